@@ -1,0 +1,433 @@
+"""The validated container of one image pair's matched points and line segments.
+
+Coordinates are **pixels** with OpenCV's convention: the centre of the top-left pixel is
+``(0, 0)``, ``x`` grows to the right and ``y`` downwards. Image sizes are ``(H, W)``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "PairMatches",
+    "OUT_OF_IMAGE_TOLERANCE",
+    "MIN_LINE_LENGTH",
+    "load_external_matches",
+]
+
+#: A coordinate may lie this many pixels outside ``[0, W - 1] x [0, H - 1]`` (detectors and
+#: projections of generated scenes place points on the border, sub-pixel refinement nudges
+#: them past it); anything further is treated as a bug in the caller's match list.
+OUT_OF_IMAGE_TOLERANCE = 4.0
+
+#: Line segments shorter than this (pixels, in either image) have no direction and are
+#: rejected.
+MIN_LINE_LENGTH = 1e-3
+
+_NPZ_ARRAYS = (
+    "points0",
+    "points1",
+    "lines0",
+    "lines1",
+    "point_scores",
+    "line_scores",
+    "image_size0",
+    "image_size1",
+    "K0",
+    "K1",
+    "image0",
+    "image1",
+)
+
+
+def _as_array(value: Any, name: str, dtype=np.float64) -> np.ndarray:
+    if hasattr(value, "detach"):  # torch tensor
+        value = value.detach().cpu().numpy()
+    try:
+        arr = np.asarray(value)
+    except Exception as err:  # pragma: no cover - numpy accepts nearly everything
+        raise TypeError(f"Expected an array for '{name}' (got {type(value).__name__})") from err
+    if arr.dtype == object or not (
+        np.issubdtype(arr.dtype, np.number) or arr.dtype == np.bool_
+    ):
+        raise TypeError(f"Expected a numeric array for '{name}' (got dtype {arr.dtype})")
+    return arr.astype(dtype, copy=False) if dtype is not None else arr
+
+
+def _check_finite(arr: np.ndarray, name: str) -> None:
+    if not np.isfinite(arr).all():
+        bad = int((~np.isfinite(arr)).reshape(len(arr), -1).any(1).sum()) if arr.ndim else 1
+        raise ValueError(f"Expected finite values in '{name}' (got NaN or inf in {bad} rows)")
+
+
+def _check_size(value: Any, name: str) -> tuple[int, int]:
+    arr = _as_array(value, name, dtype=None).reshape(-1)
+    if arr.shape != (2,) or not np.all(np.isfinite(arr)) or np.any(arr <= 0) or np.any(
+        arr != np.round(arr)
+    ):
+        raise ValueError(f"Expected '{name}' as two positive integers (H, W) (got {value!r})")
+    return int(arr[0]), int(arr[1])
+
+
+def _check_K(value: Any, name: str) -> np.ndarray | None:
+    if value is None:
+        return None
+    K = _as_array(value, name)
+    if K.shape != (3, 3):
+        raise ValueError(f"Expected '{name}' of shape (3, 3) (got {tuple(K.shape)})")
+    _check_finite(K, name)
+    if not np.allclose(K[2], [0.0, 0.0, 1.0], atol=1e-6):
+        raise ValueError(f"Expected the last row of '{name}' to be [0, 0, 1] (got {K[2].tolist()})")
+    if K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise ValueError(
+            f"Expected positive focal lengths in '{name}' (got fx={K[0, 0]}, fy={K[1, 1]})"
+        )
+    if abs(np.linalg.det(K)) < 1e-12 or np.linalg.cond(K) > 1e12:
+        raise ValueError(f"Expected an invertible '{name}' (got det={np.linalg.det(K):.3g})")
+    return K
+
+
+def _check_image(value: Any, name: str) -> np.ndarray | None:
+    if value is None:
+        return None
+    if hasattr(value, "detach"):
+        value = value.detach().cpu().numpy()
+    img = np.asarray(value)
+    if img.dtype not in (np.uint8, np.float32, np.float64):
+        raise TypeError(f"Expected '{name}' of dtype uint8, float32 or float64 (got {img.dtype})")
+    if not (img.ndim == 2 or (img.ndim == 3 and img.shape[2] in (1, 3))):
+        raise ValueError(f"Expected '{name}' of shape (H, W) or (H, W, 1|3) (got {img.shape})")
+    if img.size == 0:
+        raise ValueError(f"Expected a non-empty '{name}' (got shape {img.shape})")
+    if img.dtype != np.uint8:
+        if not np.isfinite(img).all() or img.min() < 0.0 or img.max() > 1.0:
+            raise ValueError(f"Expected float '{name}' with finite values in [0, 1]")
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[..., 0]
+    return img
+
+
+def _check_in_image(coords: np.ndarray, size: tuple[int, int], name: str) -> None:
+    if coords.size == 0:
+        return
+    h, w = size
+    xy = coords.reshape(-1, 2)
+    tol = OUT_OF_IMAGE_TOLERANCE
+    out = (xy[:, 0] < -tol) | (xy[:, 0] > w - 1 + tol) | (xy[:, 1] < -tol) | (xy[:, 1] > h - 1 + tol)
+    if out.any():
+        i = int(np.flatnonzero(out)[0])
+        raise ValueError(
+            f"Expected '{name}' inside the {w}x{h} image (+-{tol} px) "
+            f"(got {int(out.sum())} coordinates outside, first {xy[i].tolist()})"
+        )
+
+
+@dataclass
+class PairMatches:
+    """Matched points and line segments between image 0 (reference) and image 1 (target).
+
+    Validated on construction; every violation raises ``ValueError``/``TypeError`` with an
+    ``Expected ... (got ...)`` message.
+
+    Args:
+        points0, points1: Matched points, ``[Np, 2]`` pixels; row ``i`` of both is one match.
+        lines0, lines1: Matched segments, ``[Nl, 2, 2]`` pixels; endpoint ``k`` of line ``i`` in
+            image 0 matches endpoint ``k`` of line ``i`` in image 1.
+        image_size0, image_size1: ``(H, W)``; taken from the images when omitted.
+        point_scores, line_scores: Optional confidences ``[Np]``, ``[Nl]``.
+        K0, K1: Optional intrinsics ``[3, 3]`` (pixels), last row ``[0, 0, 1]``.
+        image0, image1: Optional images ``(H, W)`` or ``(H, W, 3)``, uint8 or float in [0, 1].
+        info: Free-form metadata (e.g. timings per stage), saved as JSON.
+
+    Zero lines is valid (a points-only pair); zero points with some lines is valid too
+    (a lines-only pair: every node is a line endpoint). No match at all is an error.
+    """
+
+    points0: Any
+    points1: Any
+    lines0: Any = None
+    lines1: Any = None
+    image_size0: Any = None
+    image_size1: Any = None
+    point_scores: Any = None
+    line_scores: Any = None
+    K0: Any = None
+    K1: Any = None
+    image0: Any = None
+    image1: Any = None
+    info: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.image0 = _check_image(self.image0, "image0")
+        self.image1 = _check_image(self.image1, "image1")
+        for i in (0, 1):
+            size_name, img = f"image_size{i}", getattr(self, f"image{i}")
+            size = getattr(self, size_name)
+            if size is None:
+                if img is None:
+                    raise ValueError(
+                        f"Expected '{size_name}' (H, W) or 'image{i}' to be given (got neither)"
+                    )
+                size = img.shape[:2]
+            size = _check_size(size, size_name)
+            if img is not None and tuple(img.shape[:2]) != size:
+                raise ValueError(
+                    f"Expected 'image{i}' of size {size} (H, W) (got {tuple(img.shape[:2])})"
+                )
+            setattr(self, size_name, size)
+
+        self.points0 = self._coords(self.points0, "points0", (2,))
+        self.points1 = self._coords(self.points1, "points1", (2,))
+        self.lines0 = self._coords(self.lines0, "lines0", (2, 2))
+        self.lines1 = self._coords(self.lines1, "lines1", (2, 2))
+        if len(self.points0) != len(self.points1):
+            raise ValueError(
+                "Expected as many points in image 0 as in image 1 "
+                f"(got {len(self.points0)} and {len(self.points1)})"
+            )
+        if len(self.lines0) != len(self.lines1):
+            raise ValueError(
+                "Expected as many lines in image 0 as in image 1 "
+                f"(got {len(self.lines0)} and {len(self.lines1)})"
+            )
+        if len(self.points0) == 0 and len(self.lines0) == 0:
+            raise ValueError("Expected at least one point or line match (got none)")
+        for name in ("lines0", "lines1"):
+            lines = getattr(self, name)
+            length = np.linalg.norm(lines[:, 1] - lines[:, 0], axis=-1)
+            short = length < MIN_LINE_LENGTH
+            if short.any():
+                raise ValueError(
+                    f"Expected line segments of length >= {MIN_LINE_LENGTH} px in '{name}' "
+                    f"(got {int(short.sum())} zero-length lines, first index "
+                    f"{int(np.flatnonzero(short)[0])})"
+                )
+        _check_in_image(self.points0, self.image_size0, "points0")
+        _check_in_image(self.points1, self.image_size1, "points1")
+        _check_in_image(self.lines0, self.image_size0, "lines0")
+        _check_in_image(self.lines1, self.image_size1, "lines1")
+        self.point_scores = self._scores(self.point_scores, "point_scores", len(self.points0))
+        self.line_scores = self._scores(self.line_scores, "line_scores", len(self.lines0))
+        self.K0 = _check_K(self.K0, "K0")
+        self.K1 = _check_K(self.K1, "K1")
+        if (self.K0 is None) != (self.K1 is None):
+            raise ValueError("Expected both K0 and K1 or neither (got only one)")
+        if not isinstance(self.info, dict):
+            raise TypeError(f"Expected 'info' to be a dict (got {type(self.info).__name__})")
+
+    @staticmethod
+    def _coords(value: Any, name: str, tail: tuple[int, ...]) -> np.ndarray:
+        if value is None:
+            return np.zeros((0, *tail), dtype=np.float64)
+        arr = _as_array(value, name)
+        if arr.size == 0:
+            return np.zeros((0, *tail), dtype=np.float64)
+        if arr.ndim != 1 + len(tail) or arr.shape[1:] != tail:
+            want = "[N, " + ", ".join(map(str, tail)) + "]"
+            raise ValueError(f"Expected '{name}' of shape {want} (got {tuple(arr.shape)})")
+        _check_finite(arr, name)
+        return np.ascontiguousarray(arr)
+
+    @staticmethod
+    def _scores(value: Any, name: str, n: int) -> np.ndarray | None:
+        if value is None:
+            return None
+        arr = _as_array(value, name).reshape(-1)
+        if len(arr) != n:
+            raise ValueError(f"Expected '{name}' of length {n} (got {len(arr)})")
+        _check_finite(arr, name)
+        return arr
+
+    @property
+    def num_points(self) -> int:
+        return len(self.points0)
+
+    @property
+    def num_lines(self) -> int:
+        return len(self.lines0)
+
+    @property
+    def has_intrinsics(self) -> bool:
+        return self.K0 is not None
+
+    @property
+    def has_images(self) -> bool:
+        return self.image0 is not None and self.image1 is not None
+
+    def __repr__(self) -> str:
+        parts = [f"points={self.num_points}", f"lines={self.num_lines}"]
+        parts.append(f"size0={self.image_size0}, size1={self.image_size1}")
+        parts.append(f"K={'yes' if self.has_intrinsics else 'no'}")
+        parts.append(f"images={'yes' if self.has_images else 'no'}")
+        return f"PairMatches({', '.join(parts)})"
+
+    def select(self, point_index: Any = None, line_index: Any = None) -> PairMatches:
+        """Returns a copy keeping the points and lines at the given indices (repeats allowed)."""
+        pi = slice(None) if point_index is None else np.asarray(point_index, dtype=np.int64)
+        li = slice(None) if line_index is None else np.asarray(line_index, dtype=np.int64)
+        kwargs = {f.name: getattr(self, f.name) for f in fields(self)}
+        kwargs.update(
+            points0=self.points0[pi],
+            points1=self.points1[pi],
+            lines0=self.lines0[li],
+            lines1=self.lines1[li],
+            point_scores=None if self.point_scores is None else self.point_scores[pi],
+            line_scores=None if self.line_scores is None else self.line_scores[li],
+            info=dict(self.info),
+        )
+        return PairMatches(**kwargs)
+
+    # ------------------------------------------------------------------ I/O
+    def save(self, path: str | os.PathLike) -> Path:
+        """Saves to ``.npz`` atomically (temporary file, then rename).
+
+        Keys: ``points0``, ``points1`` ``[Np, 2]``; ``lines0``, ``lines1`` ``[Nl, 2, 2]``;
+        ``image_size0``, ``image_size1`` ``[2]`` (H, W); optional ``point_scores``,
+        ``line_scores``, ``K0``, ``K1``, ``image0``, ``image1``; ``info_json`` (a JSON string).
+        """
+        path = Path(path)
+        arrays = {k: getattr(self, k) for k in _NPZ_ARRAYS if getattr(self, k) is not None}
+        arrays["image_size0"] = np.asarray(self.image_size0, dtype=np.int64)
+        arrays["image_size1"] = np.asarray(self.image_size1, dtype=np.int64)
+        arrays["info_json"] = np.asarray(json.dumps(self.info, default=float))
+        atomic_save_npz(path, arrays)
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> PairMatches:
+        """Loads a file written by :meth:`save`; missing or corrupt files raise clearly."""
+        data = _load_npz(path)
+        missing = [k for k in ("points0", "points1", "image_size0", "image_size1") if k not in data]
+        if missing:
+            raise KeyError(f"Expected keys {missing} in match file '{path}' (got {sorted(data)})")
+        kwargs = {k: data[k] for k in _NPZ_ARRAYS if k in data}
+        info = json.loads(str(data["info_json"])) if "info_json" in data else {}
+        return cls(**kwargs, info=info)
+
+
+def atomic_save_npz(path: str | os.PathLike, arrays: dict[str, np.ndarray]) -> None:
+    """Writes ``arrays`` to ``path`` via a temporary file in the same folder and a rename, so
+    readers never see a half-written file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, **arrays)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"Expected a match file at '{path}' (got no such file)")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            return {k: npz[k] for k in npz.files}
+    except Exception as err:
+        raise ValueError(f"Expected a readable .npz match file at '{path}' (got {err})") from err
+
+
+def load_external_matches(
+    path_or_dict: str | os.PathLike | dict[str, Any],
+    image_size0: Any = None,
+    image_size1: Any = None,
+    K0: Any = None,
+    K1: Any = None,
+    min_score: float | None = None,
+) -> PairMatches:
+    """Loads matches written by another matcher (``.npz`` or a dict of arrays).
+
+    Three layouts are recognised, tried in this order:
+
+    * **strl-pyg**: the keys of :meth:`PairMatches.save`.
+    * **already matched** (for example from hloc or a user's own code): ``mkpts0``, ``mkpts1``
+      ``[M, 2]``, optional ``mlines0``, ``mlines1`` ``[L, 2, 2]`` and ``mscores``,
+      ``mline_scores``.
+    * **GlueStick / LightGlue raw output**: ``keypoints0`` ``[N0, 2]``, ``keypoints1``
+      ``[N1, 2]`` and either ``matches0`` ``[N0]`` (index into image 1, -1 for none, as
+      SuperGlue and GlueStick write) or ``matches`` ``[M, 2]`` (index pairs, as LightGlue
+      writes), optional ``match_scores0`` / ``scores``; and for lines ``lines0`` ``[L0, 2, 2]``,
+      ``lines1`` ``[L1, 2, 2]``, ``line_matches0`` ``[L0]`` with optional
+      ``line_match_scores0``.
+
+    A leading batch dimension of size 1 (as PyTorch matchers return) is dropped. Image sizes
+    may also be stored under ``image_size0``/``image_size1``; ``min_score`` drops matches with
+    a lower score when scores exist.
+    """
+    if isinstance(path_or_dict, dict):
+        data = {k: _as_array(v, k, dtype=None) for k, v in path_or_dict.items()}
+        source = "the given dict"
+    else:
+        data = _load_npz(path_or_dict)
+        source = f"'{path_or_dict}'"
+    data = {k: (v[0] if v.ndim >= 2 and v.shape[0] == 1 and k != "info_json" else v)
+            for k, v in data.items()}
+    size0 = image_size0 if image_size0 is not None else data.get("image_size0")
+    size1 = image_size1 if image_size1 is not None else data.get("image_size1")
+    K0 = K0 if K0 is not None else data.get("K0")
+    K1 = K1 if K1 is not None else data.get("K1")
+    common = dict(image_size0=size0, image_size1=size1, K0=K0, K1=K1)
+
+    if "points0" in data and "points1" in data:
+        kw = {k: data[k] for k in ("lines0", "lines1", "point_scores", "line_scores") if k in data}
+        pm = PairMatches(data["points0"], data["points1"], **kw, **common)
+    elif "mkpts0" in data:
+        pm = PairMatches(
+            data["mkpts0"],
+            data.get("mkpts1"),
+            lines0=data.get("mlines0"),
+            lines1=data.get("mlines1"),
+            point_scores=data.get("mscores"),
+            line_scores=data.get("mline_scores"),
+            **common,
+        )
+    elif "keypoints0" in data and "keypoints1" in data:
+        p_idx0, p_idx1, p_sc = _index_pairs(data, "matches0", "matches", "match_scores0", "scores")
+        kp0, kp1 = data["keypoints0"].reshape(-1, 2), data["keypoints1"].reshape(-1, 2)
+        lines0 = lines1 = l_sc = None
+        if "line_matches0" in data:
+            l_idx0, l_idx1, l_sc = _index_pairs(
+                data, "line_matches0", "line_matches", "line_match_scores0", "line_scores"
+            )
+            lines0, lines1 = data["lines0"][l_idx0], data["lines1"][l_idx1]
+        pm = PairMatches(
+            kp0[p_idx0], kp1[p_idx1], lines0=lines0, lines1=lines1,
+            point_scores=p_sc, line_scores=l_sc, **common,
+        )
+    else:
+        raise KeyError(
+            "Expected keys (points0, points1), (mkpts0, mkpts1) or (keypoints0, keypoints1, "
+            f"matches0|matches) in {source} (got {sorted(data)})"
+        )
+    if min_score is not None:
+        keep_p = None if pm.point_scores is None else np.flatnonzero(pm.point_scores >= min_score)
+        keep_l = None if pm.line_scores is None else np.flatnonzero(pm.line_scores >= min_score)
+        pm = pm.select(keep_p, keep_l)
+    return pm
+
+
+def _index_pairs(data, per_node_key, pair_key, per_node_score, pair_score):
+    if per_node_key in data:
+        m0 = data[per_node_key].astype(np.int64).reshape(-1)
+        idx0 = np.flatnonzero(m0 >= 0)
+        idx1 = m0[idx0]
+        scores = data[per_node_score].reshape(-1)[idx0] if per_node_score in data else None
+    elif pair_key in data:
+        pairs = data[pair_key].astype(np.int64).reshape(-1, 2)
+        idx0, idx1 = pairs[:, 0], pairs[:, 1]
+        scores = data[pair_score].reshape(-1) if pair_score in data else None
+    else:
+        raise KeyError(f"Expected '{per_node_key}' or '{pair_key}' (got neither)")
+    return idx0, idx1, scores
