@@ -17,7 +17,8 @@ Layout of a pair graph (:func:`strl_pyg.data.build_pair_graph`)::
                      either ``dense`` [1] (bool, implicit complete bipartite edges between the
                      two node types of the same pair; the default) or ``edge_index`` (explicit).
     graph level      image_size0, image_size1 [1, 2] (H, W); K0, K1 [1, 3, 3] when known;
-                     T_0to1 [1, 4, 4] when a ground-truth pose is given.
+                     T_0to1 [1, 4, 4] when a ground-truth pose is given;
+                     image0, image1 [1, C, H, W] float in [0, 1] with keep_images=True.
 """
 
 from __future__ import annotations
@@ -58,5 +59,7 @@ IMAGE_SIZE1 = "image_size1"
 K0 = "K0"
 K1 = "K1"
 T_0TO1 = "T_0to1"
+IMAGE0 = "image0"  # [1, C, H, W] float in [0, 1], only with keep_images=True
+IMAGE1 = "image1"
 
 __all__ = [n for n in dir() if n.isupper()]

@@ -1,0 +1,92 @@
+"""Transforms on pair graphs (PyG ``BaseTransform`` style)."""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+from torch_geometric.data import Batch, HeteroData
+from torch_geometric.transforms import BaseTransform
+
+from strl_pyg.data import keys as K
+from strl_pyg.data.graph import has_implicit_complete_edges, line_edge_index, materialize_complete_edges
+
+__all__ = ["FixedSizeResample", "MaterializeCompleteEdges", "resample_indices"]
+
+
+def resample_indices(n: int, target: int, generator: torch.Generator | None = None) -> Tensor:
+    """Indices that bring ``n`` items to exactly ``target`` by random deletion or repetition.
+
+    With ``n >= target``, a random subset of ``target`` distinct items (random deletion); with
+    ``0 < n < target``, every item once plus ``target - n`` items drawn with replacement
+    (random repetition), in random order. With ``n == 0`` nothing can be repeated: returns an
+    empty index.
+    """
+    if n == 0:
+        return torch.zeros(0, dtype=torch.long)
+    if n >= target:
+        return torch.randperm(n, generator=generator)[:target]
+    extra = torch.randint(n, (target - n,), generator=generator)
+    idx = torch.cat([torch.arange(n), extra])
+    return idx[torch.randperm(target, generator=generator)]
+
+
+class FixedSizeResample(BaseTransform):
+    """Brings every pair graph to a fixed number of points and lines, as the paper does
+    (following UA-Fusion: random repetition and deletion, 384 points and 192 lines).
+
+    Line endpoints move in pairs, so a line is kept, repeated or deleted whole. A pair with no
+    lines stays without lines (and likewise for points): there is nothing to repeat.
+
+    Args:
+        num_points: Target number of points (default: ``384``).
+        num_lines: Target number of line segments (default: ``192``).
+        seed: Seed of the transform's own generator; successive calls draw successive
+            samples, so the same seed gives the same sequence of graphs. With ``None``
+            (default), torch's global generator is used (seeded per DataLoader worker).
+    """
+
+    def __init__(self, num_points: int = 384, num_lines: int = 192, seed: int | None = None):
+        if num_points < 0 or num_lines < 0:
+            raise ValueError(
+                f"Expected non-negative targets (got num_points={num_points}, num_lines={num_lines})"
+            )
+        self.num_points = num_points
+        self.num_lines = num_lines
+        self.seed = seed
+        self.generator = None
+        if seed is not None:
+            self.generator = torch.Generator().manual_seed(seed)
+
+    def forward(self, data: HeteroData) -> HeteroData:
+        if isinstance(data, Batch):
+            raise TypeError("Expected a single pair graph (got a batch): resample before batching")
+        explicit = not has_implicit_complete_edges(data)
+        data = data.clone()
+        pi = resample_indices(data[K.POINT].num_nodes, self.num_points, self.generator)
+        nl = data[K.ENDPOINT].num_nodes // 2
+        li = resample_indices(nl, self.num_lines, self.generator)
+        ei = torch.stack([2 * li, 2 * li + 1], dim=1).reshape(-1)
+        for node_type, idx in ((K.POINT, pi), (K.ENDPOINT, ei)):
+            store = data[node_type]
+            n = store.num_nodes
+            for key, value in list(store.items()):
+                if isinstance(value, Tensor) and value.dim() > 0 and value.size(0) == n:
+                    store[key] = value[idx]
+            store.num_nodes = idx.numel()
+        data[K.LINE_EDGE].edge_index = line_edge_index(li.numel())
+        if explicit:
+            materialize_complete_edges(data)
+        return data
+
+    def __repr__(self) -> str:
+        return (
+            f"{self.__class__.__name__}(num_points={self.num_points}, "
+            f"num_lines={self.num_lines}, seed={self.seed})"
+        )
+
+
+class MaterializeCompleteEdges(BaseTransform):
+    """Transform form of :func:`~strl_pyg.data.graph.materialize_complete_edges`."""
+
+    def forward(self, data: HeteroData) -> HeteroData:
+        return materialize_complete_edges(data)
