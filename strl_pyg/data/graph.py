@@ -135,8 +135,15 @@ def complete_edge_index(
         ``edge_index`` ``[2, sum_b N_src_b * N_dst_b]``, grouped by target node.
     """
     if num_graphs is None:
-        num_graphs = int(max(batch_src.max().item() if batch_src.numel() else -1,
-                             batch_dst.max().item() if batch_dst.numel() else -1)) + 1
+        num_graphs = (
+            int(
+                max(
+                    batch_src.max().item() if batch_src.numel() else -1,
+                    batch_dst.max().item() if batch_dst.numel() else -1,
+                )
+            )
+            + 1
+        )
     count_src = torch.bincount(batch_src, minlength=num_graphs)
     ptr_src = torch.cat([count_src.new_zeros(1), count_src.cumsum(0)])
     per_dst = count_src[batch_dst]  # sources of each target node
@@ -241,11 +248,15 @@ def build_pair_graph(
     if not isinstance(patch_size, int) or patch_size < 1 or patch_size % 2 == 0:
         raise ValueError(f"Expected an odd positive integer patch_size (got {patch_size!r})")
     if complete_edges not in COMPLETE_EDGE_MODES:
-        raise ValueError(f"Expected complete_edges in {COMPLETE_EDGE_MODES} (got {complete_edges!r})")
+        raise ValueError(
+            f"Expected complete_edges in {COMPLETE_EDGE_MODES} (got {complete_edges!r})"
+        )
     if normalization not in NORMALIZATIONS:
         raise ValueError(f"Expected normalization in {NORMALIZATIONS} (got {normalization!r})")
     if normalization == "intrinsics" and not matches.has_intrinsics:
-        raise ValueError("Expected K0 and K1 in the matches for normalization='intrinsics' (got none)")
+        raise ValueError(
+            "Expected K0 and K1 in the matches for normalization='intrinsics' (got none)"
+        )
     if keep_images and not matches.has_images:
         raise ValueError("Expected images in the matches for keep_images=True (got none)")
     pose = None if T_0to1 is None else _as_pose(T_0to1)
@@ -266,8 +277,10 @@ def build_pair_graph(
     nl = matches.num_lines
     lines = [torch.from_numpy(matches.lines0).float(), torch.from_numpy(matches.lines1).float()]
     coords = {
-        K.POINT: [torch.from_numpy(matches.points0).float(),
-                  torch.from_numpy(matches.points1).float()],
+        K.POINT: [
+            torch.from_numpy(matches.points0).float(),
+            torch.from_numpy(matches.points1).float(),
+        ],
         K.ENDPOINT: [ln.reshape(-1, 2) for ln in lines],
     }
     data = HeteroData()
@@ -283,7 +296,9 @@ def build_pair_graph(
     if matches.point_scores is not None:
         data[K.POINT][K.SCORE] = torch.from_numpy(matches.point_scores).float()
     if matches.line_scores is not None:
-        data[K.ENDPOINT][K.SCORE] = torch.from_numpy(matches.line_scores).float().repeat_interleave(2)
+        data[K.ENDPOINT][K.SCORE] = (
+            torch.from_numpy(matches.line_scores).float().repeat_interleave(2)
+        )
 
     ep = data[K.ENDPOINT]
     other = torch.arange(2 * nl) ^ 1
@@ -331,7 +346,9 @@ def load_graph(path: str | os.PathLike) -> HeteroData:
     try:
         raw = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as err:
-        raise ValueError(f"Expected a graph file written by save_graph at '{path}' (got {err})") from err
+        raise ValueError(
+            f"Expected a graph file written by save_graph at '{path}' (got {err})"
+        ) from err
     if not isinstance(raw, dict) or K.POINT not in raw:
         raise ValueError(f"Expected a pair-graph dict in '{path}' (got {type(raw).__name__})")
     return HeteroData.from_dict(raw)

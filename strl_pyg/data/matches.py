@@ -54,9 +54,7 @@ def _as_array(value: Any, name: str, dtype=np.float64) -> np.ndarray:
         arr = np.asarray(value)
     except Exception as err:  # pragma: no cover - numpy accepts nearly everything
         raise TypeError(f"Expected an array for '{name}' (got {type(value).__name__})") from err
-    if arr.dtype == object or not (
-        np.issubdtype(arr.dtype, np.number) or arr.dtype == np.bool_
-    ):
+    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == np.bool_):
         raise TypeError(f"Expected a numeric array for '{name}' (got dtype {arr.dtype})")
     return arr.astype(dtype, copy=False) if dtype is not None else arr
 
@@ -69,8 +67,11 @@ def _check_finite(arr: np.ndarray, name: str) -> None:
 
 def _check_size(value: Any, name: str) -> tuple[int, int]:
     arr = _as_array(value, name, dtype=None).reshape(-1)
-    if arr.shape != (2,) or not np.all(np.isfinite(arr)) or np.any(arr <= 0) or np.any(
-        arr != np.round(arr)
+    if (
+        arr.shape != (2,)
+        or not np.all(np.isfinite(arr))
+        or np.any(arr <= 0)
+        or np.any(arr != np.round(arr))
     ):
         raise ValueError(f"Expected '{name}' as two positive integers (H, W) (got {value!r})")
     return int(arr[0]), int(arr[1])
@@ -120,7 +121,9 @@ def _check_in_image(coords: np.ndarray, size: tuple[int, int], name: str) -> Non
     h, w = size
     xy = coords.reshape(-1, 2)
     tol = OUT_OF_IMAGE_TOLERANCE
-    out = (xy[:, 0] < -tol) | (xy[:, 0] > w - 1 + tol) | (xy[:, 1] < -tol) | (xy[:, 1] > h - 1 + tol)
+    out = (
+        (xy[:, 0] < -tol) | (xy[:, 0] > w - 1 + tol) | (xy[:, 1] < -tol) | (xy[:, 1] > h - 1 + tol)
+    )
     if out.any():
         i = int(np.flatnonzero(out)[0])
         raise ValueError(
@@ -372,8 +375,10 @@ def load_external_matches(
     else:
         data = _load_npz(path_or_dict)
         source = f"'{path_or_dict}'"
-    data = {k: (v[0] if v.ndim >= 2 and v.shape[0] == 1 and k != "info_json" else v)
-            for k, v in data.items()}
+    data = {
+        k: (v[0] if v.ndim >= 2 and v.shape[0] == 1 and k != "info_json" else v)
+        for k, v in data.items()
+    }
     size0 = image_size0 if image_size0 is not None else data.get("image_size0")
     size1 = image_size1 if image_size1 is not None else data.get("image_size1")
     K0 = K0 if K0 is not None else data.get("K0")
@@ -403,8 +408,13 @@ def load_external_matches(
             )
             lines0, lines1 = data["lines0"][l_idx0], data["lines1"][l_idx1]
         pm = PairMatches(
-            kp0[p_idx0], kp1[p_idx1], lines0=lines0, lines1=lines1,
-            point_scores=p_sc, line_scores=l_sc, **common,
+            kp0[p_idx0],
+            kp1[p_idx1],
+            lines0=lines0,
+            lines1=lines1,
+            point_scores=p_sc,
+            line_scores=l_sc,
+            **common,
         )
     else:
         raise KeyError(

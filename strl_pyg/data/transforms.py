@@ -8,7 +8,11 @@ from torch_geometric.data import Batch, HeteroData
 from torch_geometric.transforms import BaseTransform
 
 from strl_pyg.data import keys as K
-from strl_pyg.data.graph import has_implicit_complete_edges, line_edge_index, materialize_complete_edges
+from strl_pyg.data.graph import (
+    has_implicit_complete_edges,
+    line_edge_index,
+    materialize_complete_edges,
+)
 
 __all__ = ["FixedSizeResample", "MaterializeCompleteEdges", "resample_indices"]
 
@@ -48,7 +52,8 @@ class FixedSizeResample(BaseTransform):
     def __init__(self, num_points: int = 384, num_lines: int = 192, seed: int | None = None):
         if num_points < 0 or num_lines < 0:
             raise ValueError(
-                f"Expected non-negative targets (got num_points={num_points}, num_lines={num_lines})"
+                "Expected non-negative targets "
+                f"(got num_points={num_points}, num_lines={num_lines})"
             )
         self.num_points = num_points
         self.num_lines = num_lines

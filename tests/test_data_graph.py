@@ -1,0 +1,212 @@
+import numpy as np
+import pytest
+import torch
+from torch_geometric.loader import DataLoader
+
+from strl_pyg.data import (
+    FixedSizeResample,
+    MaterializeCompleteEdges,
+    PairMatches,
+    build_pair_graph,
+    complete_edge_index,
+    has_implicit_complete_edges,
+    load_graph,
+    materialize_complete_edges,
+    save_graph,
+)
+from strl_pyg.data import keys as K
+from strl_pyg.data.graph import normalize_coords, sample_patches
+
+H, W = 48, 64
+
+
+def make(num_points=10, num_lines=4, seed=0, images=True, K_mat=None, rgb=False):
+    rng = np.random.default_rng(seed)
+    pts = lambda n: rng.uniform([0, 0], [W - 1, H - 1], (n, 2))  # noqa: E731
+    shape = (H, W, 3) if rgb else (H, W)
+    kw = dict(image_size0=(H, W), image_size1=(H, W))
+    if images:
+        kw.update(
+            image0=rng.integers(0, 256, shape, dtype=np.uint8),
+            image1=rng.integers(0, 256, shape, dtype=np.uint8),
+        )
+    if K_mat is not None:
+        kw.update(K0=K_mat, K1=K_mat)
+    return PairMatches(
+        pts(num_points),
+        pts(num_points),
+        pts(2 * num_lines).reshape(-1, 2, 2),
+        pts(2 * num_lines).reshape(-1, 2, 2),
+        **kw,
+    )
+
+
+def test_shapes_dtypes_and_validate():
+    m = make(10, 4)
+    g = build_pair_graph(m, patch_size=3, T_0to1=np.eye(4))
+    assert g.validate()
+    assert set(g.node_types) == set(K.NODE_TYPES)
+    assert set(g.edge_types) == set(K.EDGE_TYPES)
+    assert g[K.POINT].num_nodes == 10 and g[K.ENDPOINT].num_nodes == 8
+    for nt in K.NODE_TYPES:
+        n = g[nt].num_nodes
+        for key in (K.POS0, K.POS1, K.KPTS0, K.KPTS1):
+            assert g[nt][key].shape == (n, 2) and g[nt][key].dtype == torch.float32
+        assert g[nt][K.PATCH0].shape == (n, 9)
+    assert g[K.ENDPOINT][K.LINE_FEAT].shape == (8, 8)
+    assert g[K.T_0TO1].shape == (1, 4, 4)
+    torch.testing.assert_close(
+        g[K.POINT][K.KPTS0].double(), torch.from_numpy(m.points0), rtol=0, atol=1e-4
+    )
+    # endpoints 2i, 2i+1 are line i's endpoints; line edges connect them both ways
+    torch.testing.assert_close(
+        g[K.ENDPOINT][K.KPTS1][2:4].double(), torch.from_numpy(m.lines1[1]), rtol=0, atol=1e-4
+    )
+    assert g[K.LINE_EDGE].edge_index.tolist() == [list(range(8)), [1, 0, 3, 2, 5, 4, 7, 6]]
+
+
+def test_line_features_are_endpoint_and_delta():
+    g = build_pair_graph(make(3, 2))
+    ep = g[K.ENDPOINT]
+    lf = ep[K.LINE_FEAT]
+    torch.testing.assert_close(lf[0, :2], ep[K.POS0][0])
+    torch.testing.assert_close(lf[0, 2:4], ep[K.POS0][1] - ep[K.POS0][0])
+    torch.testing.assert_close(lf[1, 6:8], ep[K.POS1][0] - ep[K.POS1][1])
+
+
+def test_normalisation_by_image_size_and_intrinsics():
+    xy = torch.tensor([[(W - 1) / 2, (H - 1) / 2], [W - 1 + 0.5, (H - 1) / 2]])
+    out = normalize_coords(xy, (H, W))
+    torch.testing.assert_close(out, torch.tensor([[0.0, 0.0], [1.0, 0.0]]))
+    Km = np.array([[50.0, 0, 30], [0, 40, 20], [0, 0, 1]])
+    g = build_pair_graph(make(4, 0, K_mat=Km))
+    kp = g[K.POINT][K.KPTS0]
+    expect = torch.stack([(kp[:, 0] - 30) / 50, (kp[:, 1] - 20) / 40], -1)
+    torch.testing.assert_close(g[K.POINT][K.POS0], expect)
+    g2 = build_pair_graph(make(4, 0, K_mat=Km), normalization="image_size")
+    torch.testing.assert_close(g2[K.POINT][K.POS0], normalize_coords(kp, (H, W)))
+
+
+def test_patch_sampling_matches_integer_pixels():
+    img = torch.arange(H * W, dtype=torch.float32).view(1, H, W)
+    xy = torch.tensor([[5.0, 7.0], [0.0, 0.0], [2.5, 3.0]])
+    p1 = sample_patches(img, xy, 1)
+    close = lambda a, b: torch.testing.assert_close(a, torch.tensor(b), rtol=0, atol=1e-3)  # noqa: E731
+    close(p1[:, 0], [7.0 * W + 5, 0.0, 3.0 * W + 2.5])
+    p3 = sample_patches(img, xy[:1], 3)
+    close(p3.view(3, 3)[0], [6.0 * W + 4, 6.0 * W + 5, 6.0 * W + 6])
+    g = build_pair_graph(make(4, 1, rgb=True), patch_size=5)
+    assert g[K.POINT][K.PATCH0].shape == (4, 3 * 25)
+
+
+def test_points_only_and_lines_only():
+    g = build_pair_graph(make(5, 0))
+    assert g[K.ENDPOINT].num_nodes == 0 and g[K.LINE_EDGE].edge_index.shape == (2, 0)
+    assert g.validate()
+    g = build_pair_graph(make(0, 3))
+    assert g[K.POINT].num_nodes == 0 and g[K.ENDPOINT].num_nodes == 6
+    assert g.validate()
+
+
+def test_batching_offsets_every_edge_type():
+    graphs = [
+        build_pair_graph(make(n, m, seed=n), complete_edges="explicit")
+        for n, m in [(3, 2), (5, 0), (1, 3)]
+    ]
+    batch = next(iter(DataLoader(graphs, batch_size=3)))
+    assert batch.num_graphs == 3
+    for et in K.EDGE_TYPES:
+        src, _, dst = et
+        ei = batch[et].edge_index
+        assert ei.shape[1] == sum(g[et].edge_index.shape[1] for g in graphs)
+        bs, bd = batch[src].batch[ei[0]], batch[dst].batch[ei[1]]
+        assert torch.equal(bs, bd), et  # never crosses graphs
+    # implicit batch materialised after collation equals explicit collated
+    implicit = [build_pair_graph(make(n, m, seed=n)) for n, m in [(3, 2), (5, 0), (1, 3)]]
+    b2 = next(iter(DataLoader(implicit, batch_size=3)))
+    assert has_implicit_complete_edges(b2) and b2[K.SELF_EDGE_TYPES[0]][K.DENSE].shape == (3,)
+    materialize_complete_edges(b2)
+    for et in K.COMPLETE_EDGE_TYPES:
+        a = batch[et].edge_index
+        b = b2[et].edge_index
+        assert sorted(map(tuple, a.T.tolist())) == sorted(map(tuple, b.T.tolist()))
+
+
+def test_complete_edge_index_counts_and_self_loops():
+    bs = torch.tensor([0, 0, 1, 1, 1])
+    ei = complete_edge_index(bs, bs)
+    assert ei.shape[1] == 4 + 9
+    assert (ei[0] == ei[1]).sum() == 5
+    ei = complete_edge_index(torch.tensor([1, 1]), torch.tensor([0, 1, 1]), num_graphs=2)
+    assert ei.shape[1] == 4 and set(ei[1].tolist()) == {1, 2}
+
+
+def test_implicit_memory_is_linear():
+    def edge_bytes(g):
+        return sum(v.numel() * v.element_size() for et in g.edge_types for v in g[et].values())
+
+    small, big = build_pair_graph(make(20, 10)), build_pair_graph(make(200, 100))
+    assert edge_bytes(big) <= 10 * edge_bytes(small) + 64
+    explicit = MaterializeCompleteEdges()(build_pair_graph(make(200, 100)))
+    assert edge_bytes(explicit) > 100 * edge_bytes(big)
+
+
+def test_save_load_roundtrip(tmp_path):
+    g = build_pair_graph(make(7, 3), T_0to1=np.eye(4), patch_size=3)
+    r = load_graph(save_graph(g, tmp_path / "g.pt"))
+    assert set(r.edge_types) == set(g.edge_types)
+    for store_r, store_g in zip(r.stores, g.stores, strict=True):
+        for key, value in store_g.items():
+            assert (
+                torch.equal(store_r[key], value)
+                if torch.is_tensor(value)
+                else store_r[key] == value
+            )
+    with pytest.raises(FileNotFoundError):
+        load_graph(tmp_path / "nope.pt")
+    (tmp_path / "bad.pt").write_bytes(b"garbage")
+    with pytest.raises(ValueError, match="save_graph"):
+        load_graph(tmp_path / "bad.pt")
+
+
+def test_resample_counts_determinism_and_pairs():
+    g = build_pair_graph(make(50, 30), T_0to1=np.eye(4))
+    a = FixedSizeResample(16, 8, seed=3)(g)
+    b = FixedSizeResample(16, 8, seed=3)(g)
+    c = FixedSizeResample(16, 8, seed=4)(g)
+    assert a[K.POINT].num_nodes == 16 and a[K.ENDPOINT].num_nodes == 16
+    assert torch.equal(a[K.POINT][K.KPTS0], b[K.POINT][K.KPTS0])
+    assert not torch.equal(a[K.POINT][K.KPTS0], c[K.POINT][K.KPTS0])
+    # endpoints stay paired: line features of 2i and 2i+1 describe the same segment
+    lf = a[K.ENDPOINT][K.LINE_FEAT].view(-1, 2, 8)
+    torch.testing.assert_close(lf[:, 0, :2] + lf[:, 0, 2:4], lf[:, 1, :2])
+    # upsampling repeats: every original point is kept
+    up = FixedSizeResample(80, 40, seed=0)(g)
+    assert up[K.POINT].num_nodes == 80 and up[K.ENDPOINT].num_nodes == 80
+    assert len(torch.unique(up[K.POINT][K.KPTS0], dim=0)) == 50
+    assert up.validate() and torch.equal(up[K.T_0TO1], g[K.T_0TO1])
+    # no resampling when not asked: the builder keeps every match
+    assert g[K.POINT].num_nodes == 50
+    # zero lines stays zero lines; explicit edges are rebuilt
+    z = FixedSizeResample(8, 4, seed=0)(build_pair_graph(make(5, 0), complete_edges="explicit"))
+    assert z[K.ENDPOINT].num_nodes == 0 and z[K.SELF_EDGE_TYPES[0]].edge_index.shape[1] == 64
+
+
+@pytest.mark.parametrize(
+    "kw, err, match",
+    [
+        (dict(patch_size=2), ValueError, "odd positive"),
+        (dict(complete_edges="sparse"), ValueError, "complete_edges"),
+        (dict(T_0to1=np.eye(3)), ValueError, r"\(4, 4\)"),
+        (dict(T_0to1=np.diag([1.0, 1, -1, 1])), ValueError, "rotation"),
+        (dict(normalization="intrinsics"), ValueError, "K0 and K1"),
+    ],
+)
+def test_builder_bad_arguments(kw, err, match):
+    with pytest.raises(err, match=match):
+        build_pair_graph(make(4, 1), **kw)
+
+
+def test_builder_rejects_non_matches():
+    with pytest.raises(TypeError, match="PairMatches"):
+        build_pair_graph({"points0": np.zeros((3, 2))})

@@ -1,0 +1,171 @@
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from strl_pyg.data import PairMatches, load_external_matches
+from strl_pyg.data.matches import OUT_OF_IMAGE_TOLERANCE
+
+H, W = 120, 160
+
+
+def make(num_points=6, num_lines=3, seed=0, **kw):
+    rng = np.random.default_rng(seed)
+    pts = lambda n: rng.uniform([0, 0], [W - 1, H - 1], (n, 2))  # noqa: E731
+    args = dict(
+        points0=pts(num_points),
+        points1=pts(num_points),
+        lines0=pts(2 * num_lines).reshape(-1, 2, 2),
+        lines1=pts(2 * num_lines).reshape(-1, 2, 2),
+        image_size0=(H, W),
+        image_size1=(H, W),
+    )
+    args.update(kw)
+    return PairMatches(**args)
+
+
+def test_valid_and_counts():
+    m = make(6, 3)
+    assert m.num_points == 6 and m.num_lines == 3
+    assert m.points0.dtype == np.float64 and m.lines0.shape == (3, 2, 2)
+    assert "points=6" in repr(m)
+
+
+def test_points_only_and_lines_only_are_valid():
+    assert make(5, 0).num_lines == 0
+    assert make(0, 4).num_points == 0
+
+
+def test_size_taken_from_images():
+    img = np.zeros((H, W, 3), np.uint8)
+    m = make(image_size0=None, image_size1=None, image0=img, image1=img[..., 0])
+    assert m.image_size0 == (H, W) and m.image1.ndim == 2
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        (dict(points1=np.zeros((5, 2))), "as many points"),
+        (dict(points0=np.zeros((6, 3))), r"shape \[N, 2\]"),
+        (dict(lines1=np.zeros((2, 2, 2)) + 5), "as many lines"),
+        (dict(image_size0=(0, 5)), "two positive integers"),
+        (dict(K0=np.eye(3), K1=np.eye(4)), r"shape \(3, 3\)"),
+        (dict(K0=np.eye(3), K1=np.diag([1.0, 0.0, 1.0])), "positive focal"),
+        (dict(K0=np.eye(3)), "both K0 and K1"),
+        (dict(K0=np.ones((3, 3)), K1=np.eye(3)), "last row"),
+        (dict(image0=np.zeros((H + 1, W), np.uint8)), "image0' of size"),
+        (dict(image0=np.zeros((H, W), np.int32)), "dtype uint8"),
+        (dict(image0=np.full((H, W), 2.0, np.float32)), r"\[0, 1\]"),
+        (dict(point_scores=np.ones(2)), "length 6"),
+    ],
+)
+def test_bad_input_errors(kw, match):
+    with pytest.raises((ValueError, TypeError), match=match):
+        make(**kw)
+
+
+def test_no_matches_error():
+    with pytest.raises(ValueError, match="at least one point or line"):
+        make(0, 0)
+
+
+def test_nan_and_zero_length_and_outside():
+    with pytest.raises(ValueError, match="finite"):
+        make(points0=np.full((6, 2), np.nan))
+    lines = np.ones((3, 2, 2)) * 10
+    with pytest.raises(ValueError, match="zero-length"):
+        make(lines0=lines)
+    pts = make().points0.copy()
+    pts[2] = [W + OUT_OF_IMAGE_TOLERANCE + 1, 3]
+    with pytest.raises(ValueError, match="inside the 160x120 image"):
+        make(points0=pts)
+
+
+def test_save_load_roundtrip(tmp_path):
+    img = np.random.default_rng(1).integers(0, 255, (H, W), dtype=np.uint8)
+    K = np.array([[100.0, 0, 80], [0, 100, 60], [0, 0, 1]])
+    m = make(
+        point_scores=np.linspace(0, 1, 6),
+        K0=K,
+        K1=K,
+        image0=img,
+        image1=img,
+        info={"timings_ms": {"detect": 1.5}},
+    )
+    path = m.save(tmp_path / "m.npz")
+    r = PairMatches.load(path)
+    for key in ("points0", "points1", "lines0", "lines1", "point_scores", "K0", "image0"):
+        np.testing.assert_array_equal(getattr(r, key), getattr(m, key))
+    assert r.line_scores is None and r.image_size1 == (H, W) and r.info == m.info
+    assert not list(tmp_path.glob(".*tmp"))  # no temporary left behind
+
+
+def test_load_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        PairMatches.load(tmp_path / "missing.npz")
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="readable .npz"):
+        PairMatches.load(bad)
+
+
+def test_external_gluestick_and_lightglue_layouts():
+    rng = np.random.default_rng(0)
+    kp0, kp1 = rng.uniform(0, 100, (8, 2)), rng.uniform(0, 100, (5, 2))
+    m0 = np.array([2, -1, 0, -1, 4, -1, -1, 1])
+    l0, l1 = rng.uniform(0, 100, (3, 2, 2)), rng.uniform(0, 100, (4, 2, 2))
+    glue = dict(
+        keypoints0=kp0[None],
+        keypoints1=kp1[None],
+        matches0=m0[None],
+        match_scores0=np.linspace(0, 1, 8)[None],
+        lines0=l0[None],
+        lines1=l1[None],
+        line_matches0=np.array([[3, -1, 0]]),
+        image_size0=[H, W],
+        image_size1=[H, W],
+    )
+    pm = load_external_matches(glue)
+    np.testing.assert_array_equal(pm.points0, kp0[[0, 2, 4, 7]])
+    np.testing.assert_array_equal(pm.points1, kp1[[2, 0, 4, 1]])
+    np.testing.assert_array_equal(pm.lines1, l1[[3, 0]])
+    assert load_external_matches(glue, min_score=0.5).num_points == 2
+    lg = dict(keypoints0=kp0, keypoints1=kp1, matches=np.array([[0, 2], [7, 1]]))
+    pm = load_external_matches(lg, image_size0=(H, W), image_size1=(H, W))
+    np.testing.assert_array_equal(pm.points1, kp1[[2, 1]])
+    with pytest.raises(KeyError, match="Expected keys"):
+        load_external_matches({"foo": np.zeros(3)})
+
+
+finite = st.floats(-1e4, 1e4, allow_nan=False)
+bad_value = st.sampled_from([np.nan, np.inf, -np.inf, 1e9, -1e9])
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    n=st.integers(1, 20),
+    row=st.integers(0, 19),
+    col=st.integers(0, 1),
+    value=bad_value,
+    which=st.sampled_from(["points0", "points1"]),
+)
+def test_fuzz_bad_coordinates_raise_value_error(n, row, col, value, which):
+    m = make(n, 2)
+    arr = getattr(m, which).copy()
+    arr[row % n, col] = value
+    kw = {which: arr}
+    with pytest.raises(ValueError, match="Expected"):
+        make(n, 2, **kw)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n0=st.integers(0, 8), n1=st.integers(0, 8), d=st.integers(1, 4))
+def test_fuzz_shapes(n0, n1, d):
+    p0 = np.zeros((n0, d)) + 1.0
+    p1 = np.zeros((n1, d)) + 1.0
+    ok = n0 == n1 and d == 2 and n0 > 0
+    if ok:
+        assert PairMatches(p0, p1, image_size0=(H, W), image_size1=(H, W)).num_points == n0
+    else:
+        with pytest.raises(ValueError, match="Expected"):
+            PairMatches(p0, p1, image_size0=(H, W), image_size1=(H, W))
