@@ -1,0 +1,1 @@
+"""Visualisation: trajectory and error plots, match drawings (matplotlib, Agg backend)."""
