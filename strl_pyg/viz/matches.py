@@ -1,0 +1,134 @@
+"""Drawings of point and line matches on an image pair (OpenCV, no display needed).
+
+The two images are placed side by side (image 0 left, image 1 right, top-aligned, different
+sizes allowed); pixel coordinates follow OpenCV's convention. Inliers are drawn in green,
+outliers in red; without an inlier mask every match is drawn in green.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from strl_pyg.data.matches import PairMatches
+
+__all__ = ["draw_matches", "save_matches_png", "INLIER_COLOUR", "OUTLIER_COLOUR"]
+
+#: BGR colours of inlier and outlier matches.
+INLIER_COLOUR = (60, 200, 60)
+OUTLIER_COLOUR = (40, 40, 230)
+
+
+def _to_bgr(img: np.ndarray) -> np.ndarray:
+    img = np.asarray(img)
+    if img.dtype != np.uint8:
+        img = np.clip(np.round(img * 255.0), 0, 255).astype(np.uint8)
+    if img.ndim == 2:
+        return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    return cv2.cvtColor(img, cv2.COLOR_RGB2BGR)
+
+
+def _mask(value: Any, n: int, name: str) -> np.ndarray | None:
+    if value is None:
+        return None
+    arr = np.asarray(value).reshape(-1)
+    if arr.dtype != np.bool_ or len(arr) != n:
+        raise ValueError(f"Expected '{name}' as a bool array of length {n} "
+                         f"(got dtype {arr.dtype}, length {len(arr)})")
+    return arr
+
+
+def draw_matches(
+    matches: PairMatches,
+    point_inliers: Any = None,
+    line_inliers: Any = None,
+    connect: bool = True,
+    max_connectors: int = 200,
+) -> np.ndarray:
+    """Draws the matches of ``matches`` (which must carry both images).
+
+    Args:
+        matches: a :class:`PairMatches` with ``image0`` and ``image1``.
+        point_inliers: optional bool ``[Np]``.
+        line_inliers: optional bool ``[Nl]``.
+        connect: draw thin connectors between matched points / line midpoints.
+        max_connectors: at most this many connectors (evenly picked) to keep it readable.
+
+    Returns:
+        BGR uint8 canvas ``[max(H0, H1), W0 + W1, 3]``.
+    """
+    if not matches.has_images:
+        raise ValueError("Expected matches with image0 and image1 attached (got none)")
+    pin = _mask(point_inliers, matches.num_points, "point_inliers")
+    lin = _mask(line_inliers, matches.num_lines, "line_inliers")
+    a, b = _to_bgr(matches.image0), _to_bgr(matches.image1)
+    h = max(a.shape[0], b.shape[0])
+    canvas = np.zeros((h, a.shape[1] + b.shape[1], 3), np.uint8)
+    canvas[: a.shape[0], : a.shape[1]] = a
+    canvas[: b.shape[0], a.shape[1] :] = b
+    shift = np.array([a.shape[1], 0.0])
+    sub = 16  # fixed-point drawing: sub-pixel positions
+
+    def pt(x):
+        return tuple(int(v) for v in np.round(np.asarray(x) * sub))
+
+    def colour(mask, i):
+        return INLIER_COLOUR if mask is None or mask[i] else OUTLIER_COLOUR
+
+    thick = max(1, int(round(h / 300)))
+    for i in range(matches.num_lines):
+        c = colour(lin, i)
+        l0, l1 = matches.lines0[i], matches.lines1[i]
+        cv2.line(canvas, pt(l0[0]), pt(l0[1]), c, thick, cv2.LINE_AA, shift=4)
+        cv2.line(canvas, pt(l1[0] + shift), pt(l1[1] + shift), c, thick, cv2.LINE_AA, shift=4)
+        cv2.circle(canvas, pt(l0[0]), 2 * sub, c, -1, cv2.LINE_AA, shift=4)  # endpoint 0
+        cv2.circle(canvas, pt(l1[0] + shift), 2 * sub, c, -1, cv2.LINE_AA, shift=4)
+    for i in range(matches.num_points):
+        c = colour(pin, i)
+        cv2.circle(canvas, pt(matches.points0[i]), 2 * sub, c, 1, cv2.LINE_AA, shift=4)
+        cv2.circle(canvas, pt(matches.points1[i] + shift), 2 * sub, c, 1, cv2.LINE_AA, shift=4)
+    if connect:
+        ends = [(matches.points0, matches.points1, pin),
+                (matches.lines0.mean(1), matches.lines1.mean(1), lin)]
+        for x0, x1, mask in ends:
+            if len(x0) == 0:
+                continue
+            pick = np.unique(np.linspace(0, len(x0) - 1, min(len(x0), max_connectors)).astype(int))
+            for i in pick:
+                cv2.line(canvas, pt(x0[i]), pt(x1[i] + shift), colour(mask, i), 1,
+                         cv2.LINE_AA, shift=4)
+    return canvas
+
+
+def save_matches_png(
+    path: str | os.PathLike,
+    matches: PairMatches,
+    point_inliers: Any = None,
+    line_inliers: Any = None,
+    **kwargs: Any,
+) -> Path:
+    """Draws with :func:`draw_matches` and writes a PNG atomically (temporary file in the same
+    folder, then rename), so a reader never sees a half-written file. Returns the path."""
+    path = Path(path)
+    if path.suffix.lower() != ".png":
+        raise ValueError(f"Expected a .png path (got '{path}')")
+    canvas = draw_matches(matches, point_inliers, line_inliers, **kwargs)
+    ok, buf = cv2.imencode(".png", canvas)
+    if not ok:  # pragma: no cover - imencode fails only on invalid input
+        raise RuntimeError(f"Could not encode the drawing for '{path}'")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(buf.tobytes())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
