@@ -1,6 +1,6 @@
 """Match containers, pair graphs, transforms and datasets."""
 
-from strl_pyg.data import keys
+from strl_pyg.data import datasets, keys
 from strl_pyg.data.graph import (
     build_pair_graph,
     complete_edge_index,
@@ -13,6 +13,7 @@ from strl_pyg.data.matches import PairMatches, load_external_matches
 from strl_pyg.data.transforms import FixedSizeResample, MaterializeCompleteEdges
 
 __all__ = [
+    "datasets",
     "keys",
     "PairMatches",
     "load_external_matches",
