@@ -1,0 +1,121 @@
+import os
+import subprocess
+import sys
+import textwrap
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+import torch
+
+from strl_pyg.geometry import Pose
+from strl_pyg.training import StepBatchSampler, TrainConfig, load_checkpoint, mean_pose, train
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def tiny_config(out_dir, **kw) -> TrainConfig:
+    base = TrainConfig(
+        train_pairs=6, val_pairs=3, batch_size=4, steps=4, val_every=2, num_points=32,
+        num_lines=16, out_dir=str(out_dir), tensorboard=False, seed=3,
+        scene={"image_size": [96, 256], "max_points": 64, "max_lines": 32},
+        model_overrides={"hidden": 16, "layers": 1, "heads": 2, "patch_features": 1},
+    )
+    return replace(base, **kw)
+
+
+def states_equal(a, b):
+    return all(torch.equal(a[k], b[k]) for k in a) and a.keys() == b.keys()
+
+
+def test_resume_equals_uninterrupted(tmp_path):
+    full = train(tiny_config(tmp_path / "full"), progress=False)
+    assert full["step"] == 4 and (tmp_path / "full" / "log.csv").exists()
+    train(tiny_config(tmp_path / "split", steps=2), progress=False)
+    half = load_checkpoint(tmp_path / "split" / "last.pt")
+    assert half["step"] == 2
+    resumed = train(tiny_config(tmp_path / "split"), resume=True, progress=False)
+    assert resumed["step"] == 4
+    a = load_checkpoint(tmp_path / "full" / "last.pt")
+    b = load_checkpoint(tmp_path / "split" / "last.pt")
+    assert states_equal(a["model"], b["model"])
+    assert a["history"][-1]["rot_err_deg"] == b["history"][-1]["rot_err_deg"]
+    # the CSV log of the resumed run holds each step once
+    rows = (tmp_path / "split" / "log.csv").read_text().splitlines()
+    train_loss_steps = [r.split(",")[0] for r in rows if ",train,loss," in r]
+    assert train_loss_steps == ["1", "2", "3", "4"]
+
+
+def test_resume_errors(tmp_path):
+    cfg = tiny_config(tmp_path / "run", steps=2)
+    with pytest.raises(FileNotFoundError, match="checkpoint"):
+        train(cfg, resume=True, progress=False)
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "last.pt").write_bytes(b"\x00garbage")
+    with pytest.raises(ValueError, match="readable checkpoint"):
+        train(cfg, resume=True, progress=False)
+    train(tiny_config(tmp_path / "ok", steps=2), progress=False)
+    with pytest.raises(ValueError, match="config to match"):
+        train(tiny_config(tmp_path / "ok", steps=4, lr=1e-3), resume=True, progress=False)
+
+
+def test_config_validation():
+    with pytest.raises(ValueError, match="dataset"):
+        TrainConfig(dataset="imagenet")
+    with pytest.raises(ValueError, match="data-root"):
+        TrainConfig(dataset="kitti")
+    with pytest.raises(ValueError, match="batch_size"):
+        TrainConfig(batch_size=0)
+    with pytest.raises(ValueError, match="unknown keys"):
+        TrainConfig.from_dict({"steps": 3, "epochs": 2})
+
+
+def test_step_sampler_is_a_function_of_step_and_shards_the_batch():
+    a = StepBatchSampler(10, 4, 0, 7, seed=1)
+    b = StepBatchSampler(10, 4, 5, 7, seed=1)
+    assert list(a)[5:] == list(b)
+    r0 = list(StepBatchSampler(10, 4, 0, 3, seed=1, rank=0, world_size=2))
+    r1 = list(StepBatchSampler(10, 4, 0, 3, seed=1, rank=1, world_size=2))
+    for full, x, y in zip(a, r0, r1, strict=False):
+        assert sorted(x + y) == sorted(full)
+    epoch0 = [i for batch in list(a)[:2] for i, _, _ in batch]
+    assert len(set(epoch0)) == 8  # no repeats within an epoch
+    with pytest.raises(ValueError, match="divisible"):
+        StepBatchSampler(10, 3, 0, 1, seed=0, world_size=2)
+
+
+def test_mean_pose_known_answers():
+    R = Pose.from_quaternion(torch.tensor([0.9, 0.1, -0.2, 0.3]), torch.zeros(3)).R
+    T = torch.eye(4).repeat(5, 1, 1)
+    T[:, :3, :3] = R
+    T[:, :3, 3] = torch.tensor([0.0, 0.0, 2.0])
+    q, t = mean_pose(T)
+    assert torch.allclose(Pose.from_quaternion(q, t).R, R, atol=1e-5)
+    assert torch.allclose(t, torch.tensor([0.0, 0.0, 1.0]))
+    T[:2, :3, 3] = torch.tensor([1.0, 0.0, 0.0])
+    _, t = mean_pose(T, translation="metric")
+    assert torch.allclose(t, torch.tensor([0.4, 0.0, 1.2]))
+
+
+@pytest.mark.slow
+def test_torchrun_two_ranks_identical_and_equal_to_single_process(tmp_path):
+    script = tmp_path / "ddp_train.py"
+    script.write_text(textwrap.dedent(f"""
+        import os, sys, torch
+        sys.path.insert(0, {str(REPO / "tests")!r})
+        from test_training import tiny_config
+        from strl_pyg.training import train
+        out = train(tiny_config({str(tmp_path / "ddp")!r}), progress=False)
+        torch.save(out["model"].state_dict(), {str(tmp_path)!r} + f"/rank{{os.environ['RANK']}}.pt")
+    """))
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
+           str(script)]
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    w0 = torch.load(tmp_path / "rank0.pt")
+    w1 = torch.load(tmp_path / "rank1.pt")
+    assert states_equal(w0, w1)
+    single = train(tiny_config(tmp_path / "single"), progress=False)["model"].state_dict()
+    for k in w0:
+        torch.testing.assert_close(w0[k], single[k], rtol=1e-4, atol=1e-5)
