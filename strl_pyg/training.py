@@ -512,6 +512,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
                     "history": history,
                     "trivial_T": trivial_T,
                 })
+                model.save(out_dir / "model.pt")  # the weights alone, for StrLPose.load
                 bar.write(f"step {step}: val rot {metrics['rot_err_deg']:.2f} deg "
                           f"(trivial {metrics['trivial_rot_err_deg']:.2f}), trans "
                           f"{metrics['trans_err_deg']:.2f} deg "

@@ -22,8 +22,15 @@ def _count(canvas, colour):
 
 
 def test_draw_layout_and_colours(pair):
-    canvas = draw_matches(pair.matches, pair.point_inliers, pair.line_inliers)
+    canvas = draw_matches(pair.matches, pair.point_inliers, pair.line_inliers,
+                          layout="horizontal")
     assert canvas.shape == (96, 320, 3) and canvas.dtype == np.uint8
+    # wide images stack vertically by default; both layouts draw the same matches
+    auto = draw_matches(pair.matches, pair.point_inliers, pair.line_inliers)
+    assert auto.shape == (192, 160, 3)
+    assert _count(auto, OUTLIER_COLOUR) > 0
+    with pytest.raises(ValueError, match="layout"):
+        draw_matches(pair.matches, layout="diagonal")
     assert _count(canvas, OUTLIER_COLOUR) > 0
     all_in = draw_matches(pair.matches, np.ones_like(pair.point_inliers),
                           np.ones_like(pair.line_inliers))
@@ -39,7 +46,7 @@ def test_different_sizes():
 
 def test_save_png_atomic(pair, tmp_path):
     path = save_matches_png(tmp_path / "sub" / "m.png", pair.matches, pair.point_inliers,
-                            pair.line_inliers)
+                            pair.line_inliers, layout="horizontal")
     img = cv2.imread(str(path))
     assert img is not None and img.shape == (96, 320, 3)
     assert [p.name for p in path.parent.iterdir()] == ["m.png"]  # no temporary file left

@@ -49,6 +49,7 @@ def draw_matches(
     line_inliers: Any = None,
     connect: bool = True,
     max_connectors: int = 200,
+    layout: str = "auto",
 ) -> np.ndarray:
     """Draws the matches of ``matches`` (which must carry both images).
 
@@ -58,20 +59,34 @@ def draw_matches(
         line_inliers: optional bool ``[Nl]``.
         connect: draw thin connectors between matched points / line midpoints.
         max_connectors: at most this many connectors (evenly picked) to keep it readable.
+        layout: ``"horizontal"`` (side by side), ``"vertical"`` (image 1 below image 0) or
+            ``"auto"`` (vertical for wide images such as KITTI's, where W > 1.5 H).
 
     Returns:
-        BGR uint8 canvas ``[max(H0, H1), W0 + W1, 3]``.
+        BGR uint8 canvas ``[max(H0, H1), W0 + W1, 3]`` (horizontal) or
+        ``[H0 + H1, max(W0, W1), 3]`` (vertical).
     """
+    if layout not in ("auto", "horizontal", "vertical"):
+        raise ValueError(f"Expected layout 'auto', 'horizontal' or 'vertical' (got {layout!r})")
     if not matches.has_images:
         raise ValueError("Expected matches with image0 and image1 attached (got none)")
     pin = _mask(point_inliers, matches.num_points, "point_inliers")
     lin = _mask(line_inliers, matches.num_lines, "line_inliers")
     a, b = _to_bgr(matches.image0), _to_bgr(matches.image1)
-    h = max(a.shape[0], b.shape[0])
-    canvas = np.zeros((h, a.shape[1] + b.shape[1], 3), np.uint8)
-    canvas[: a.shape[0], : a.shape[1]] = a
-    canvas[: b.shape[0], a.shape[1] :] = b
-    shift = np.array([a.shape[1], 0.0])
+    if layout == "auto":
+        layout = "vertical" if a.shape[1] > 1.5 * a.shape[0] else "horizontal"
+    if layout == "horizontal":
+        h = max(a.shape[0], b.shape[0])
+        canvas = np.zeros((h, a.shape[1] + b.shape[1], 3), np.uint8)
+        canvas[: a.shape[0], : a.shape[1]] = a
+        canvas[: b.shape[0], a.shape[1] :] = b
+        shift = np.array([a.shape[1], 0.0])
+    else:
+        h = a.shape[0] + b.shape[0]
+        canvas = np.zeros((h, max(a.shape[1], b.shape[1]), 3), np.uint8)
+        canvas[: a.shape[0], : a.shape[1]] = a
+        canvas[a.shape[0] :, : b.shape[1]] = b
+        shift = np.array([0.0, a.shape[0]])
     sub = 16  # fixed-point drawing: sub-pixel positions
 
     def pt(x):
@@ -80,7 +95,7 @@ def draw_matches(
     def colour(mask, i):
         return INLIER_COLOUR if mask is None or mask[i] else OUTLIER_COLOUR
 
-    thick = max(1, int(round(h / 300)))
+    thick = max(1, int(round(min(canvas.shape[:2]) / 300)))
     for i in range(matches.num_lines):
         c = colour(lin, i)
         l0, l1 = matches.lines0[i], matches.lines1[i]

@@ -1,0 +1,436 @@
+"""The ``strl-pose`` command line.
+
+Subcommands: ``demo`` (the main job on an embedded default: a generated pair goes through
+matching, graph and model), ``match``, ``predict``, ``train``, ``evaluate`` and ``bench``.
+Every error in the user's input ends with a one-line ``error: Expected ... (got ...)`` on
+stderr and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["main", "read_intrinsics", "read_image_file", "default_checkpoint", "predict_pair"]
+
+WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+DEFAULT_WEIGHTS = WEIGHTS_DIR / "strl_pose_synthetic.pt"
+DEMO_SEED = 2_000_017  # held out: training uses seeds < 2,000,000
+
+
+class UsageError(ValueError):
+    """Bad input from the command line (printed without a traceback, exit code 2)."""
+
+
+def default_checkpoint() -> Path:
+    """The shipped checkpoint (``STRL_POSE_WEIGHTS`` overrides it)."""
+    return Path(os.environ.get("STRL_POSE_WEIGHTS", DEFAULT_WEIGHTS))
+
+
+def load_model(path: str | os.PathLike | None):
+    from strl_pyg.model import StrLPose
+
+    path = Path(path) if path else default_checkpoint()
+    if not path.is_file():
+        raise UsageError(f"Expected a model checkpoint at '{path}' (got no such file); train one "
+                         "with 'strl-pose train' or pass --checkpoint")
+    return StrLPose.load(path).eval()
+
+
+# ----------------------------------------------------------------------------- inputs
+def read_image_file(path: str | os.PathLike) -> np.ndarray:
+    """Reads an image file as uint8 ``(H, W)`` or ``(H, W, 3)`` RGB; clear errors otherwise."""
+    import cv2
+
+    path = Path(path)
+    if not path.is_file():
+        raise UsageError(f"Expected an image file at '{path}' (got no such file)")
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None or img.size == 0:
+        raise UsageError(f"Expected a readable image at '{path}' (got a file OpenCV cannot decode)")
+    if img.dtype == np.uint16:
+        img = (img / 257).astype(np.uint8)
+    if img.ndim == 3 and img.shape[2] == 4:
+        img = img[..., :3]
+    if img.ndim == 3:
+        img = np.ascontiguousarray(img[..., ::-1])  # BGR -> RGB
+    return img
+
+
+def _K_from_numbers(values: list[float], source: str) -> np.ndarray:
+    if len(values) == 4:
+        fx, fy, cx, cy = values
+        return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    if len(values) == 9:
+        return np.asarray(values, dtype=np.float64).reshape(3, 3)
+    if len(values) == 12:  # a 3x4 projection matrix (KITTI P0)
+        return np.asarray(values, dtype=np.float64).reshape(3, 4)[:, :3]
+    raise UsageError(f"Expected 4 (fx,fy,cx,cy), 9 (3x3) or 12 (3x4) numbers for intrinsics in "
+                     f"{source} (got {len(values)})")
+
+
+def read_intrinsics(text_or_path: str) -> np.ndarray:
+    """Intrinsics from ``"fx,fy,cx,cy"``, nine comma-separated numbers, or a file holding a
+    3x3 matrix (DeMoN ``cam.txt``), a 3x4 projection, or KITTI ``calib.txt`` (``P0:`` row)."""
+    path = Path(text_or_path)
+    if path.is_file():
+        text = path.read_text()
+        rows = {ln.split(":", 1)[0].strip(): ln.split(":", 1)[1] for ln in text.splitlines()
+                if ":" in ln}
+        body = rows.get("P0", rows.get("P2", text if not rows else None))
+        if body is None:
+            raise UsageError(f"Expected a 'P0:' row or bare numbers in '{path}' "
+                             f"(got keys {sorted(rows)})")
+        source = f"'{path}'"
+    else:
+        if not any(c.isdigit() for c in text_or_path) or os.sep in text_or_path:
+            raise UsageError(f"Expected an intrinsics file or 'fx,fy,cx,cy' (got '{text_or_path}'"
+                             ", which is neither an existing file nor numbers)")
+        body, source = text_or_path.replace(",", " "), "the flag"
+    try:
+        values = [float(v) for v in body.split()]
+    except ValueError as err:
+        raise UsageError(f"Expected numbers for intrinsics in {source} (got {err})") from err
+    K = _K_from_numbers(values, source)
+    from strl_pyg.data.matches import _check_K
+
+    try:
+        return _check_K(K, "K")
+    except ValueError as err:
+        raise UsageError(str(err)) from err
+
+
+def _intrinsics(args) -> tuple[np.ndarray | None, np.ndarray | None]:
+    K0 = read_intrinsics(args.K0) if args.K0 else None
+    K1 = read_intrinsics(args.K1) if args.K1 else K0
+    if args.K:
+        K0 = K1 = read_intrinsics(args.K)
+    return K0, K1
+
+
+# ----------------------------------------------------------------------------- the pipeline
+def predict_pair(model, matches, resample_seed: int | None = 0,
+                 warmup: bool = False) -> dict[str, Any]:
+    """Runs the model on one pair's matches; returns the pose and its uncertainty.
+
+    The graph is resampled to the model's training counts (384 points, 192 lines, by random
+    repetition/deletion with a fixed seed) unless ``resample_seed`` is None. With ``warmup``,
+    one untimed forward pass runs first, so ``time_ms`` is the steady-state time.
+    """
+    import torch
+
+    from strl_pyg.data import FixedSizeResample, build_pair_graph
+
+    if matches.has_images and model.config.visual == "pixel":
+        channels = model.config.patch_features
+        if channels == 1 and matches.image0.ndim == 3:
+            matches = _grey(matches)
+    data = build_pair_graph(matches, keep_images=model.config.visual == "cnn")
+    if resample_seed is not None:
+        data = FixedSizeResample(seed=resample_seed)(data)
+    with torch.no_grad():
+        if warmup:
+            model(data)
+        t0 = time.perf_counter()
+        out = model(data)
+    ms = (time.perf_counter() - t0) * 1e3
+    sigma = torch.exp(0.5 * out.log_var[0])
+    return {
+        "T_0to1": out.T_0to1[0].numpy(),
+        "quaternion": out.quaternion[0].numpy(),
+        "translation": out.translation[0].numpy(),
+        "sigma": sigma.numpy(),
+        "log_var": out.log_var[0].numpy(),
+        "time_ms": ms,
+    }
+
+
+def _grey(matches):
+    from dataclasses import replace
+
+    import cv2
+
+    conv = lambda im: im if im.ndim == 2 else cv2.cvtColor(im, cv2.COLOR_RGB2GRAY)  # noqa: E731
+    return replace(matches, image0=conv(matches.image0), image1=conv(matches.image1))
+
+
+def _pose_errors(T_est: np.ndarray, T_gt: np.ndarray) -> tuple[float, float]:
+    from strl_pyg.metrics import relative_pose_error
+
+    r, t = relative_pose_error(np.asarray(T_est)[None], np.asarray(T_gt)[None])
+    return float(r[0]), float(t[0])
+
+
+def _fmt_pose(T: np.ndarray) -> str:
+    from strl_pyg.geometry import Pose
+
+    p = Pose.from_matrix(np.asarray(T, dtype=np.float64))
+    t = p.t.numpy()
+    return (f"rotation {float(p.angle_deg()):.3f} deg, q(wxyz) "
+            f"{np.array2string(p.quaternion().numpy(), precision=4)}, t "
+            f"{np.array2string(t, precision=4)}")
+
+
+def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out[k] = _jsonable(v)
+        elif isinstance(v, np.ndarray):
+            out[k] = v.tolist()
+        elif isinstance(v, (np.floating, np.integer)):
+            out[k] = v.item()
+        else:
+            out[k] = v
+    return out
+
+
+def _classical(matches) -> dict[str, Any] | None:
+    from strl_pyg.baselines import estimate_relative_pose
+
+    if not matches.has_intrinsics or matches.num_points < 5:
+        return None
+    res = estimate_relative_pose(matches, method="opencv")
+    return {"T_0to1": res.pose.matrix().numpy(), "success": bool(res.success),
+            "inliers": int(np.asarray(res.inliers).sum()), "time_ms": float(res.time_ms),
+            "result": res}
+
+
+def _fused(pred: dict[str, Any], classical: dict[str, Any] | None, matches):
+    if classical is None or not classical["success"]:
+        return None
+    try:
+        from strl_pyg.fusion import fuse_poses
+    except ImportError:
+        return None
+    import torch
+
+    from strl_pyg.geometry import Pose
+
+    T = torch.as_tensor(pred["T_0to1"], dtype=torch.float64)
+    fused = fuse_poses(Pose.from_matrix(T), torch.as_tensor(pred["log_var"]),
+                       classical["result"], matches)
+    return {"T_0to1": fused.pose.matrix().numpy()}
+
+
+# ----------------------------------------------------------------------------- subcommands
+def cmd_demo(args) -> int:
+    from strl_pyg.frontend import epipolar_residuals, match_images
+    from strl_pyg.synthetic import SceneConfig, generate_pair
+    from strl_pyg.viz.matches import save_matches_png
+
+    model = load_model(args.checkpoint)
+    pair = generate_pair(args.seed, SceneConfig(kind=args.kind))
+    print(f"generated pair: kind={args.kind}, seed={args.seed}, "
+          f"{pair.image0.shape[1]}x{pair.image0.shape[0]} px (held out from training)")
+    matches = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K)
+    tm = matches.info.get("timings_ms", {})
+    print(f"front end: {matches.num_points} points, {matches.num_lines} lines "
+          f"in {tm.get('total', float('nan')):.0f} ms")
+    pred = predict_pair(model, matches, warmup=True)
+    classical = _classical(matches)
+    fused = _fused(pred, classical, matches)
+    T_gt = pair.T_0to1
+    rows = [("ground truth", T_gt, None), ("Str-L Pose", pred["T_0to1"], pred["time_ms"])]
+    if classical is not None:
+        rows.append(("OpenCV MAGSAC", classical["T_0to1"], classical["time_ms"]))
+    if fused is not None:
+        rows.append(("fused", fused["T_0to1"], None))
+    print(f"\n{'method':<14} {'rot err':>8} {'t err':>8} {'ms':>7}   pose")
+    report = {}
+    for name, T, ms in rows:
+        r, t = _pose_errors(T, T_gt)
+        ms_s = f"{ms:7.1f}" if ms is not None else "      -"
+        print(f"{name:<14} {r:8.3f} {t:8.3f} {ms_s}   {_fmt_pose(T)}")
+        report[name] = {"rot_err_deg": r, "trans_err_deg": t}
+    s = pred["sigma"]
+    print(f"\npredicted sigma: quaternion {np.array2string(s[:4], precision=4)}, "
+          f"translation {np.array2string(s[4:], precision=4)}")
+    p_err, l_err = epipolar_residuals(matches, T_gt)
+    out = Path(args.out)
+    png = save_matches_png(out / "demo_matches.png", matches, point_inliers=p_err < 2.0,
+                           line_inliers=l_err < 2.0)
+    print(f"matches drawn (green: epipolar error < 2 px under the true pose): {png}")
+    if args.json:
+        print(json.dumps(_jsonable({"prediction": {k: v for k, v in pred.items()},
+                                    "errors": report})))
+    return 0
+
+
+def _match_from_args(args):
+    from strl_pyg.frontend import FrontendConfig, match_images
+
+    img0, img1 = read_image_file(args.image0), read_image_file(args.image1)
+    K0, K1 = _intrinsics(args)
+    cfg = FrontendConfig(detector=args.detector)
+    return match_images(img0, img1, K0=K0, K1=K1, config=cfg)
+
+
+def cmd_match(args) -> int:
+    from strl_pyg.viz.matches import save_matches_png
+
+    matches = _match_from_args(args)
+    path = matches.save(args.out)
+    print(f"{matches.num_points} points, {matches.num_lines} lines -> {path}")
+    if args.png:
+        print(f"drawing -> {save_matches_png(args.png, matches)}")
+    return 0
+
+
+def cmd_predict(args) -> int:
+    model = load_model(args.checkpoint)
+    matches = _match_from_args(args)
+    pred = predict_pair(model, matches)
+    classical = _classical(matches) if not args.no_baseline else None
+    result = {"model": {k: pred[k] for k in ("T_0to1", "quaternion", "translation", "sigma",
+                                              "time_ms")},
+              "num_points": matches.num_points, "num_lines": matches.num_lines,
+              "translation_kind": model.config.translation,
+              "intrinsics": matches.has_intrinsics}
+    if classical is not None:
+        result["opencv"] = {k: classical[k] for k in ("T_0to1", "success", "inliers", "time_ms")}
+        fused = _fused(pred, classical, matches)
+        if fused is not None:
+            result["fused"] = fused
+    if args.json:
+        print(json.dumps(_jsonable(result)))
+        return 0
+    print(f"matches: {matches.num_points} points, {matches.num_lines} lines")
+    if not matches.has_intrinsics:
+        print("note: no intrinsics given (--K/--K0/--K1): coordinates were normalised by the "
+              "image size and no classical baseline was run")
+    print(f"Str-L Pose: {_fmt_pose(pred['T_0to1'])}  ({pred['time_ms']:.1f} ms)")
+    print(f"  sigma: {np.array2string(pred['sigma'], precision=4)}")
+    if "opencv" in result:
+        print(f"OpenCV:     {_fmt_pose(classical['T_0to1'])}  ({classical['inliers']} inliers)")
+    if "fused" in result:
+        print(f"fused:      {_fmt_pose(result['fused']['T_0to1'])}")
+    return 0
+
+
+def cmd_train(args, parser) -> int:
+    from strl_pyg.training import run_from_args
+
+    return run_from_args(args, parser)
+
+
+def cmd_evaluate(argv: list[str]) -> int:
+    try:
+        from strl_pyg.evaluation import main as evaluate_main
+    except ImportError as err:
+        raise UsageError(f"Expected strl_pyg.evaluation to be importable (got {err})") from err
+    return int(evaluate_main(argv) or 0)
+
+
+def cmd_bench(args) -> int:
+    import platform
+
+    import torch
+    from torch_geometric.loader.dataloader import Collater
+
+    from strl_pyg.data import FixedSizeResample, build_pair_graph
+    from strl_pyg.frontend import match_images
+    from strl_pyg.synthetic import SceneConfig, generate_pair
+
+    model = load_model(args.checkpoint)
+    print(f"python {platform.python_version()}, torch {torch.__version__}, "
+          f"{os.cpu_count()} cores, {torch.get_num_threads()} threads; model {model!r}")
+    pair = generate_pair(DEMO_SEED, SceneConfig())
+
+    def timed(fn, n):
+        fn()
+        t0 = time.perf_counter()
+        for _ in range(n):
+            fn()
+        return (time.perf_counter() - t0) / n * 1e3
+
+    n = args.repeat
+    ms_match = timed(lambda: match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K),
+                     max(1, n // 5))
+    m = pair.matches
+    ms_graph = timed(lambda: FixedSizeResample(seed=0)(build_pair_graph(m)), n)
+    g = FixedSizeResample(seed=0)(build_pair_graph(m))
+    b16 = Collater(None)([g] * 16)
+    with torch.no_grad():
+        ms_b1 = timed(lambda: model(g), n)
+        ms_b16 = timed(lambda: model(b16), max(1, n // 4))
+    print("\n| stage (192x640, 384 points + 192 lines) | ms |\n|---|---|")
+    print(f"| front end (SIFT + LSD + line matching) | {ms_match:.1f} |")
+    print(f"| graph build + resample | {ms_graph:.2f} |")
+    print(f"| model forward, batch 1 | {ms_b1:.2f} |")
+    print(f"| model forward, batch 16 (per pair) | {ms_b16 / 16:.2f} |")
+    return 0
+
+
+# ----------------------------------------------------------------------------- parser
+def _add_pair_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("image0", help="reference image")
+    p.add_argument("image1", help="target image")
+    p.add_argument("--K", help="intrinsics of both images: 'fx,fy,cx,cy', 9 numbers or a file "
+                               "(3x3, 3x4, or KITTI calib.txt)")
+    p.add_argument("--K0", help="intrinsics of image 0 (same formats)")
+    p.add_argument("--K1", help="intrinsics of image 1 (default: --K0)")
+    p.add_argument("--detector", choices=("sift", "orb"), default="sift")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from strl_pyg.training import add_train_arguments
+
+    ap = argparse.ArgumentParser(prog="strl-pose", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("demo", help="the main job on a generated pair (no downloads)")
+    p.add_argument("--seed", type=int, default=DEMO_SEED)
+    p.add_argument("--kind", choices=("street", "indoor", "boxes"), default="street")
+    p.add_argument("--checkpoint", default=None, help="default: the shipped weights")
+    p.add_argument("--out", default="outputs/demo", help="folder for the match drawing")
+    p.add_argument("--json", action="store_true", help="also print the result as JSON")
+    p = sub.add_parser("match", help="match points and lines of two images into a .npz")
+    _add_pair_args(p)
+    p.add_argument("--out", required=True, help="output .npz (PairMatches.save keys)")
+    p.add_argument("--png", default=None, help="also draw the matches to this PNG")
+    p = sub.add_parser("predict", help="relative pose of two images")
+    _add_pair_args(p)
+    p.add_argument("--checkpoint", default=None, help="default: the shipped weights")
+    p.add_argument("--json", action="store_true", help="print JSON only")
+    p.add_argument("--no-baseline", action="store_true", help="skip the classical estimate")
+    p = sub.add_parser("train", help="train a model (see examples/train.py)")
+    add_train_arguments(p)
+    sub.add_parser("evaluate", help="evaluate a checkpoint (see examples/evaluate.py)",
+                   add_help=False)
+    p = sub.add_parser("bench", help="time the pipeline stages on this machine")
+    p.add_argument("--checkpoint", default=None)
+    p.add_argument("--repeat", type=int, default=20)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        if argv[:1] == ["evaluate"]:
+            return cmd_evaluate(argv[1:])
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if args.command == "train":
+            return cmd_train(args, parser)
+        return {"demo": cmd_demo, "match": cmd_match, "predict": cmd_predict,
+                "bench": cmd_bench}[args.command](args)
+    except (UsageError, FileNotFoundError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    except ValueError as err:  # validation errors of the library: "Expected ... (got ...)"
+        if "Expected" not in str(err):
+            raise
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
