@@ -264,19 +264,23 @@ def cmd_demo(args) -> int:
     return 0
 
 
-def _match_from_args(args):
-    from strl_pyg.frontend import FrontendConfig, match_images
-
+def _read_pair_args(args) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
     img0, img1 = read_image_file(args.image0), read_image_file(args.image1)
     K0, K1 = _intrinsics(args)
-    cfg = FrontendConfig(detector=args.detector)
-    return match_images(img0, img1, K0=K0, K1=K1, config=cfg)
+    return img0, img1, K0, K1
+
+
+def _match(inputs, args):
+    from strl_pyg.frontend import FrontendConfig, match_images
+
+    img0, img1, K0, K1 = inputs
+    return match_images(img0, img1, K0=K0, K1=K1, config=FrontendConfig(detector=args.detector))
 
 
 def cmd_match(args) -> int:
     from strl_pyg.viz.matches import save_matches_png
 
-    matches = _match_from_args(args)
+    matches = _match(_read_pair_args(args), args)
     path = matches.save(args.out)
     print(f"{matches.num_points} points, {matches.num_lines} lines -> {path}")
     if args.png:
@@ -285,8 +289,9 @@ def cmd_match(args) -> int:
 
 
 def cmd_predict(args) -> int:
+    inputs = _read_pair_args(args)  # fail on bad files before any heavy work
     model = load_model(args.checkpoint)
-    matches = _match_from_args(args)
+    matches = _match(inputs, args)
     pred = predict_pair(model, matches)
     classical = _classical(matches) if not args.no_baseline else None
     result = {"model": {k: pred[k] for k in ("T_0to1", "quaternion", "translation", "sigma",
