@@ -126,20 +126,14 @@ def predict_pair(model, matches, resample_seed: int | None = 0,
     """
     import torch
 
-    from strl_pyg.data import FixedSizeResample, build_pair_graph
+    from strl_pyg.evaluation import predict_pose
 
-    if matches.has_images and model.config.visual == "pixel":
-        channels = model.config.patch_features
-        if channels == 1 and matches.image0.ndim == 3:
-            matches = _grey(matches)
-    data = build_pair_graph(matches, keep_images=model.config.visual == "cnn")
-    if resample_seed is not None:
-        data = FixedSizeResample(seed=resample_seed)(data)
-    with torch.no_grad():
-        if warmup:
-            model(data)
-        t0 = time.perf_counter()
-        out = model(data)
+    resample = None if resample_seed is None else (384, 192)
+    seed = resample_seed or 0
+    if warmup:
+        predict_pose(model, matches, resample, seed)
+    t0 = time.perf_counter()
+    out = predict_pose(model, matches, resample, seed)
     ms = (time.perf_counter() - t0) * 1e3
     sigma = torch.exp(0.5 * out.log_var[0])
     return {
@@ -150,15 +144,6 @@ def predict_pair(model, matches, resample_seed: int | None = 0,
         "log_var": out.log_var[0].numpy(),
         "time_ms": ms,
     }
-
-
-def _grey(matches):
-    from dataclasses import replace
-
-    import cv2
-
-    conv = lambda im: im if im.ndim == 2 else cv2.cvtColor(im, cv2.COLOR_RGB2GRAY)  # noqa: E731
-    return replace(matches, image0=conv(matches.image0), image1=conv(matches.image1))
 
 
 def _pose_errors(T_est: np.ndarray, T_gt: np.ndarray) -> tuple[float, float]:
@@ -331,7 +316,7 @@ def cmd_evaluate(argv: list[str]) -> int:
         from strl_pyg.evaluation import main as evaluate_main
     except ImportError as err:
         raise UsageError(f"Expected strl_pyg.evaluation to be importable (got {err})") from err
-    return int(evaluate_main(argv) or 0)
+    return int(evaluate_main(argv, prog="strl-pose evaluate") or 0)
 
 
 def cmd_bench(args) -> int:

@@ -1,0 +1,152 @@
+"""Tests of strl_pyg.evaluation and examples/evaluate.py."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from strl_pyg.evaluation import (
+    EvalPair,
+    EvalReport,
+    PairResult,
+    available_methods,
+    evaluate_pairs,
+    synthetic_eval_pairs,
+)
+from strl_pyg.model import StrLPose, StrLPoseConfig
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def tiny_checkpoint(tmp_path_factory) -> Path:
+    torch.manual_seed(0)
+    model = StrLPose(StrLPoseConfig(hidden=32, layers=1, heads=2, patch_features=1))
+    return model.save(tmp_path_factory.mktemp("ckpt") / "tiny.pt")
+
+
+@pytest.fixture(scope="module")
+def synthetic_report(tiny_checkpoint) -> EvalReport:
+    pairs = synthetic_eval_pairs(4, seed=2_000_000, kinds=("indoor", "boxes"))
+    return evaluate_pairs(StrLPose.load(tiny_checkpoint), pairs, progress=False)
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("evaluate_script",
+                                                  REPO / "examples" / "evaluate.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_report_rows_columns_and_classical_accuracy(synthetic_report):
+    rep = synthetic_report
+    assert rep.methods == available_methods()
+    assert len(rep.results) == 4 * len(rep.methods)
+    summary = rep.summary()
+    assert list(summary) == ["synthetic/indoor", "synthetic/boxes", "all"]
+    for per in summary.values():
+        assert list(per) == list(rep.methods)
+    keys = {"n", "failures", "rot_mean", "rot_median", "trans_mean", "trans_median", "auc5",
+            "auc10", "auc20", "time_ms"}
+    assert set(summary["all"]["strl"]) == keys
+    assert summary["all"]["strl"]["n"] == 4
+    # noise-free generated matches: the classical estimates are essentially exact
+    for m in ("opencv", "poselib"):
+        if m in rep.methods:
+            s = summary["all"][m]
+            assert s["failures"] == 0 and s["rot_mean"] < 1.0 and s["trans_mean"] < 1.0
+            assert s["auc5"] > 0.8
+    # an untrained network is far off; the fusion follows the exact classical estimate
+    assert summary["all"]["strl"]["rot_mean"] > 1.0
+    assert summary["all"]["fused_opencv"]["rot_mean"] < 1.0
+
+
+def test_markdown_and_json_render(synthetic_report, tmp_path):
+    md = synthetic_report.to_markdown()
+    lines = md.splitlines()
+    header = next(ln for ln in lines if ln.startswith("| subset"))
+    assert "AUC@5" in header and "rot med" in header and "trans mean" in header
+    rows = [ln for ln in lines if ln.startswith("| synthetic/") or ln.startswith("| all")]
+    assert len(rows) == 3 * len(synthetic_report.methods)
+    paths = synthetic_report.save(tmp_path)
+    assert [p.name for p in paths] == ["results.md", "results.json"]  # no frames, no chain
+    data = json.loads((tmp_path / "results.json").read_text())
+    assert data["summary"]["all"]["opencv"]["n"] == 4
+
+
+def test_trajectory_metrics_on_a_known_chain():
+    # ground truth: the camera moves 1 m along +z per frame (X1 = X0 - (0, 0, 1)); the
+    # estimate has the exact rotation and a translation direction 2 degrees off in x-z
+    a = math.radians(2.0)
+    T_gt = np.eye(4)
+    T_gt[2, 3] = -1.0
+    T_est = np.eye(4)
+    T_est[:3, 3] = [-math.sin(a), 0.0, -math.cos(a)]
+    n = 4
+    results = [PairResult(f"s/{i}", "seq", "opencv", 0.0, 2.0, 1.0, True, T_est)
+               for i in range(n)]
+    pairs = {f"s/{i}": ("seq", T_gt, (i, i + 1)) for i in range(n)}
+    pairs["s/x"] = ("seq", T_gt, (10, 11))  # not consecutive: outside the longest chain
+    rep = EvalReport(results, ("opencv",), pairs)
+    trajs = rep.trajectories()["seq"]
+    assert torch.allclose(trajs["ground truth"].t[-1],
+                          torch.tensor([0.0, 0.0, float(n)], dtype=torch.float64))
+    assert torch.allclose(trajs["opencv"].t[-1], torch.tensor(
+        [n * math.sin(a), 0.0, n * math.cos(a)], dtype=torch.float64), atol=1e-12)
+    k = rep.kitti_summary()["seq"]["opencv"]
+    assert k["num_pairs"] == n and k["length_m"] == pytest.approx(float(n))
+    assert math.isnan(k["t_rel"]) and k["num_segments"] == 0  # no 100 m segment
+    assert k["rmse_trans_m"] == pytest.approx(2 * math.sin(a / 2), rel=1e-9)
+    assert k["rmse_rot_deg"] == 0.0
+    # 10-50 m segments do not fit either in 4 m
+    assert k["num_short_segments"] == 0
+    assert "| seq | opencv | 4 | 4.0 | - | - |" in rep.to_markdown()
+
+
+def test_evaluate_pairs_rejects_bad_arguments(tiny_checkpoint):
+    with pytest.raises(ValueError, match="Expected methods"):
+        evaluate_pairs(None, [], methods=("magic",))
+    with pytest.raises(ValueError, match="Expected a model"):
+        evaluate_pairs(None, [], methods=("strl",))
+    with pytest.raises(ValueError, match="Expected intrinsics"):
+        from strl_pyg.data.matches import PairMatches
+
+        EvalPair(PairMatches(np.zeros((5, 2)), np.zeros((5, 2)), image_size0=(10, 10),
+                             image_size1=(10, 10)), np.eye(4), "s", "p")
+
+
+def test_script_errors_for_missing_checkpoint_and_root(tiny_checkpoint, tmp_path, capsys):
+    script = _script()
+    with pytest.raises(SystemExit):
+        script.main(["--checkpoint", str(tmp_path / "nope.pt")])
+    assert "Expected a checkpoint file" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        script.main(["--checkpoint", str(tiny_checkpoint), "--dataset", "kitti"])
+    assert "Expected --data-root" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        script.main(["--checkpoint", str(tiny_checkpoint), "--dataset", "demon",
+                     "--data-root", str(tmp_path / "missing")])
+    assert "Expected a data folder" in capsys.readouterr().err
+
+
+def test_script_end_to_end_on_kitti_slice(kitti_root, tiny_checkpoint, tmp_path, capsys):
+    out = tmp_path / "out"
+    rc = _script().main([
+        "--checkpoint", str(tiny_checkpoint), "--dataset", "kitti",
+        "--data-root", str(kitti_root), "--sequences", "06", "--limit", "2",
+        "--cache-dir", str(tmp_path / "cache"), "--out", str(out), "--no-progress",
+        "--methods", "strl", "opencv", "fused_opencv",
+    ])
+    assert rc == 0
+    md = (out / "results.md").read_text()
+    assert "| KITTI/06 | opencv | 2 |" in md and "RMSE rot deg" in md
+    png = out / "trajectory_KITTI_06.png"
+    assert png.is_file() and png.read_bytes()[:4] == b"\x89PNG"
+    assert "| KITTI/06 | fused_opencv |" in capsys.readouterr().out
