@@ -1,0 +1,182 @@
+"""Node encoders: SCE (coordinates), LSE (line segments), PE (pixels), and the +R CNN."""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+from torch_geometric.utils import to_dense_batch
+
+from strl_pyg.nn.attention import mlp, reset_mlp
+
+__all__ = [
+    "SpatialCoordinateEncoder",
+    "LineSegmentEncoder",
+    "PixelEncoder",
+    "ImageEncoder",
+    "sample_at_pixels",
+]
+
+
+class _MLPEncoder(nn.Module):
+    in_features: int
+
+    def __init__(self, in_features: int, out_channels: int, hidden: list[int]) -> None:
+        super().__init__()
+        self.in_features = in_features
+        self.out_channels = out_channels
+        self.mlp = mlp([in_features, *hidden, out_channels])
+        self.reset_parameters()
+
+    def reset_parameters(self) -> None:
+        reset_mlp(self.mlp)
+
+    def forward(self, x: Tensor) -> Tensor:
+        return self.mlp(x)
+
+    def __repr__(self) -> str:
+        return f"{self.__class__.__name__}({self.in_features}, {self.out_channels})"
+
+
+class SpatialCoordinateEncoder(_MLPEncoder):
+    r"""Spatial Coordinate Encoder (SCE): :math:`\mathbf{f}^0_{i,N} =
+    \mathrm{MLP}([x_0 \Vert y_0 \Vert x_1 \Vert y_1])` on the normalised coordinates of a match
+    (point or line endpoint) in image 0 and image 1.
+
+    Args:
+        out_channels (int): Output size :math:`C`.
+
+    Shapes:
+        - **input:** :math:`(N, 4)` ``[pos0 || pos1]``, normalised coordinates
+        - **output:** :math:`(N, C)`
+    """
+
+    def __init__(self, out_channels: int) -> None:
+        super().__init__(4, out_channels, [out_channels // 2, out_channels])
+
+
+class LineSegmentEncoder(_MLPEncoder):
+    r"""Line Segment Encoder (LSE): :math:`\mathbf{f}^0_{i,L} = \mathrm{MLP}([x_0 \Vert
+    y_0 \Vert \Delta x_0 \Vert \Delta y_0 \Vert x_1 \Vert y_1 \Vert \Delta x_1 \Vert
+    \Delta y_1])` on the ``line_feat`` of an endpoint (its normalised coordinates and the offset
+    to the other endpoint, in both images).
+
+    Args:
+        out_channels (int): Output size :math:`C_L`.
+
+    Shapes:
+        - **input:** :math:`(N, 8)`
+        - **output:** :math:`(N, C_L)`
+    """
+
+    def __init__(self, out_channels: int) -> None:
+        super().__init__(8, out_channels, [out_channels])
+
+
+class PixelEncoder(_MLPEncoder):
+    r"""Pixel Encoder (PE): :math:`\mathbf{f}^0_{i,V} =
+    \mathrm{MLP}([\mathrm{pixel}(x_0, y_0) \Vert \mathrm{pixel}(x_1, y_1)])` on the pixel
+    values (a :math:`p \times p` patch of :math:`c` channels, flattened) sampled at the node in
+    both images.
+
+    Args:
+        patch_features (int): Features per node and image, :math:`P = c\,p^2`.
+        out_channels (int): Output size :math:`C`.
+
+    Shapes:
+        - **input:** :math:`(N, 2P)` ``[patch0 || patch1]``
+        - **output:** :math:`(N, C)`
+    """
+
+    def __init__(self, patch_features: int, out_channels: int) -> None:
+        super().__init__(2 * patch_features, out_channels, [out_channels])
+
+
+def sample_at_pixels(fmap: Tensor, kpts: Tensor, batch: Tensor | None,
+                     image_size: tuple[int, int]) -> Tensor:
+    r"""Bilinearly samples per-graph feature maps at node pixel coordinates.
+
+    Pixel convention: OpenCV's, the centre of the top-left pixel of the *image* is ``(0, 0)``;
+    the feature map may have a lower resolution and covers the same field of view.
+
+    Args:
+        fmap: feature maps, shape :math:`(B, C, h, w)`.
+        kpts: pixel coordinates ``(x, y)`` in the image, shape :math:`(N, 2)`.
+        batch: graph id of each node, shape :math:`(N)`, sorted, or :obj:`None` (one graph).
+        image_size: ``(H, W)`` of the image the coordinates refer to.
+
+    Returns:
+        sampled features, shape :math:`(N, C)`; zeros padding outside the image.
+    """
+    B = fmap.shape[0]
+    if kpts.shape[0] == 0:
+        return fmap.new_zeros(0, fmap.shape[1])
+    H, W = image_size
+    scale = kpts.new_tensor([2.0 / W, 2.0 / H])
+    grid = (kpts + 0.5) * scale - 1.0  # align_corners=False maps pixel centres this way
+    if batch is None:
+        batch = kpts.new_zeros(kpts.shape[0], dtype=torch.long)
+    dense, mask = to_dense_batch(grid, batch, batch_size=B)
+    out = F.grid_sample(fmap, dense.unsqueeze(1).to(fmap.dtype), mode="bilinear",
+                        padding_mode="zeros", align_corners=False)  # [B, C, 1, L]
+    return out.squeeze(2).transpose(1, 2)[mask]
+
+
+class ImageEncoder(nn.Module):
+    r"""A small convolutional image encoder for the ``+R`` ablation rows.
+
+    The paper's ``+R`` rows use an ImageNet-pretrained ResNet-34. Pretrained weights cannot be
+    downloaded in this project's environment, so this is a randomly initialised 4-stage CNN
+    (stride 8 overall, ``3x3`` convolutions, GroupNorm, ReLU) trained end to end with the rest
+    of the model. Its output is sampled bilinearly at the node pixels of both images
+    (:func:`sample_at_pixels`) and embedded by an MLP into the visual stream. Expect ``+R``
+    figures to differ from the paper's for this reason.
+
+    Args:
+        in_channels (int): Image channels :math:`c`.
+        out_channels (int): Node feature size :math:`C`.
+        width (int, optional): Channels of the first stage, doubled per stride-2 stage.
+            (default: :obj:`32`)
+
+    Shapes:
+        - **input:** images :math:`(B, c, H, W)`
+        - **output:** feature maps :math:`(B, C_f, \lceil H/8 \rceil, \lceil W/8 \rceil)` with
+          :math:`C_f` = ``feature_channels``
+    """
+
+    def __init__(self, in_channels: int, out_channels: int, width: int = 32) -> None:
+        super().__init__()
+        self.in_channels = in_channels
+        self.out_channels = out_channels
+        self.width = width
+        chans = [in_channels, width, width, 2 * width, 4 * width]
+        strides = [1, 2, 2, 2]
+        layers: list[nn.Module] = []
+        for i, s in enumerate(strides):
+            layers += [
+                nn.Conv2d(chans[i], chans[i + 1], 3, stride=s, padding=1),
+                nn.GroupNorm(8, chans[i + 1]),
+                nn.ReLU(inplace=True),
+            ]
+        self.cnn = nn.Sequential(*layers)
+        self.feature_channels = chans[-1]
+        self.embed = mlp([2 * self.feature_channels, out_channels, out_channels])
+        self.reset_parameters()
+
+    def reset_parameters(self) -> None:
+        reset_mlp(self.cnn)
+        reset_mlp(self.embed)
+
+    def forward(self, image: Tensor) -> Tensor:
+        return self.cnn(image)
+
+    def encode_nodes(self, image0: Tensor, image1: Tensor, kpts0: Tensor, kpts1: Tensor,
+                     batch: Tensor | None) -> Tensor:
+        """Node features :math:`(N, C)` from images :math:`(B, c, H, W)` and the nodes' pixel
+        coordinates :math:`(N, 2)` in image 0 and image 1."""
+        f0 = sample_at_pixels(self(image0), kpts0, batch, tuple(image0.shape[-2:]))
+        f1 = sample_at_pixels(self(image1), kpts1, batch, tuple(image1.shape[-2:]))
+        return self.embed(torch.cat([f0, f1], dim=-1))
+
+    def __repr__(self) -> str:
+        return f"{self.__class__.__name__}({self.in_channels}, {self.out_channels})"

@@ -1,0 +1,163 @@
+"""AttentionConv: the dense fast path against explicit-edge message passing and a naive loop."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from strl_pyg.nn import AttentionConv
+
+
+def complete_edges(b_src: torch.Tensor, b_dst: torch.Tensor) -> torch.Tensor:
+    """Reference complete bipartite edges (j, i) with equal graph ids; any batch order."""
+    j, i = torch.nonzero(b_src[:, None] == b_dst[None, :], as_tuple=True)
+    return torch.stack([j, i])
+
+
+def naive_messages(conv: AttentionConv, x_src, x_dst, edge_index, query=None) -> torch.Tensor:
+    """Eq. 10 by a loop over target nodes and heads, for the math itself."""
+    g = x_dst if query is None else query
+    H, D = conv.heads, conv.head_dim
+    q = conv.lin_q(g).view(-1, H, D)
+    k = conv.lin_k(x_src).view(-1, H, D)
+    v = conv.lin_v(x_src).view(-1, H, D)
+    m = torch.zeros(x_dst.shape[0], H, D, dtype=x_dst.dtype)
+    for i in range(x_dst.shape[0]):
+        js = edge_index[0, edge_index[1] == i]
+        if js.numel() == 0:
+            continue
+        for h in range(H):
+            a = torch.softmax(k[js, h] @ q[i, h] / math.sqrt(D), dim=0)
+            m[i, h] = a @ v[js, h]
+    m = conv.lin_out(m.view(-1, H * D))
+    return x_dst + conv.update_mlp(torch.cat([x_dst, m], -1))
+
+
+def run_both(conv, x, batch, query=None):
+    """Outputs and gradients (inputs and parameters) of the dense and the explicit path."""
+    results = []
+    x_src, x_dst = x if isinstance(x, tuple) else (x, x)
+    b_src, b_dst = batch if isinstance(batch, tuple) else (batch, batch)
+    ei = complete_edges(b_src, b_dst)
+    for edge_index in (None, ei):
+        conv.zero_grad()
+        xs = x_src.detach().clone().requires_grad_()
+        xd = xs if x_src is x_dst else x_dst.detach().clone().requires_grad_()
+        qq = None if query is None else query.detach().clone().requires_grad_()
+        inp = xs if x_src is x_dst else (xs, xd)
+        out = conv(inp, edge_index, batch, query=qq)
+        (out * torch.linspace(-1, 1, out.numel(), dtype=out.dtype).view_as(out)).sum().backward()
+        grads = [xs.grad, xd.grad] + ([qq.grad] if qq is not None else [])
+        grads += [p.grad.clone() for p in conv.parameters()]
+        results.append((out.detach(), grads))
+    return results
+
+
+def assert_paths_agree(results, atol):
+    (out_d, g_d), (out_e, g_e) = results
+    torch.testing.assert_close(out_d, out_e, atol=atol, rtol=atol)
+    for a, b in zip(g_d, g_e, strict=True):
+        torch.testing.assert_close(a, b, atol=atol, rtol=atol)
+
+
+def test_repr_and_heads_check():
+    assert repr(AttentionConv(32, heads=4)) == "AttentionConv(32, heads=4, mlp_ratio=2)"
+    assert repr(AttentionConv((16, 32), heads=2)) == "AttentionConv((16, 32), heads=2, mlp_ratio=2)"
+    with pytest.raises(ValueError, match="Expected heads to divide"):
+        AttentionConv(30, heads=4)
+
+
+def test_explicit_path_matches_naive_loop_on_sparse_graph():
+    torch.manual_seed(0)
+    conv = AttentionConv(16, heads=2).double()
+    x = torch.randn(7, 16, dtype=torch.float64)
+    # Arbitrary sparse graph, node 6 has no incoming edge (message 0).
+    ei = torch.tensor([[0, 1, 2, 3, 4, 5, 0, 2, 6], [1, 0, 0, 2, 2, 2, 3, 4, 5]])
+    torch.testing.assert_close(conv(x, ei), naive_messages(conv, x, x, ei))
+
+
+@pytest.mark.parametrize("dtype,atol", [(torch.float32, 1e-5), (torch.float64, 1e-10)])
+def test_dense_matches_explicit_uneven_unsorted_batch(dtype, atol):
+    torch.manual_seed(1)
+    conv = AttentionConv(32, heads=4).to(dtype)
+    sizes = [5, 1, 9, 3]
+    batch = torch.repeat_interleave(torch.arange(4), torch.tensor(sizes))
+    perm = torch.randperm(batch.numel())
+    batch = batch[perm]  # unsorted: the dense path must sort and unsort
+    x = torch.randn(batch.numel(), 32, dtype=dtype)
+    assert_paths_agree(run_both(conv, x, batch), atol)
+
+
+def test_dense_matches_explicit_single_node_graphs():
+    torch.manual_seed(2)
+    conv = AttentionConv(16, heads=2)
+    batch = torch.arange(3)
+    x = torch.randn(3, 16)
+    assert_paths_agree(run_both(conv, x, batch), 1e-5)
+    # One node attends only to itself: the message is its own value.
+    one = conv(x[:1])
+    ref = naive_messages(conv, x[:1], x[:1], torch.tensor([[0], [0]]))
+    torch.testing.assert_close(one, ref)
+
+
+def test_dense_matches_explicit_bipartite_with_empty_source_graph():
+    torch.manual_seed(3)
+    conv = AttentionConv((8, 16), heads=4)
+    b_src = torch.tensor([0, 0, 2, 2, 2, 3])  # graph 1 has no source nodes
+    b_dst = torch.tensor([0, 1, 1, 2, 3, 3, 3])
+    x_src, x_dst = torch.randn(6, 8), torch.randn(7, 16)
+    results = run_both(conv, (x_src, x_dst), (b_src, b_dst))
+    assert_paths_agree(results, 1e-5)
+    out = results[0][0]
+    assert torch.isfinite(out).all()
+    # Nodes of graph 1 receive message 0.
+    zero_msg = conv.lin_out(torch.zeros(1, 16))
+    expected = x_dst[1:3] + conv.update_mlp(torch.cat([x_dst[1:3], zero_msg.expand(2, 16)], -1))
+    torch.testing.assert_close(out[1:3], expected.detach())
+
+
+def test_dense_with_query_matches_explicit():
+    torch.manual_seed(4)
+    conv = AttentionConv(16, heads=2)
+    batch = torch.tensor([1, 0, 0, 1, 1, 2, 0])
+    x, g = torch.randn(7, 16), torch.randn(7, 16)
+    assert_paths_agree(run_both(conv, (x, x.clone()), batch, query=g), 1e-5)
+    ei = complete_edges(batch, batch)
+    torch.testing.assert_close(conv((x, x), ei, query=g), naive_messages(conv, x, x, ei, g))
+
+
+def test_no_source_nodes_at_all():
+    conv = AttentionConv((8, 16), heads=2)
+    x_src = torch.zeros(0, 8, requires_grad=True)
+    x_dst = torch.randn(3, 16, requires_grad=True)
+    batch = (torch.zeros(0, dtype=torch.long), torch.tensor([0, 0, 1]))
+    dense = conv((x_src, x_dst), None, batch)
+    explicit = conv((x_src, x_dst), torch.zeros(2, 0, dtype=torch.long), batch)
+    torch.testing.assert_close(dense, explicit)
+    dense.sum().backward()
+    assert torch.isfinite(x_dst.grad).all()
+
+
+def test_mask_blocks_attention_across_graphs():
+    """Changing graph 1's nodes must not change graph 0's outputs (padding/mask honoured)."""
+    torch.manual_seed(5)
+    conv = AttentionConv(16, heads=4)
+    batch = torch.tensor([0, 0, 0, 1, 1, 1, 1, 1])
+    x = torch.randn(8, 16)
+    x2 = x.clone()
+    x2[3:] = 100 * torch.randn(5, 16)
+    out, out2 = conv(x, None, batch), conv(x2, None, batch)
+    torch.testing.assert_close(out[:3], out2[:3])
+    assert not torch.allclose(out[3:], out2[3:])
+    # Graph 0 alone gives the same as graph 0 inside the batch (padded keys carry no weight).
+    torch.testing.assert_close(conv(x[:3]), out[:3], atol=1e-6, rtol=1e-6)
+
+
+def test_reset_parameters_reinitialises():
+    conv = AttentionConv(16, heads=2)
+    before = [p.detach().clone() for p in conv.parameters()]
+    conv.reset_parameters()
+    changed = [not torch.equal(a, b) for a, b in zip(before, conv.parameters(), strict=True)]
+    assert sum(changed) >= 4  # every linear weight; LayerNorm defaults are constants

@@ -1,0 +1,57 @@
+"""LineEndpointConv: the update rule, isolated nodes, bipartite inputs, validation."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from strl_pyg.nn import LineEndpointConv
+
+
+def test_repr():
+    assert repr(LineEndpointConv(32, 16)) == "LineEndpointConv(32, line_channels=16)"
+
+
+def test_update_rule_by_hand():
+    torch.manual_seed(0)
+    conv = LineEndpointConv(8, 4).double()
+    x = torch.randn(5, 8, dtype=torch.float64)
+    f0 = torch.randn(5, 4, dtype=torch.float64)
+    # Node 0 has two neighbours (mean), 1 and 2 one each, 3 and 4 none (unchanged).
+    ei = torch.tensor([[1, 2, 0, 0], [0, 0, 1, 2]])
+    out = conv(x, ei, f0)
+    F = conv.mlp
+    exp0 = x[0] + 0.5 * (F(torch.cat([x[0], x[1], f0[1]])) + F(torch.cat([x[0], x[2], f0[2]])))
+    exp1 = x[1] + F(torch.cat([x[1], x[0], f0[0]]))
+    torch.testing.assert_close(out[0], exp0)
+    torch.testing.assert_close(out[1], exp1)
+    torch.testing.assert_close(out[3:], x[3:])
+
+
+def test_line_pairs_and_gradients():
+    torch.manual_seed(1)
+    conv = LineEndpointConv(16, 8)
+    n_lines = 3
+    src = torch.arange(2 * n_lines)
+    ei = torch.stack([src, src ^ 1])
+    x = torch.randn(2 * n_lines, 16, requires_grad=True)
+    f0 = torch.randn(2 * n_lines, 8, requires_grad=True)
+    out = conv(x, ei, f0)
+    out.square().sum().backward()
+    assert x.grad.abs().sum() > 0 and f0.grad.abs().sum() > 0
+    assert all(p.grad is not None for p in conv.parameters())
+    # Swapping the two endpoints of every line permutes the output the same way.
+    perm = src ^ 1
+    torch.testing.assert_close(conv(x[perm], ei, f0[perm]), out[perm])
+
+
+def test_bipartite_and_validation():
+    torch.manual_seed(2)
+    conv = LineEndpointConv((6, 10), 3)
+    x_src, x_dst, f0 = torch.randn(4, 6), torch.randn(2, 10), torch.randn(4, 3)
+    ei = torch.tensor([[0, 3], [1, 1]])
+    out = conv((x_src, x_dst), ei, f0)
+    assert out.shape == (2, 10)
+    torch.testing.assert_close(out[0], x_dst[0])
+    with pytest.raises(ValueError, match="Expected one line feature per source node"):
+        conv((x_src, x_dst), ei, f0[:3])
