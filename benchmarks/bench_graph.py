@@ -26,9 +26,12 @@ def make_matches(num_points: int, num_lines: int, h: int, w: int, seed: int = 0)
 
     img = lambda: rng.integers(0, 256, (h, w), dtype=np.uint8)  # noqa: E731
     return PairMatches(
-        pts(num_points), pts(num_points),
-        pts(2 * num_lines).reshape(-1, 2, 2), pts(2 * num_lines).reshape(-1, 2, 2),
-        image0=img(), image1=img(),
+        pts(num_points),
+        pts(num_points),
+        pts(2 * num_lines).reshape(-1, 2, 2),
+        pts(2 * num_lines).reshape(-1, 2, 2),
+        image0=img(),
+        image1=img(),
     )
 
 
@@ -56,9 +59,13 @@ def main() -> None:
     print("|---|---|---|---|")
     for p in (1, 7):
         t = time_it(lambda p=p: build_pair_graph(m, patch_size=p), repeat=args.repeat)
-        print(f"| {p}x{p} | {t['median_ms']:.3f} | {t['min_ms']:.3f} | {1e3 / t['median_ms']:.0f} |")
-    graphs = [build_pair_graph(make_matches(args.points, args.lines, args.height, args.width, s))
-              for s in range(16)]
+        print(
+            f"| {p}x{p} | {t['median_ms']:.3f} | {t['min_ms']:.3f} | {1e3 / t['median_ms']:.0f} |"
+        )
+    graphs = [
+        build_pair_graph(make_matches(args.points, args.lines, args.height, args.width, s))
+        for s in range(16)
+    ]
     batch = next(iter(DataLoader(graphs, batch_size=16)))
     implicit = edge_bytes(batch)
     explicit = edge_bytes(materialize_complete_edges(batch))

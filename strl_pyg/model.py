@@ -12,7 +12,6 @@ sees graph-contiguous nodes; the geometric and the visual stream share this node
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -23,6 +22,7 @@ from torch_geometric.data import Batch, HeteroData
 
 from strl_pyg.data import keys as K
 from strl_pyg.geometry import Pose, quaternion_to_rotation
+from strl_pyg.io import atomic_open
 from strl_pyg.nn import (
     AttentionConv,
     ImageEncoder,
@@ -421,21 +421,14 @@ class StrLPose(nn.Module):
     def save(self, path: str | os.PathLike) -> Path:
         """Writes the config and the weights to ``path`` atomically (temp file + rename)."""
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         payload = {
             "format": self._FORMAT,
             "version": self._VERSION,
             "config": self.config.to_dict(),
             "state_dict": {k: v.detach().cpu() for k, v in self.state_dict().items()},
         }
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as f:
-                torch.save(payload, f)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        with atomic_open(path) as f:
+            torch.save(payload, f)
         return path
 
     @classmethod

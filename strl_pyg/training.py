@@ -20,7 +20,6 @@ import math
 import os
 import random
 import sys
-import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields
@@ -38,6 +37,7 @@ from tqdm.auto import tqdm
 from strl_pyg.data import keys as K
 from strl_pyg.data.transforms import FixedSizeResample
 from strl_pyg.geometry import Pose, quaternion_to_rotation, rotation_to_quaternion
+from strl_pyg.io import atomic_open
 from strl_pyg.loss import PoseLoss
 from strl_pyg.metrics import pose_auc, rotation_error_deg, translation_angle_error_deg
 from strl_pyg.model import ABLATIONS, StrLPose, StrLPoseConfig
@@ -305,16 +305,8 @@ def evaluate_model(model: torch.nn.Module, loader, loss_fn: PoseLoss | None = No
 def save_checkpoint(path: str | os.PathLike, state: dict[str, Any]) -> Path:
     """Writes a checkpoint atomically (temporary file in the same folder, then rename)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            torch.save(state, f)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_open(path) as f:
+        torch.save(state, f)
     return path
 
 

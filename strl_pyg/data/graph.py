@@ -13,7 +13,6 @@ edge family). :func:`materialize_complete_edges` turns the markers into explicit
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +24,7 @@ from torch_geometric.data import Batch, HeteroData
 
 from strl_pyg.data import keys as K
 from strl_pyg.data.matches import PairMatches
+from strl_pyg.io import atomic_open
 
 __all__ = [
     "build_pair_graph",
@@ -325,16 +325,8 @@ def build_pair_graph(
 def save_graph(data: HeteroData, path: str | os.PathLike) -> Path:
     """Saves a pair graph atomically as a dict of tensors (loadable with ``weights_only``)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            torch.save(data.to_dict(), f)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_open(path) as f:
+        torch.save(data.to_dict(), f)
     return path
 
 

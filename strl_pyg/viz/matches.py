@@ -8,7 +8,6 @@ outliers in red; without an inlier mask every match is drawn in green.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +15,7 @@ import cv2
 import numpy as np
 
 from strl_pyg.data.matches import PairMatches
+from strl_pyg.io import atomic_open
 
 __all__ = ["draw_matches", "save_matches_png", "INLIER_COLOUR", "OUTLIER_COLOUR"]
 
@@ -136,14 +136,6 @@ def save_matches_png(
     ok, buf = cv2.imencode(".png", canvas)
     if not ok:  # pragma: no cover - imencode fails only on invalid input
         raise RuntimeError(f"Could not encode the drawing for '{path}'")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(buf.tobytes())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_open(path) as f:
+        f.write(buf.tobytes())
     return path

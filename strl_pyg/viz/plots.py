@@ -8,7 +8,6 @@ machines). Files are written atomically: a temporary file in the target folder, 
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -18,6 +17,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from strl_pyg.geometry import Pose, as_tensor
+from strl_pyg.io import atomic_open
 from strl_pyg.metrics import KittiSegmentErrors, kitti_odometry_summary
 
 __all__ = ["save_figure", "plot_trajectory_topview", "plot_segment_errors"]
@@ -30,17 +30,9 @@ def save_figure(fig: Figure, path: str | os.PathLike, dpi: int = 100) -> Path:
     path = Path(path)
     if path.suffix.lower() != ".png":
         raise ValueError(f"Expected a .png path (got '{path}')")
-    path.parent.mkdir(parents=True, exist_ok=True)
     FigureCanvasAgg(fig)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            fig.savefig(f, format="png", dpi=dpi)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_open(path) as f:
+        fig.savefig(f, format="png", dpi=dpi)
     return path
 
 
