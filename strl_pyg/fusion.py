@@ -275,7 +275,7 @@ def classical_covariance(
             :func:`truncated_sigma` undoes that. ``None``: no correction.
         inflation: multiplies the covariance (divides the information); ``1`` is the
             first-order (Cramer-Rao-like) value, which is optimistic for RANSAC estimates
-            (see ``benchmarks/RESULTS_fusion.md``).
+            (see ``benchmarks/results_fusion.md``).
 
     Returns:
         ``(information [5, 5], covariance [5, 5], sigma_px)`` in float64; the covariance is a
