@@ -378,7 +378,8 @@ def load_external_matches(
     common = dict(image_size0=size0, image_size1=size1, K0=K0, K1=K1)
 
     if "points0" in data and "points1" in data:
-        kw = {k: data[k] for k in ("lines0", "lines1", "point_scores", "line_scores") if k in data}
+        kw = {k: data[k] for k in ("lines0", "lines1", "point_scores", "line_scores", "image0",
+                                   "image1") if k in data}
         pm = PairMatches(data["points0"], data["points1"], **kw, **common)
     elif "mkpts0" in data:
         pm = PairMatches(
