@@ -35,7 +35,7 @@ from torch_geometric.loader.dataloader import Collater
 from tqdm.auto import tqdm
 
 from strl_pyg.data import keys as K
-from strl_pyg.data.transforms import FixedSizeResample
+from strl_pyg.data.transforms import FixedSizeResample, RandomSwap
 from strl_pyg.geometry import Pose, quaternion_to_rotation, rotation_to_quaternion
 from strl_pyg.io import atomic_open
 from strl_pyg.loss import PoseLoss
@@ -84,6 +84,8 @@ class TrainConfig:
     num_points: int = 384  # resampled per pair, as the paper
     num_lines: int = 192
     patch_size: int = 1  # the paper's single pixel
+    swap_prob: float = 0.5  # training pairs have their images exchanged with this probability
+    init_from: str | None = None  # start from these weights (model.pt or last.pt); fine-tuning
     grad_clip: float | None = 10.0  # max gradient norm (None: off)
     seed: int = 0
     out_dir: str = "runs/default"
@@ -99,6 +101,8 @@ class TrainConfig:
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"Expected a positive integer '{name}' (got {value!r})")
+        if not 0.0 <= self.swap_prob <= 1.0:
+            raise ValueError(f"Expected swap_prob in [0, 1] (got {self.swap_prob!r})")
         if not self.lr > 0:
             raise ValueError(f"Expected a positive learning rate (got {self.lr!r})")
         if self.dataset != "synthetic" and not self.data_root:
@@ -138,10 +142,13 @@ class _InMemory(Dataset):
 
 
 class _Resampled(Dataset):
-    """Applies :class:`FixedSizeResample` seeded by the key ``(index, step, position)``."""
+    """Applies :class:`FixedSizeResample` and :class:`RandomSwap`, seeded by the key
+    ``(index, step, position)``."""
 
-    def __init__(self, base: Dataset, num_points: int, num_lines: int, seed: int) -> None:
+    def __init__(self, base: Dataset, num_points: int, num_lines: int, seed: int,
+                 swap_prob: float = 0.0) -> None:
         self.base, self.num_points, self.num_lines, self.seed = base, num_points, num_lines, seed
+        self.swap_prob = swap_prob
 
     def __len__(self) -> int:
         return len(self.base)
@@ -149,7 +156,10 @@ class _Resampled(Dataset):
     def __getitem__(self, key: tuple[int, int, int]) -> HeteroData:
         index, step, position = key
         seed = (self.seed * 1_000_003 + step * 4099 + position) % (2**63)
-        return FixedSizeResample(self.num_points, self.num_lines, seed=seed)(self.base[index])
+        data = FixedSizeResample(self.num_points, self.num_lines, seed=seed)(self.base[index])
+        if self.swap_prob > 0:
+            data = RandomSwap(self.swap_prob, seed=seed + 1)(data)
+        return data
 
 
 class StepBatchSampler(Sampler):
@@ -381,6 +391,21 @@ class _Logger:
             self.tb.close()
 
 
+def _init_weights(model: StrLPose, path: str | os.PathLike) -> None:
+    """Loads the weights of a model checkpoint (``model.pt``) or training checkpoint
+    (``last.pt``) into ``model``; the architectures must match."""
+    path = Path(path)
+    try:
+        state = StrLPose.load(path).state_dict()
+    except ValueError:
+        state = load_checkpoint(path)["model"]
+    try:
+        model.load_state_dict(state)
+    except RuntimeError as err:
+        raise ValueError(f"Expected weights matching this run's model config in '{path}' "
+                         f"(got {str(err).splitlines()[0]})") from err
+
+
 def _dist_info() -> tuple[int, int]:
     if torch.distributed.is_available() and torch.distributed.is_initialized():
         return torch.distributed.get_rank(), torch.distributed.get_world_size()
@@ -423,6 +448,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     loss_fn = PoseLoss(translation=model_cfg.translation)
     start_step, history = 0, []
     trivial_buf: list[Tensor] = []
+    if cfg.init_from and not resume:
+        _init_weights(model, cfg.init_from)
     if resume:
         state = load_checkpoint(ckpt_path)
         saved = TrainConfig.from_dict(state["train_config"])
@@ -448,7 +475,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     collate = Collater(None)
     sampler = StepBatchSampler(len(train_ds), cfg.batch_size, start_step, cfg.steps, cfg.seed,
                                rank, world)
-    loader = DataLoader(_Resampled(train_ds, cfg.num_points, cfg.num_lines, cfg.seed),
+    loader = DataLoader(_Resampled(train_ds, cfg.num_points, cfg.num_lines, cfg.seed,
+                                   cfg.swap_prob),
                         batch_sampler=sampler, collate_fn=collate, num_workers=cfg.num_workers)
     val_keys = [(i, -1, i) for i in range(len(val_ds))]
     val_loader = DataLoader(_Resampled(val_ds, cfg.num_points, cfg.num_lines, cfg.seed + 1),
@@ -583,6 +611,10 @@ def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     ap.add_argument("--num-points", type=int, default=d.num_points)
     ap.add_argument("--num-lines", type=int, default=d.num_lines)
     ap.add_argument("--patch-size", type=int, default=d.patch_size)
+    ap.add_argument("--swap-prob", type=float, default=d.swap_prob,
+                    help="probability of exchanging the two images of a training pair")
+    ap.add_argument("--init-from", default=None,
+                    help="start from these weights (model.pt or last.pt), e.g. to fine-tune")
     ap.add_argument("--seed", type=int, default=d.seed)
     ap.add_argument("--workers", type=int, default=d.num_workers)
     ap.add_argument("--device", default=d.device)
@@ -614,6 +646,7 @@ def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
             limit=args.limit, model=args.model, model_overrides=pairs(args.set), lr=args.lr,
             batch_size=args.batch_size, steps=args.steps, val_every=args.val_every,
             num_points=args.num_points, num_lines=args.num_lines, patch_size=args.patch_size,
+            swap_prob=args.swap_prob, init_from=args.init_from,
             seed=args.seed, out_dir=args.out, num_workers=args.workers, device=args.device,
             tensorboard=not args.no_tensorboard,
         )

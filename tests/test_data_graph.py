@@ -210,3 +210,39 @@ def test_builder_bad_arguments(kw, err, match):
 def test_builder_rejects_non_matches():
     with pytest.raises(TypeError, match="PairMatches"):
         build_pair_graph({"points0": np.zeros((3, 2))})
+
+
+def swapped_matches(m):
+    from dataclasses import replace
+
+    return replace(m, points0=m.points1, points1=m.points0, lines0=m.lines1, lines1=m.lines0,
+                   image_size0=m.image_size1, image_size1=m.image_size0, K0=m.K1, K1=m.K0,
+                   image0=m.image1, image1=m.image0)
+
+
+def test_swap_images_equals_building_from_swapped_matches():
+    from strl_pyg.data import RandomSwap, swap_images
+    from strl_pyg.geometry import Pose
+
+    Km = np.array([[50.0, 0, 30], [0, 40, 20], [0, 0, 1]])
+    m = make(6, 3, K_mat=Km)
+    T = Pose.from_quaternion(torch.tensor([0.9, 0.1, -0.2, 0.3]), torch.tensor([0.1, 0.2, 1.0]))
+    T = T.matrix().numpy()
+    a = swap_images(build_pair_graph(m, T_0to1=T, patch_size=3))
+    b = build_pair_graph(swapped_matches(m), T_0to1=np.linalg.inv(T), patch_size=3)
+    for store_a, store_b in zip(a.stores, b.stores, strict=True):
+        for key, value in store_b.items():
+            if torch.is_tensor(value) and value.is_floating_point():
+                torch.testing.assert_close(store_a[key], value, atol=1e-5, rtol=1e-5)
+            elif torch.is_tensor(value):
+                assert torch.equal(store_a[key], value), key
+    twice = swap_images(a)
+    g = build_pair_graph(m, T_0to1=T, patch_size=3)
+    torch.testing.assert_close(twice[K.T_0TO1], g[K.T_0TO1], atol=1e-6, rtol=0)
+    assert torch.equal(twice[K.ENDPOINT][K.LINE_FEAT], g[K.ENDPOINT][K.LINE_FEAT])
+    # the random transform swaps about half of the time, deterministically by seed
+    t = RandomSwap(0.5, seed=0)
+    flips = [not torch.equal(t(g)[K.POINT][K.KPTS0], g[K.POINT][K.KPTS0]) for _ in range(200)]
+    assert 70 < sum(flips) < 130
+    with pytest.raises(ValueError, match="probability"):
+        RandomSwap(1.5)

@@ -119,3 +119,17 @@ def test_torchrun_two_ranks_identical_and_equal_to_single_process(tmp_path):
     single = train(tiny_config(tmp_path / "single"), progress=False)["model"].state_dict()
     for k in w0:
         torch.testing.assert_close(w0[k], single[k], rtol=1e-4, atol=1e-5)
+
+
+def test_init_from_loads_weights_and_rejects_other_architectures(tmp_path):
+    first = train(tiny_config(tmp_path / "a", steps=2), progress=False)["model"]
+    cfg = tiny_config(tmp_path / "b", steps=1, init_from=str(tmp_path / "a" / "model.pt"),
+                      lr=1e-12)
+    tuned = train(cfg, progress=False)["model"]
+    for k, v in first.state_dict().items():
+        torch.testing.assert_close(tuned.state_dict()[k], v, atol=1e-6, rtol=0)
+    bad = tiny_config(tmp_path / "c", steps=1, init_from=str(tmp_path / "a" / "last.pt"),
+                      model_overrides={"hidden": 32, "layers": 1, "heads": 2,
+                                       "patch_features": 1})
+    with pytest.raises(ValueError, match="matching this run's model config"):
+        train(bad, progress=False)

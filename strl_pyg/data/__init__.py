@@ -10,7 +10,12 @@ from strl_pyg.data.graph import (
     save_graph,
 )
 from strl_pyg.data.matches import PairMatches, load_external_matches
-from strl_pyg.data.transforms import FixedSizeResample, MaterializeCompleteEdges
+from strl_pyg.data.transforms import (
+    FixedSizeResample,
+    MaterializeCompleteEdges,
+    RandomSwap,
+    swap_images,
+)
 
 __all__ = [
     "datasets",
@@ -25,4 +30,6 @@ __all__ = [
     "load_graph",
     "FixedSizeResample",
     "MaterializeCompleteEdges",
+    "RandomSwap",
+    "swap_images",
 ]

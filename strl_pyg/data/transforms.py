@@ -14,7 +14,13 @@ from strl_pyg.data.graph import (
     materialize_complete_edges,
 )
 
-__all__ = ["FixedSizeResample", "MaterializeCompleteEdges", "resample_indices"]
+__all__ = [
+    "FixedSizeResample",
+    "MaterializeCompleteEdges",
+    "RandomSwap",
+    "resample_indices",
+    "swap_images",
+]
 
 
 def resample_indices(n: int, target: int, generator: torch.Generator | None = None) -> Tensor:
@@ -95,3 +101,61 @@ class MaterializeCompleteEdges(BaseTransform):
 
     def forward(self, data: HeteroData) -> HeteroData:
         return materialize_complete_edges(data)
+
+
+_SWAPPED_NODE_KEYS = ((K.KPTS0, K.KPTS1), (K.POS0, K.POS1), (K.PATCH0, K.PATCH1))
+_SWAPPED_GRAPH_KEYS = ((K.IMAGE_SIZE0, K.IMAGE_SIZE1), (K.K0, K.K1), (K.IMAGE0, K.IMAGE1))
+
+
+def swap_images(data: HeteroData) -> HeteroData:
+    """The pair graph with image 0 and image 1 exchanged (a new object; works on batches).
+
+    Every per-image attribute trades places, the line features swap their two halves, and
+    ``T_0to1`` becomes its inverse. Building the graph from matches whose images were swapped
+    gives the same graph.
+    """
+    data = data.clone()
+    for node_type in K.NODE_TYPES:
+        store = data[node_type]
+        for a, b in _SWAPPED_NODE_KEYS:
+            if a in store:
+                store[a], store[b] = store[b], store[a]
+    lf = data[K.ENDPOINT][K.LINE_FEAT]
+    data[K.ENDPOINT][K.LINE_FEAT] = torch.cat([lf[:, 4:], lf[:, :4]], dim=1)
+    for a, b in _SWAPPED_GRAPH_KEYS:
+        if a in data:
+            data[a], data[b] = data[b], data[a]
+    if K.T_0TO1 in data:
+        T = data[K.T_0TO1]
+        R_t = T[..., :3, :3].transpose(-1, -2)
+        inv = T.clone()
+        inv[..., :3, :3] = R_t
+        inv[..., :3, 3] = -(R_t @ T[..., :3, 3:4]).squeeze(-1)
+        data[K.T_0TO1] = inv
+    return data
+
+
+class RandomSwap(BaseTransform):
+    """Exchanges the two images of a pair with probability ``p`` (:func:`swap_images`): a
+    training augmentation that makes the data symmetric under reversing the motion (driving
+    data only ever moves forward).
+
+    Args:
+        p: Probability of a swap (default: ``0.5``).
+        seed: Seed of the transform's own generator (``None``: torch's global generator).
+    """
+
+    def __init__(self, p: float = 0.5, seed: int | None = None) -> None:
+        if not 0.0 <= p <= 1.0:
+            raise ValueError(f"Expected a probability p in [0, 1] (got {p!r})")
+        self.p = p
+        self.seed = seed
+        self.generator = None if seed is None else torch.Generator().manual_seed(seed)
+
+    def forward(self, data: HeteroData) -> HeteroData:
+        if float(torch.rand(1, generator=self.generator)) < self.p:
+            return swap_images(data)
+        return data
+
+    def __repr__(self) -> str:
+        return f"{self.__class__.__name__}(p={self.p}, seed={self.seed})"
