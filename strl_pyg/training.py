@@ -551,8 +551,10 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     return result
 
 
-def plot_history(history: list[dict[str, Any]], path: str | os.PathLike) -> Path:
-    """Validation error curves (model against the trivial mean-pose predictor) as a PNG."""
+def plot_history(history: list[dict[str, Any]], path: str | os.PathLike,
+                 marks: Sequence[tuple[int, str]] = ()) -> Path:
+    """Validation error curves (model against the trivial mean-pose predictor) as a PNG;
+    ``marks`` draws labelled vertical lines, e.g. where a run was continued with new settings."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -567,6 +569,9 @@ def plot_history(history: list[dict[str, Any]], path: str | os.PathLike) -> Path
                                "pose AUC@10"), strict=True):
         ax.plot(steps, [h[key] for h in history], "o-", label="Str-L Pose")
         ax.plot(steps, [h["trivial_" + key] for h in history], "--", label="mean pose")
+        for step, label in marks:
+            ax.axvline(step, color="grey", lw=0.8, ls=":")
+            ax.text(step, ax.get_ylim()[1], f" {label}", va="top", fontsize=7, color="grey")
         ax.set_xlabel("step")
         ax.set_title(title)
         ax.grid(alpha=0.3)

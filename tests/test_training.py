@@ -9,7 +9,14 @@ import pytest
 import torch
 
 from strl_pyg.geometry import Pose
-from strl_pyg.training import StepBatchSampler, TrainConfig, load_checkpoint, mean_pose, train
+from strl_pyg.training import (
+    StepBatchSampler,
+    TrainConfig,
+    load_checkpoint,
+    mean_pose,
+    plot_history,
+    train,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -31,6 +38,9 @@ def states_equal(a, b):
 def test_resume_equals_uninterrupted(tmp_path):
     full = train(tiny_config(tmp_path / "full"), progress=False)
     assert full["step"] == 4 and (tmp_path / "full" / "log.csv").exists()
+    assert [h["step"] for h in full["history"]] == [2, 4]
+    png = plot_history(full["history"], tmp_path / "curves.png", marks=[(2, "phase 2")])
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     train(tiny_config(tmp_path / "split", steps=2), progress=False)
     half = load_checkpoint(tmp_path / "split" / "last.pt")
     assert half["step"] == 2
