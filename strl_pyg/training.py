@@ -391,6 +391,18 @@ class _Logger:
             self.tb.close()
 
 
+def _unaugmented_poses(batch: HeteroData) -> Tensor:
+    """Ground-truth poses with the swap augmentation undone (the trivial predictor is the mean
+    pose of the data as it comes, not of the augmented data)."""
+    T = batch[K.T_0TO1].detach()
+    if K.SWAPPED not in batch:
+        return T
+    swapped = batch[K.SWAPPED].bool()
+    T = T.clone()
+    T[swapped] = torch.linalg.inv(T[swapped])
+    return T
+
+
 def _init_weights(model: StrLPose, path: str | os.PathLike) -> None:
     """Loads the weights of a model checkpoint (``model.pt``) or training checkpoint
     (``last.pt``) into ``model``; the architectures must match."""
@@ -497,7 +509,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         batch = batch.to(device)
         T_gt = batch[K.T_0TO1]
         if sum(t.shape[0] for t in trivial_buf) < 4096:
-            trivial_buf.append(T_gt.detach().cpu())
+            trivial_buf.append(_unaugmented_poses(batch).cpu())
         out = ddp_model(batch)
         logs = loss_fn(out, T_gt)
         optimizer.zero_grad(set_to_none=True)

@@ -246,3 +246,13 @@ def test_swap_images_equals_building_from_swapped_matches():
     assert 70 < sum(flips) < 130
     with pytest.raises(ValueError, match="probability"):
         RandomSwap(1.5)
+
+
+def test_swap_flag_collates_and_undoes():
+    from strl_pyg.data import RandomSwap
+
+    g = build_pair_graph(make(4, 2), T_0to1=np.eye(4))
+    t = RandomSwap(0.5, seed=1)
+    graphs = [t(g) for _ in range(8)]
+    batch = next(iter(DataLoader(graphs, batch_size=8)))
+    assert batch[K.SWAPPED].shape == (8,) and 0 < int(batch[K.SWAPPED].sum()) < 8

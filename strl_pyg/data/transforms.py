@@ -112,7 +112,8 @@ def swap_images(data: HeteroData) -> HeteroData:
 
     Every per-image attribute trades places, the line features swap their two halves, and
     ``T_0to1`` becomes its inverse. Building the graph from matches whose images were swapped
-    gives the same graph.
+    gives the same graph. The graph attribute ``swapped`` records the exchange (toggled, so
+    swapping twice restores it).
     """
     data = data.clone()
     for node_type in K.NODE_TYPES:
@@ -125,6 +126,9 @@ def swap_images(data: HeteroData) -> HeteroData:
     for a, b in _SWAPPED_GRAPH_KEYS:
         if a in data:
             data[a], data[b] = data[b], data[a]
+    n = data.num_graphs if isinstance(data, Batch) else 1
+    prev = data[K.SWAPPED] if K.SWAPPED in data else torch.zeros(n, dtype=torch.bool)
+    data[K.SWAPPED] = ~prev
     if K.T_0TO1 in data:
         T = data[K.T_0TO1]
         R_t = T[..., :3, :3].transpose(-1, -2)
@@ -155,6 +159,9 @@ class RandomSwap(BaseTransform):
     def forward(self, data: HeteroData) -> HeteroData:
         if float(torch.rand(1, generator=self.generator)) < self.p:
             return swap_images(data)
+        if K.SWAPPED not in data:  # every graph carries the flag, so batches collate
+            data = data.clone()
+            data[K.SWAPPED] = torch.zeros(1, dtype=torch.bool)
         return data
 
     def __repr__(self) -> str:
