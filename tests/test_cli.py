@@ -112,3 +112,14 @@ def test_console_script_entry_point_help():
     with pytest.raises(SystemExit) as exc:
         cli.main(["--help"])
     assert exc.value.code == 0
+
+
+def test_bench_prints_a_timing_table(tmp_path, capsys):
+    from strl_pyg.model import StrLPose, StrLPoseConfig
+
+    ckpt = tmp_path / "tiny.pt"
+    StrLPose(StrLPoseConfig(hidden=32, layers=1, heads=2, patch_features=1)).save(ckpt)
+    assert cli.main(["bench", "--checkpoint", str(ckpt), "--repeat", "1"]) == 0
+    out = capsys.readouterr().out
+    rows = [r for r in out.splitlines() if r.startswith("| ") and "ms" not in r.split("|")[2]]
+    assert len(rows) == 4 and all(float(r.split("|")[2]) > 0 for r in rows)
