@@ -16,10 +16,11 @@ from strl_pyg.synthetic import SceneConfig, generate_pair
 # Held-out seeds (training used seeds below 2,000,000), the kinds the model was trained on.
 SEEDS = [(2_100_000 + i, kind) for i, kind in enumerate(["street", "indoor", "boxes"] * 3)]
 
-# Measured on these 9 pairs with the shipped checkpoint (see the README): the tolerances sit
-# above the measured values with margin, and far below what an untrained model gives.
+# Medians measured on these 9 pairs with the shipped checkpoint: rotation loop 1.64 deg,
+# translation 20.5 deg (the checkpoint before swap augmentation: 1.62 and 42.6 deg; a freshly
+# initialised model: 73.6 and 161.6 deg). The tolerances leave margin above the shipped model.
 MAX_SWAP_ROT_DEG = 3.0
-MAX_SWAP_TRANS_DEG = 25.0
+MAX_SWAP_TRANS_DEG = 35.0
 
 
 @pytest.fixture(scope="module")
@@ -54,11 +55,12 @@ def test_swapping_the_images_inverts_the_pose(model, pairs):
     assert np.median(trans) < MAX_SWAP_TRANS_DEG, trans
 
 
-def test_trained_model_beats_the_mean_pose_on_held_out_pairs(model, pairs):
+def test_trained_model_beats_the_zero_rotation_predictor_on_held_out_pairs(model, pairs):
+    # measured medians: 1.64 deg (model) against 6.96 deg (identity rotation)
     errs, trivial = [], []
     for pair in pairs:
         gt = Pose.from_matrix(torch.as_tensor(pair.T_0to1))
         est = predict_pose(model, pair.matches).pose
         errs.append(float(rotation_error_deg(est.R, gt.R)[0]))
-        trivial.append(float(rotation_error_deg(torch.eye(3), gt.R)))  # no motion
+        trivial.append(float(rotation_error_deg(torch.eye(3), gt.R)))
     assert np.median(errs) < np.median(trivial), (errs, trivial)
