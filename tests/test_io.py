@@ -1,6 +1,6 @@
 import pytest
 
-from strl_pyg.io import atomic_open
+from strl_pyg.io import _umask, atomic_open
 
 
 def test_atomic_open_writes_and_replaces(tmp_path):
@@ -10,6 +10,7 @@ def test_atomic_open_writes_and_replaces(tmp_path):
     with atomic_open(path, "w") as f:
         f.write("two")
     assert path.read_text() == "two"
+    assert path.stat().st_mode & 0o777 == 0o666 & ~_umask()  # not mkstemp's 0600
     assert [p.name for p in path.parent.iterdir()] == ["f.txt"]
 
 
