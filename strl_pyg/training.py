@@ -36,10 +36,10 @@ from tqdm.auto import tqdm
 
 from strl_pyg.data import keys as K
 from strl_pyg.data.transforms import FixedSizeResample, RandomSwap
-from strl_pyg.geometry import Pose, quaternion_to_rotation, rotation_to_quaternion
+from strl_pyg.geometry import Pose, rotation_to_quaternion
 from strl_pyg.io import atomic_open
 from strl_pyg.loss import PoseLoss
-from strl_pyg.metrics import pose_auc, rotation_error_deg, translation_angle_error_deg
+from strl_pyg.metrics import pose_auc, relative_pose_error
 from strl_pyg.model import ABLATIONS, StrLPose, StrLPoseConfig
 
 __all__ = [
@@ -258,10 +258,7 @@ def mean_pose(T_0to1: Tensor, translation: str = "direction") -> tuple[Tensor, T
 
 
 def _errors(q: Tensor, t: Tensor, T_gt: Tensor) -> tuple[Tensor, Tensor]:
-    pose = Pose.from_matrix(T_gt)
-    rot = rotation_error_deg(quaternion_to_rotation(q), pose.R)
-    trans = translation_angle_error_deg(t, pose.t)
-    return rot, trans
+    return relative_pose_error(Pose.from_quaternion(q, t), T_gt)
 
 
 def _summary(rot: Tensor, trans: Tensor, prefix: str) -> dict[str, float]:

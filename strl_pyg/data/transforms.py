@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import torch
 from torch import Tensor
 from torch_geometric.data import Batch, HeteroData
@@ -72,7 +74,7 @@ class FixedSizeResample(BaseTransform):
         if isinstance(data, Batch):
             raise TypeError("Expected a single pair graph (got a batch): resample before batching")
         explicit = not has_implicit_complete_edges(data)
-        data = data.clone()
+        data = copy.copy(data)  # attributes are reassigned below, never modified in place
         pi = resample_indices(data[K.POINT].num_nodes, self.num_points, self.generator)
         nl = data[K.ENDPOINT].num_nodes // 2
         li = resample_indices(nl, self.num_lines, self.generator)
@@ -115,7 +117,7 @@ def swap_images(data: HeteroData) -> HeteroData:
     gives the same graph. The graph attribute ``swapped`` records the exchange (toggled, so
     swapping twice restores it).
     """
-    data = data.clone()
+    data = copy.copy(data)  # attributes are reassigned below, never modified in place
     for node_type in K.NODE_TYPES:
         store = data[node_type]
         for a, b in _SWAPPED_NODE_KEYS:
@@ -160,7 +162,7 @@ class RandomSwap(BaseTransform):
         if float(torch.rand(1, generator=self.generator)) < self.p:
             return swap_images(data)
         if K.SWAPPED not in data:  # every graph carries the flag, so batches collate
-            data = data.clone()
+            data = copy.copy(data)
             data[K.SWAPPED] = torch.zeros(1, dtype=torch.bool)
         return data
 

@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 
 from strl_pyg.data.matches import PairMatches
+from strl_pyg.frontend import fundamental_from_pose
 from strl_pyg.synthetic.render import View, project, render_view
 from strl_pyg.synthetic.scene import Scene, SceneConfig, build_scene
 
@@ -229,13 +230,6 @@ def _corrupt(x0, x1, cfg: SceneConfig, rng, size, F, lines: bool):
     return np.clip(x0, 0, lim), np.clip(x1, 0, lim), inl
 
 
-def _fundamental(K, T):  # kept local: generating scenes needs no torch
-    R, t = T[:3, :3], T[:3, 3]
-    tx = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
-    K_inv = np.linalg.inv(K)
-    return K_inv.T @ tx @ R @ K_inv
-
-
 def _c2w(R_cw, t_cw):
     T = np.eye(4)
     T[:3, :3] = R_cw.T
@@ -286,7 +280,7 @@ def generate_pair(seed: int, config: SceneConfig | None = None) -> SyntheticPair
         l0, l1 = l0[pick], l1[pick]
     T_w_c0, T_w_c1 = _c2w(scene.R_cw0, scene.t_cw0), _c2w(scene.R_cw1, scene.t_cw1)
     T_0to1 = np.linalg.inv(T_w_c1) @ T_w_c0
-    F = _fundamental(K, T_0to1)
+    F = fundamental_from_pose(T_0to1, K, K)
     image0 = _to_uint8(views[0], rng, cfg.image_noise)
     image1 = _to_uint8(views[1], rng, cfg.image_noise)
     n0, n1, p_inl = _corrupt(p0, p1, cfg, rng, (h, w), F, lines=False)
