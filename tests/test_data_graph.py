@@ -256,3 +256,18 @@ def test_swap_flag_collates_and_undoes():
     graphs = [t(g) for _ in range(8)]
     batch = next(iter(DataLoader(graphs, batch_size=8)))
     assert batch[K.SWAPPED].shape == (8,) and 0 < int(batch[K.SWAPPED].sum()) < 8
+
+
+def test_transforms_leave_their_input_untouched():
+    from strl_pyg.data import RandomSwap, swap_images
+
+    g = build_pair_graph(make(30, 10), T_0to1=np.eye(4), patch_size=3)
+    before = {(nt, k): v.clone() for nt in K.NODE_TYPES for k, v in g[nt].items()
+              if torch.is_tensor(v)}
+    T = g[K.T_0TO1].clone()
+    for t in (FixedSizeResample(8, 4, seed=0), swap_images, RandomSwap(0.0, seed=0)):
+        out = t(g)
+        assert out is not g
+    assert all(torch.equal(g[nt][k], v) for (nt, k), v in before.items())
+    assert torch.equal(g[K.T_0TO1], T) and K.SWAPPED not in g
+    assert g[K.LINE_EDGE].edge_index.shape[1] == 20
