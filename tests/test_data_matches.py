@@ -3,7 +3,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from strl_pyg.data import PairMatches, load_external_matches
+from strl_pyg.data import PairMatches
 from strl_pyg.data.matches import OUT_OF_IMAGE_TOLERANCE
 
 H, W = 120, 160
@@ -107,34 +107,6 @@ def test_load_errors(tmp_path):
     bad.write_bytes(b"not a zip")
     with pytest.raises(ValueError, match="readable .npz"):
         PairMatches.load(bad)
-
-
-def test_external_gluestick_and_lightglue_layouts():
-    rng = np.random.default_rng(0)
-    kp0, kp1 = rng.uniform(0, 100, (8, 2)), rng.uniform(0, 100, (5, 2))
-    m0 = np.array([2, -1, 0, -1, 4, -1, -1, 1])
-    l0, l1 = rng.uniform(0, 100, (3, 2, 2)), rng.uniform(0, 100, (4, 2, 2))
-    glue = dict(
-        keypoints0=kp0[None],
-        keypoints1=kp1[None],
-        matches0=m0[None],
-        match_scores0=np.linspace(0, 1, 8)[None],
-        lines0=l0[None],
-        lines1=l1[None],
-        line_matches0=np.array([[3, -1, 0]]),
-        image_size0=[H, W],
-        image_size1=[H, W],
-    )
-    pm = load_external_matches(glue)
-    np.testing.assert_array_equal(pm.points0, kp0[[0, 2, 4, 7]])
-    np.testing.assert_array_equal(pm.points1, kp1[[2, 0, 4, 1]])
-    np.testing.assert_array_equal(pm.lines1, l1[[3, 0]])
-    assert load_external_matches(glue, min_score=0.5).num_points == 2
-    lg = dict(keypoints0=kp0, keypoints1=kp1, matches=np.array([[0, 2], [7, 1]]))
-    pm = load_external_matches(lg, image_size0=(H, W), image_size1=(H, W))
-    np.testing.assert_array_equal(pm.points1, kp1[[2, 1]])
-    with pytest.raises(KeyError, match="Expected keys"):
-        load_external_matches({"foo": np.zeros(3)})
 
 
 finite = st.floats(-1e4, 1e4, allow_nan=False)

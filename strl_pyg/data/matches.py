@@ -20,7 +20,6 @@ __all__ = [
     "PairMatches",
     "OUT_OF_IMAGE_TOLERANCE",
     "MIN_LINE_LENGTH",
-    "load_external_matches",
 ]
 
 #: A coordinate may lie this many pixels outside ``[0, W - 1] x [0, H - 1]`` (detectors and
@@ -331,106 +330,17 @@ def _load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
         with np.load(path, allow_pickle=False) as npz:
             return {k: npz[k] for k in npz.files}
     except Exception as err:
-        raise ValueError(f"Expected a readable .npz match file at '{path}' (got {err})") from err
+        why = str(err).splitlines()[0] if str(err) else type(err).__name__
+        if "allow_pickle" in why:  # numpy's wording would suggest unsafe loading
+            why = "an object array; pickled data is never read"
+        raise ValueError(f"Expected a readable .npz match file at '{path}' (got {why})") from err
 
 
-def load_external_matches(
-    path_or_dict: str | os.PathLike | dict[str, Any],
-    image_size0: Any = None,
-    image_size1: Any = None,
-    K0: Any = None,
-    K1: Any = None,
-    min_score: float | None = None,
-) -> PairMatches:
-    """Loads matches written by another matcher (``.npz`` or a dict of arrays).
+def __getattr__(name: str) -> Any:
+    # ``load_external_matches`` lives in :mod:`strl_pyg.data.external` (which imports this
+    # module); it stays importable from here.
+    if name == "load_external_matches":
+        from strl_pyg.data.external import load_external_matches
 
-    Three layouts are recognised, tried in this order:
-
-    * **strl-pyg**: the keys of :meth:`PairMatches.save`.
-    * **already matched** (for example from hloc or a user's own code): ``mkpts0``, ``mkpts1``
-      ``[M, 2]``, optional ``mlines0``, ``mlines1`` ``[L, 2, 2]`` and ``mscores``,
-      ``mline_scores``.
-    * **GlueStick / LightGlue raw output**: ``keypoints0`` ``[N0, 2]``, ``keypoints1``
-      ``[N1, 2]`` and either ``matches0`` ``[N0]`` (index into image 1, -1 for none, as
-      SuperGlue and GlueStick write) or ``matches`` ``[M, 2]`` (index pairs, as LightGlue
-      writes), optional ``match_scores0`` / ``scores``; and for lines ``lines0`` ``[L0, 2, 2]``,
-      ``lines1`` ``[L1, 2, 2]``, ``line_matches0`` ``[L0]`` with optional
-      ``line_match_scores0``.
-
-    A leading batch dimension of size 1 (as PyTorch matchers return) is dropped. Image sizes
-    may also be stored under ``image_size0``/``image_size1``; ``min_score`` drops matches with
-    a lower score when scores exist.
-    """
-    if isinstance(path_or_dict, dict):
-        data = {k: _as_array(v, k, dtype=None) for k, v in path_or_dict.items()}
-        source = "the given dict"
-    else:
-        data = _load_npz(path_or_dict)
-        source = f"'{path_or_dict}'"
-    data = {
-        k: (v[0] if v.ndim >= 2 and v.shape[0] == 1 and k != "info_json" else v)
-        for k, v in data.items()
-    }
-    size0 = image_size0 if image_size0 is not None else data.get("image_size0")
-    size1 = image_size1 if image_size1 is not None else data.get("image_size1")
-    K0 = K0 if K0 is not None else data.get("K0")
-    K1 = K1 if K1 is not None else data.get("K1")
-    common = dict(image_size0=size0, image_size1=size1, K0=K0, K1=K1)
-
-    if "points0" in data and "points1" in data:
-        kw = {k: data[k] for k in ("lines0", "lines1", "point_scores", "line_scores", "image0",
-                                   "image1") if k in data}
-        pm = PairMatches(data["points0"], data["points1"], **kw, **common)
-    elif "mkpts0" in data:
-        pm = PairMatches(
-            data["mkpts0"],
-            data.get("mkpts1"),
-            lines0=data.get("mlines0"),
-            lines1=data.get("mlines1"),
-            point_scores=data.get("mscores"),
-            line_scores=data.get("mline_scores"),
-            **common,
-        )
-    elif "keypoints0" in data and "keypoints1" in data:
-        p_idx0, p_idx1, p_sc = _index_pairs(data, "matches0", "matches", "match_scores0", "scores")
-        kp0, kp1 = data["keypoints0"].reshape(-1, 2), data["keypoints1"].reshape(-1, 2)
-        lines0 = lines1 = l_sc = None
-        if "line_matches0" in data:
-            l_idx0, l_idx1, l_sc = _index_pairs(
-                data, "line_matches0", "line_matches", "line_match_scores0", "line_scores"
-            )
-            lines0, lines1 = data["lines0"][l_idx0], data["lines1"][l_idx1]
-        pm = PairMatches(
-            kp0[p_idx0],
-            kp1[p_idx1],
-            lines0=lines0,
-            lines1=lines1,
-            point_scores=p_sc,
-            line_scores=l_sc,
-            **common,
-        )
-    else:
-        raise KeyError(
-            "Expected keys (points0, points1), (mkpts0, mkpts1) or (keypoints0, keypoints1, "
-            f"matches0|matches) in {source} (got {sorted(data)})"
-        )
-    if min_score is not None:
-        keep_p = None if pm.point_scores is None else np.flatnonzero(pm.point_scores >= min_score)
-        keep_l = None if pm.line_scores is None else np.flatnonzero(pm.line_scores >= min_score)
-        pm = pm.select(keep_p, keep_l)
-    return pm
-
-
-def _index_pairs(data, per_node_key, pair_key, per_node_score, pair_score):
-    if per_node_key in data:
-        m0 = data[per_node_key].astype(np.int64).reshape(-1)
-        idx0 = np.flatnonzero(m0 >= 0)
-        idx1 = m0[idx0]
-        scores = data[per_node_score].reshape(-1)[idx0] if per_node_score in data else None
-    elif pair_key in data:
-        pairs = data[pair_key].astype(np.int64).reshape(-1, 2)
-        idx0, idx1 = pairs[:, 0], pairs[:, 1]
-        scores = data[pair_score].reshape(-1) if pair_score in data else None
-    else:
-        raise KeyError(f"Expected '{per_node_key}' or '{pair_key}' (got neither)")
-    return idx0, idx1, scores
+        return load_external_matches
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
