@@ -31,6 +31,8 @@ format         keys -> meaning                                                 s
                ``matching_scores0 [N0]``)
 =============  ==============================================================  ============
 
+SuperGlue's ``match_pairs.py`` resizes images first (default ``--resize 640 480``): its
+keypoints are in the resized image, so pass that size and a scaled K, or run ``--resize -1``.
 A leading batch dimension (PyTorch outputs, LightGlue's lists) is removed only where a key
 has one rank more than its layout says: size 1 is dropped, a larger batch needs
 ``batch_index``. Points outside the image (beyond
