@@ -103,13 +103,14 @@ def test_caps_and_sizes():
 def test_renders_fast():
     cfg = SceneConfig(kind="street", image_size=(192, 640))
     best = min(_timed(generate_pair, i, cfg) for i in range(2))
-    assert best < 1.0  # measured ~0.2 s per pair on the 2-core dev machine
+    assert best < 1.0  # measured ~0.3 s of CPU per pair on the 2-core dev machine
 
 
 def _timed(fn, *args):
-    t = time.perf_counter()
+    # CPU time, not wall time: the shared 2-core machine is often busy with other jobs.
+    t = time.process_time()
     fn(*args)
-    return time.perf_counter() - t
+    return time.process_time() - t
 
 
 @pytest.mark.parametrize(

@@ -1,7 +1,8 @@
 """Generated image pairs with the exact relative pose and ground-truth matches.
 
 Conventions: ``T_0to1`` maps camera-0 points into camera 1, ``X1 = R X0 + t``; pixels follow
-OpenCV (centre of the top-left pixel is ``(0, 0)``); both images share ``K``.
+OpenCV (centre of the top-left pixel is ``(0, 0)``); both images share ``K``. Photometric
+changes (``SceneConfig.photo_*``) touch image 1 only and never the geometry.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import numpy as np
 
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.frontend import fundamental_from_pose
+from strl_pyg.synthetic.photometric import apply_photometric
 from strl_pyg.synthetic.render import View, project, render_view
 from strl_pyg.synthetic.scene import Scene, SceneConfig, build_scene
 
@@ -43,6 +45,10 @@ class SyntheticPair:
         lines_clean0, lines_clean1: ``[Nl, 2, 2]`` the line matches before noise/outliers.
         points_clean0, points_clean1: ``[Np, 2]`` the point matches before noise/outliers.
         kind: the scene kind; seed: the seed it was generated from.
+        info: ``num_quads``, ``motion`` (``"legacy"`` or one of ``MOTIONS``), ``swapped``,
+            ``depth`` (the scene depth ``d`` the motion was scaled by; new motions only),
+            and for the object kind ``object_quads`` (quads ``0 .. object_quads - 1`` of
+            ``plane_id*`` are the object; the others are the turntable or backdrop).
     """
 
     image0: np.ndarray
@@ -157,8 +163,20 @@ def _gt_points(scene: Scene, K, views, planes_c0, cfg: SceneConfig, rng):
     v0, v1 = views
     h, w = cfg.image_size
     img = np.clip(v0.image, 0, 255).astype(np.uint8)
+    mask = None
+    if cfg.kind == "object":
+        # Corners of object-face interiors only: the strong silhouette against the dark
+        # background would otherwise set the quality threshold above every corner of a weak
+        # texture (the dark turntable / backdrop get no ground-truth points, as on black).
+        ids = v0.ids
+        inner = (ids >= 0) & (ids < scene.extra["object_quads"])
+        inner[1:-1, 1:-1] &= (
+            (ids[1:-1, 1:-1] == ids[:-2, 1:-1]) & (ids[1:-1, 1:-1] == ids[2:, 1:-1])
+            & (ids[1:-1, 1:-1] == ids[1:-1, :-2]) & (ids[1:-1, 1:-1] == ids[1:-1, 2:])
+        )
+        mask = cv2.erode(inner.astype(np.uint8), np.ones((5, 5), np.uint8))
     corners = cv2.goodFeaturesToTrack(img, maxCorners=4 * max(cfg.max_points, 1),
-                                      qualityLevel=0.005, minDistance=3)
+                                      qualityLevel=0.005, minDistance=3, mask=mask)
     uv0 = np.zeros((0, 2)) if corners is None else corners.reshape(-1, 2).astype(np.float64)
     # Interior pixels only: all 3x3 neighbours on the same quad (no border ambiguity).
     xi, yi = np.round(uv0[:, 0]).astype(int), np.round(uv0[:, 1]).astype(int)
@@ -261,13 +279,13 @@ def generate_pair(seed: int, config: SceneConfig | None = None) -> SyntheticPair
     if not isinstance(cfg, SceneConfig):
         raise TypeError(f"Expected a SceneConfig (got {type(cfg).__name__})")
     h, w = cfg.image_size
-    f = cfg.focal
-    K = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]])
+    K = cfg.intrinsics()
     for attempt in range(_MAX_ATTEMPTS):
         rng = np.random.default_rng([int(seed), attempt])
         scene = build_scene(rng, cfg)
         views = tuple(
-            render_view(scene.quads, K, R, t, (h, w), cfg.near)
+            render_view(scene.quads, K, R, t, (h, w), cfg.near, scene.background,
+                        scene.gradient)
             for R, t in ((scene.R_cw0, scene.t_cw0), (scene.R_cw1, scene.t_cw1))
         )
         planes = _planes_c0(scene)
@@ -283,13 +301,19 @@ def generate_pair(seed: int, config: SceneConfig | None = None) -> SyntheticPair
     F = fundamental_from_pose(T_0to1, K, K)
     image0 = _to_uint8(views[0], rng, cfg.image_noise)
     image1 = _to_uint8(views[1], rng, cfg.image_noise)
+    if cfg.has_photometric:  # its own stream: the ground truth stays that of no change
+        image1 = apply_photometric(
+            image1, cfg.photo_gain, cfg.photo_gamma, cfg.photo_blur, cfg.photo_noise,
+            np.random.default_rng([int(seed), attempt, 1]),
+        )
     n0, n1, p_inl = _corrupt(p0, p1, cfg, rng, (h, w), F, lines=False)
     m0, m1, l_inl = _corrupt(l0, l1, cfg, rng, (h, w), F, lines=True)
     if len(n0) + len(m0) == 0:
         raise RuntimeError(f"Scene of seed {seed} has no visible correspondences; try another")
     matches = PairMatches(
         n0, n1, lines0=m0, lines1=m1, K0=K, K1=K, image0=image0, image1=image1,
-        info={"seed": int(seed), "kind": cfg.kind, "attempt": attempt, "source": "synthetic"},
+        info={"seed": int(seed), "kind": cfg.kind, "attempt": attempt, "source": "synthetic",
+              "motion": scene.extra["motion"]},
     )
     return SyntheticPair(
         image0=image0, image1=image1, K=K, T_0to1=T_0to1, matches=matches,
@@ -298,5 +322,9 @@ def generate_pair(seed: int, config: SceneConfig | None = None) -> SyntheticPair
         plane_id0=views[0].ids, plane_id1=views[1].ids, planes=planes,
         T_w_c0=T_w_c0, T_w_c1=T_w_c1,
         points_clean0=p0, points_clean1=p1, lines_clean0=l0, lines_clean1=l1,
-        kind=cfg.kind, seed=int(seed), info={"num_quads": len(scene.quads)},
+        kind=cfg.kind, seed=int(seed),
+        info={"num_quads": len(scene.quads), "motion": scene.extra["motion"],
+              "swapped": bool(cfg.swap_views),
+              **{k: scene.extra[k] for k in ("object_quads", "backdrop", "depth")
+                 if k in scene.extra}},
     )

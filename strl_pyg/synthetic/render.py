@@ -80,12 +80,14 @@ def render_view(
     size: tuple[int, int],
     near: float = 0.05,
     background: float = 215.0,
+    gradient: float = 12.0,
 ) -> View:
     """Renders ``quads`` seen by the camera ``X_c = R X_w + t`` with intrinsics ``K`` ``[3, 3]``
-    into an ``(H, W) = size`` view."""
+    into an ``(H, W) = size`` view; pixels that see no quad get ``background`` plus a vertical
+    gradient from ``-gradient`` (top) to ``+gradient`` (bottom), ``ids = -1``, ``depth = inf``."""
     h, w = size
     image = np.full((h, w), background, np.float32)
-    image += np.linspace(-12, 12, h, dtype=np.float32)[:, None]  # a sky-like gradient
+    image += np.linspace(-gradient, gradient, h, dtype=np.float32)[:, None]  # sky-like
     depth = np.full((h, w), np.inf, np.float32)
     ids = np.full((h, w), -1, np.int32)
     K_inv = np.linalg.inv(K)

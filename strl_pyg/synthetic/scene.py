@@ -14,84 +14,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
+
+from strl_pyg.synthetic.config import SCENE_KINDS, SceneConfig
+from strl_pyg.synthetic.motion import _rot, look_at, move_camera, scene_depth
+from strl_pyg.synthetic.textures import TextureMaker, pyramid
 
 __all__ = ["SceneConfig", "Quad", "Scene", "build_scene", "SCENE_KINDS"]
 
-SCENE_KINDS = ("street", "indoor", "boxes")
-
-
-@dataclass
-class SceneConfig:
-    """Knobs of a generated pair (see :func:`strl_pyg.synthetic.generate_pair`).
-
-    Args:
-        kind: ``"street"`` (buildings along a road, driving-like forward motion), ``"indoor"``
-            (rooms and corridors with furniture, free hand-held motion) or ``"boxes"`` (boxes
-            floating in front of a wall, Scenes11-like, free motion). (default: ``"street"``)
-        image_size: ``(H, W)`` of both images. (default: ``(192, 640)``)
-        focal_factor: focal length as a fraction of ``W``; ``None`` picks 0.58 for street
-            (KITTI-like) and 0.85 otherwise (DeMoN-like). (default: ``None``)
-        noise_px: std of the Gaussian noise added to every ground-truth coordinate, pixels.
-            (default: ``0.0``)
-        outlier_fraction: fraction of point and line matches replaced by wrong ones, in
-            ``[0, 1)``. (default: ``0.0``)
-        low_texture: flat, weakly textured surfaces (few blobs; edges remain). (default: False)
-        repetitive_texture: one small pattern tiled over all surfaces, identical windows.
-            (default: False)
-        max_points, max_lines: caps on the ground-truth matches kept. (default: 512, 256)
-        min_line_length: shortest ground-truth segment kept, pixels in both images.
-            (default: 15.0)
-        texels_per_metre: texture resolution before the cap of ``max_texture`` texels.
-            (default: 48.0, 512)
-        image_noise: std of the grey-level sensor noise added to the images. (default: 1.5)
-        near: near clipping distance, metres. (default: 0.05)
-    """
-
-    kind: str = "street"
-    image_size: tuple[int, int] = (192, 640)
-    focal_factor: float | None = None
-    noise_px: float = 0.0
-    outlier_fraction: float = 0.0
-    low_texture: bool = False
-    repetitive_texture: bool = False
-    max_points: int = 512
-    max_lines: int = 256
-    min_line_length: float = 15.0
-    texels_per_metre: float = 48.0
-    max_texture: int = 512
-    image_noise: float = 1.5
-    near: float = 0.05
-
-    def __post_init__(self) -> None:
-        if self.kind not in SCENE_KINDS:
-            raise ValueError(f"Expected kind in {SCENE_KINDS} (got {self.kind!r})")
-        size = tuple(int(v) for v in self.image_size)
-        if len(size) != 2 or min(size) < 16:
-            raise ValueError(f"Expected image_size (H, W) both >= 16 (got {self.image_size!r})")
-        self.image_size = size
-        if not 0.0 <= self.outlier_fraction < 1.0:
-            raise ValueError(
-                f"Expected outlier_fraction in [0, 1) (got {self.outlier_fraction})"
-            )
-        if self.noise_px < 0 or self.image_noise < 0:
-            raise ValueError(
-                f"Expected noise_px, image_noise >= 0 (got {self.noise_px}, {self.image_noise})"
-            )
-        if self.max_points < 0 or self.max_lines < 0:
-            raise ValueError(
-                f"Expected max_points, max_lines >= 0 (got {self.max_points}, {self.max_lines})"
-            )
-        if self.max_points + self.max_lines == 0:
-            raise ValueError("Expected max_points + max_lines > 0 (got 0)")
-
-    @property
-    def focal(self) -> float:
-        f = self.focal_factor
-        if f is None:
-            f = 0.58 if self.kind == "street" else 0.85
-        return float(f) * self.image_size[1]
+#: Per kind: the range the scene depth ``d`` of view 0 is clamped to (metres), and the
+#: largest camera translation of the new motions (free space; ``inf``: unbounded).
+_DEPTH_RANGE = {"street": (4.0, 20.0), "indoor": (1.0, 6.0), "boxes": (3.0, 15.0)}
 
 
 @dataclass
@@ -138,125 +71,14 @@ class Scene:
     t_cw1: np.ndarray
     background: float = 215.0
     extra: dict = field(default_factory=dict)
-
-
-# ---------------------------------------------------------------- textures
-class _TextureMaker:
-    """Procedural grey textures with their straight edges, from one seeded generator."""
-
-    def __init__(self, rng: np.random.Generator, cfg: SceneConfig) -> None:
-        self.rng = rng
-        self.cfg = cfg
-        # One tile shared by every surface when the texture is repetitive.
-        self.tile = self._noise(24, 24, 6, 60.0) if cfg.repetitive_texture else None
-
-    def _noise(self, h: int, w: int, cell: int, amp: float) -> np.ndarray:
-        small = self.rng.normal(0.0, 1.0, (max(2, h // cell), max(2, w // cell)))
-        return amp * cv2.resize(small, (w, h), interpolation=cv2.INTER_CUBIC)
-
-    def size(self, width_m: float, height_m: float) -> tuple[int, int]:
-        tpm, cap = self.cfg.texels_per_metre, self.cfg.max_texture
-        scale = min(tpm, cap / max(width_m, height_m))
-        return max(8, int(round(height_m * scale))), max(8, int(round(width_m * scale)))
-
-    def base(self, h: int, w: int, level: float) -> np.ndarray:
-        rng, cfg = self.rng, self.cfg
-        if cfg.low_texture:
-            return level + self._noise(h, w, 32, 4.0)
-        tex = level + self._noise(h, w, 32, 18.0)
-        if cfg.repetitive_texture:
-            reps = (h // self.tile.shape[0] + 1, w // self.tile.shape[1] + 1)
-            return tex + np.tile(self.tile, reps)[:h, :w]
-        cell = int(rng.integers(3, 7))
-        return tex + self._noise(h, w, cell, float(rng.uniform(25.0, 45.0)))
-
-    @staticmethod
-    def rect(tex: np.ndarray, segs: list, x0: int, y0: int, x1: int, y1: int, value) -> None:
-        """Fills texels ``[x0, x1) x [y0, y1)`` and records the four borders in ``(s, t)``."""
-        h, w = tex.shape
-        x0, x1 = max(0, x0), min(w, x1)
-        y0, y1 = max(0, y0), min(h, y1)
-        if x1 - x0 < 2 or y1 - y0 < 2:
-            return
-        tex[y0:y1, x0:x1] = value
-        s0, s1, t0, t1 = x0 / w, x1 / w, y0 / h, y1 / h
-        segs.extend([[(s0, t0), (s1, t0)], [(s1, t0), (s1, t1)], [(s1, t1), (s0, t1)],
-                     [(s0, t1), (s0, t0)]])
-
-    def make(self, style: str, width_m: float, height_m: float) -> tuple[np.ndarray, np.ndarray]:
-        """Returns a texture ``[H_t, W_t]`` float and its edges ``[M, 2, 2]`` in ``(s, t)``."""
-        rng = self.rng
-        h, w = self.size(width_m, height_m)
-        level = float(rng.uniform(60, 190))
-        tex = self.base(h, w, level)
-        segs: list = []
-        tpm_x, tpm_y = w / width_m, h / height_m
-        if style == "facade":
-            self._windows(tex, segs, tpm_x, tpm_y, level)
-        elif style in ("floor", "sidewalk"):
-            step = float(rng.uniform(0.6, 1.5))
-            val = level + rng.choice([-1, 1]) * rng.uniform(25, 50)
-            for i in range(1, int(width_m / step) + 1):
-                x = int(i * step * tpm_x)
-                self.rect(tex, segs, x, 0, x + max(2, int(0.04 * tpm_x)), h, val)
-            for j in range(1, int(height_m / step) + 1):
-                y = int(j * step * tpm_y)
-                self.rect(tex, segs, 0, y, w, y + max(2, int(0.04 * tpm_y)), val)
-        elif style == "road":
-            # Dashed lane marks along t (the driving direction).
-            for lane_s in rng.uniform(0.3, 0.7, size=1):
-                x = int(lane_s * w)
-                dash, gap = int(2.0 * tpm_y), int(2.5 * tpm_y)
-                y = int(rng.integers(0, gap + dash))
-                while y < h:
-                    self.rect(tex, segs, x, y, x + max(3, int(0.15 * tpm_x)), y + dash, 235.0)
-                    y += dash + gap
-        elif style in ("wall", "box", "ceiling"):
-            n = int(rng.integers(2, 7)) if style != "ceiling" else int(rng.integers(1, 4))
-            for _ in range(n):
-                rw = int(rng.uniform(0.15, 0.5) * w)
-                rh = int(rng.uniform(0.15, 0.5) * h)
-                x0 = int(rng.integers(0, max(1, w - rw)))
-                y0 = int(rng.integers(0, max(1, h - rh)))
-                val = np.clip(level + rng.choice([-1, 1]) * rng.uniform(40, 90), 5, 250)
-                inner = self.base(rh, rw, float(val))
-                self.rect(tex, segs, x0, y0, x0 + rw, y0 + rh, inner)
-        tex = np.clip(tex, 0, 255)
-        return tex, np.asarray(segs, dtype=np.float64).reshape(-1, 2, 2)
-
-    def _windows(self, tex, segs, tpm_x, tpm_y, level) -> None:
-        rng = self.rng
-        h, w = tex.shape
-        ww, wh = rng.uniform(0.8, 1.6), rng.uniform(1.0, 1.8)
-        sx, sy = ww + rng.uniform(0.6, 2.0), wh + rng.uniform(1.2, 2.0)
-        frame_val = np.clip(level + rng.uniform(40, 70), 0, 250)
-        glass = float(rng.uniform(20, 60))
-        x_m = rng.uniform(0.3, 1.0)
-        while (x_m + ww) * tpm_x < w:
-            y_m = rng.uniform(0.5, 1.5)
-            while (y_m + wh) * tpm_y < h:
-                x0, y0 = int(x_m * tpm_x), int(y_m * tpm_y)
-                x1, y1 = int((x_m + ww) * tpm_x), int((y_m + wh) * tpm_y)
-                f = max(2, int(0.08 * tpm_x))
-                self.rect(tex, segs, x0, y0, x1, y1, frame_val)
-                shade = glass if self.cfg.repetitive_texture else glass + rng.uniform(-15, 15)
-                self.rect(tex, segs, x0 + f, y0 + f, x1 - f, y1 - f, shade)
-                y_m += sy
-            x_m += sx
-
-
-def _pyramid(tex: np.ndarray) -> list[np.ndarray]:
-    levels = [np.clip(tex, 0, 255).astype(np.uint8)]
-    while min(levels[-1].shape) >= 16 and len(levels) < 6:
-        levels.append(cv2.pyrDown(levels[-1]))
-    return levels
+    gradient: float = 12.0  # background gradient, +- grey levels from top to bottom
 
 
 # ---------------------------------------------------------------- scene builders
 class _Builder:
     def __init__(self, rng: np.random.Generator, cfg: SceneConfig) -> None:
         self.rng = rng
-        self.tex = _TextureMaker(rng, cfg)
+        self.tex = TextureMaker(rng, cfg)
         self.quads: list[Quad] = []
         self.segments: list[np.ndarray] = []
         self.owner: list[int] = []
@@ -264,7 +86,7 @@ class _Builder:
     def quad(self, origin, u, v, style: str, edges: bool = True) -> int:
         origin, u, v = (np.asarray(a, dtype=np.float64) for a in (origin, u, v))
         tex, segs = self.tex.make(style, float(np.linalg.norm(u)), float(np.linalg.norm(v)))
-        q = Quad(origin, u, v, _pyramid(tex), segs, edges)
+        q = Quad(origin, u, v, pyramid(tex), segs, edges)
         self.quads.append(q)
         idx = len(self.quads) - 1
         for (s0, t0), (s1, t1) in segs:
@@ -278,7 +100,8 @@ class _Builder:
         return idx
 
     def box(self, center, size, yaw: float = 0.0, style: str = "box", faces=None) -> None:
-        """An axis-aligned-in-yaw box; ``faces`` limits which faces are built."""
+        """An axis-aligned-in-yaw box; ``faces`` limits which faces are built (default: all but
+        ``"bottom"``)."""
         cy, sy_ = np.cos(yaw), np.sin(yaw)
         R = np.array([[cy, 0, sy_], [0, 1, 0], [-sy_, 0, cy]])
         hx, hy, hz = np.asarray(size, dtype=np.float64) / 2
@@ -298,26 +121,16 @@ class _Builder:
                       p(hx, hy, -hz) - p(hx, -hy, -hz)),
             "top": (p(-hx, -hy, hz), p(hx, -hy, hz) - p(-hx, -hy, hz),
                     p(-hx, -hy, -hz) - p(-hx, -hy, hz)),
+            "bottom": (p(-hx, hy, -hz), p(hx, hy, -hz) - p(-hx, hy, -hz),
+                       p(-hx, hy, hz) - p(-hx, hy, -hz)),
         }
-        for name in faces or all_faces:
+        for name in faces or ("front", "back", "left", "right", "top"):
             self.quad(*all_faces[name], style=style)
 
     def scene(self, R0, t0, R1, t1, **extra) -> Scene:
         segs = np.asarray(self.segments, dtype=np.float64).reshape(-1, 2, 3)
         owner = np.asarray(self.owner, dtype=np.int64)
         return Scene(self.quads, segs, owner, R0, t0, R1, t1, extra=extra)
-
-
-def _rot(yaw: float, pitch: float = 0.0, roll: float = 0.0) -> np.ndarray:
-    """Camera-to-world rotation for a camera yawed about ``y``, pitched about ``x``, rolled
-    about ``z`` (radians)."""
-    cy, sy = np.cos(yaw), np.sin(yaw)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    cr, sr = np.cos(roll), np.sin(roll)
-    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    Rx = np.array([[1, 0, 0], [0, cp, -sp], [0, sp, cp]])
-    Rz = np.array([[cr, -sr, 0], [sr, cr, 0], [0, 0, 1]])
-    return Ry @ Rx @ Rz
 
 
 def _w2c(R_wc: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -367,7 +180,8 @@ def _street(b: _Builder, rng: np.random.Generator) -> Scene:
     step = float(rng.uniform(0.6, 1.6))
     c1 = c0 + R_wc0 @ np.array([rng.uniform(-0.05, 0.05), rng.uniform(-0.02, 0.02), step])
     R_wc1 = R_wc0 @ _rot(rng.uniform(-0.05, 0.05), rng.uniform(-0.01, 0.01), 0.0)
-    return b.scene(*_w2c(R_wc0, c0), *_w2c(R_wc1, c1))
+    room = max(1.0, road_half - 1.0 - abs(float(c0[0])))
+    return b.scene(*_w2c(R_wc0, c0), *_w2c(R_wc1, c1), room=room)
 
 
 def _indoor(b: _Builder, rng: np.random.Generator) -> Scene:
@@ -403,7 +217,8 @@ def _indoor(b: _Builder, rng: np.random.Generator) -> Scene:
     d[2] = abs(d[2])  # mostly forward: the second view keeps looking into the room
     c1 = c0 + R_wc0 @ (d / np.linalg.norm(d) * rng.uniform(0.2, 0.7))
     R_wc1 = R_wc0 @ _rot(*rng.uniform(-0.12, 0.12, size=3))
-    return b.scene(*_w2c(R_wc0, c0), *_w2c(R_wc1, c1), corridor=bool(corridor))
+    return b.scene(*_w2c(R_wc0, c0), *_w2c(R_wc1, c1), corridor=bool(corridor),
+                   room=0.35 * min(W, H))
 
 
 def _boxes(b: _Builder, rng: np.random.Generator) -> Scene:
@@ -418,11 +233,107 @@ def _boxes(b: _Builder, rng: np.random.Generator) -> Scene:
     d = rng.normal(size=3)
     c1 = c0 + R_wc0 @ (d / np.linalg.norm(d) * rng.uniform(0.3, 1.0))
     R_wc1 = R_wc0 @ _rot(*rng.uniform(-0.1, 0.1, size=3))
-    return b.scene(*_w2c(R_wc0, c0), *_w2c(R_wc1, c1))
+    return b.scene(*_w2c(R_wc0, c0), *_w2c(R_wc1, c1), room=2.5)
+
+
+_ALL_FACES = ("front", "back", "left", "right", "top", "bottom")
+
+
+def _object(b: _Builder, rng: np.random.Generator, cfg: SceneConfig) -> Scene:
+    """One object made of boxes (a box, a stack, a cross or an L) standing on ``y = 0``, with
+    textured or weak (plaster-like) faces, on an empty dark background, a dark turntable or a
+    dark backdrop; camera 0 on a sphere around it, looking at its centre."""
+    size = float(np.exp(rng.uniform(np.log(0.2), np.log(3.0))))  # object scale, metres
+    b.tex.density = max(1.0, 5.3 / size)  # about 256 texels across the object
+    style = "weak" if rng.random() < 0.4 else "box"
+    shape = str(rng.choice(["box", "stack", "cross", "ell"]))
+    backdrop = str(rng.choice(["none", "ground", "backdrop"], p=[0.5, 0.3, 0.2]))
+    faces = _ALL_FACES[:5] if backdrop == "ground" else _ALL_FACES
+    if shape == "box":
+        sx, sy, sz = size * rng.uniform([0.5, 0.5, 0.5], [1.0, 1.2, 1.0])
+        b.box([0, -sy / 2, 0], [sx, sy, sz], yaw=float(rng.uniform(-np.pi, np.pi)),
+              style=style, faces=faces)
+    elif shape == "stack":
+        y, foot = 0.0, size
+        for _ in range(int(rng.integers(2, 5))):
+            sy = size * rng.uniform(0.2, 0.5)
+            sx, sz = foot * rng.uniform(0.6, 1.0), foot * rng.uniform(0.6, 1.0)
+            b.box([0, y - sy / 2, 0], [sx, sy, sz], yaw=float(rng.uniform(-np.pi, np.pi)),
+                  style=style, faces=faces)
+            y, foot = y - sy, 0.75 * min(sx, sz)
+    else:
+        yaw = float(rng.uniform(-np.pi, np.pi))
+        sy = size * rng.uniform(0.3, 0.8)
+        long, thin = size, size * rng.uniform(0.25, 0.4)
+        b.box([0, -sy / 2, 0], [long, sy, thin], yaw=yaw, style=style, faces=faces)
+        if shape == "cross":
+            b.box([0, -sy * 0.6, 0], [long * 0.8, sy * 1.2, thin], yaw=yaw + np.pi / 2,
+                  style=style, faces=faces)
+        else:
+            off = np.array([np.cos(yaw), 0, -np.sin(yaw)]) * (long - thin) / 2
+            b.box([off[0], -sy, off[2]], [thin, 2 * sy, thin * 1.5], yaw=yaw, style=style,
+                  faces=faces)
+    n_object = len(b.quads)
+    corners = np.concatenate([q.corners() for q in b.quads])
+    lo, hi = corners.min(0), corners.max(0)
+    centre = (lo + hi) / 2
+    radius = float(np.linalg.norm(corners - centre, axis=1).max())
+    # Camera 0: the object spans a fraction `fill` of the shorter image side.
+    fill = rng.uniform(0.8, 1.4)
+    dist = max(1.5 * radius, radius * cfg.focal / (fill * min(cfg.image_size) / 2))
+    az, el = rng.uniform(-np.pi, np.pi), rng.uniform(5, 50) * np.pi / 180
+    c0 = centre + dist * np.array([np.cos(el) * np.sin(az), -np.sin(el), -np.cos(el) * np.cos(az)])
+    target = centre + rng.normal(0.0, 0.05 * radius, 3)
+    R_wc0 = look_at(c0, target, rng.uniform(-5, 5) * np.pi / 180)
+    if backdrop == "ground":  # a dark turntable just below the object
+        half = 0.8 * max(hi[0] - lo[0], hi[2] - lo[2])
+        g = 0.01 * size
+        b.quad([centre[0] - half, g, centre[2] - half], [2 * half, 0, 0], [0, 0, 2 * half], "dark")
+    elif backdrop == "backdrop":  # a dark screen behind the object, facing camera 0
+        x, y = R_wc0[:, 0] * 2.5 * radius, R_wc0[:, 1] * 2.5 * radius
+        o = centre + R_wc0[:, 2] * 1.5 * radius - (x + y) / 2
+        b.quad(o, x, y, "dark")
+    scene = b.scene(*_w2c(R_wc0, c0), *_w2c(R_wc0, c0), centre=centre, radius=dist,
+                    object_quads=n_object, backdrop=backdrop, shape=shape, style=style)
+    scene.background = float(rng.uniform(0.0, 30.0))
+    scene.gradient = float(rng.uniform(0.0, 3.0))
+    return scene
 
 
 def build_scene(rng: np.random.Generator, cfg: SceneConfig) -> Scene:
-    """Builds the quads, 3D segments and both camera poses of one scene from ``rng``."""
+    """Builds the quads, 3D segments and both camera poses of one scene from ``rng``.
+
+    The kind's builder places camera 0 (and, for the legacy motions, camera 1); any other
+    motion then redraws camera 1 (:func:`strl_pyg.synthetic.motion.move_camera`, its
+    translation capped at the kind's free space), ``baseline_scale`` scales the translation
+    and ``swap_views`` swaps the two cameras.
+    """
     builder = _Builder(rng, cfg)
-    make = {"street": _street, "indoor": _indoor, "boxes": _boxes}[cfg.kind]
-    return make(builder, rng)
+    if cfg.kind == "object":
+        scene = _object(builder, rng, cfg)
+    else:
+        scene = {"street": _street, "indoor": _indoor, "boxes": _boxes}[cfg.kind](builder, rng)
+    motion = cfg.resolved_motion
+    scale = cfg.baseline_scale
+    if motion != "legacy" or scale != 1.0:
+        R_wc0, c0 = scene.R_cw0.T, -scene.R_cw0.T @ scene.t_cw0
+        R_wc1, c1 = scene.R_cw1.T, -scene.R_cw1.T @ scene.t_cw1
+        if motion != "legacy":
+            centre = scene.extra.get("centre")
+            if centre is not None:
+                depth = scene.extra["radius"]
+            else:
+                lo, hi = _DEPTH_RANGE[cfg.kind]
+                depth = float(np.clip(scene_depth(scene.quads, c0, R_wc0), lo, hi))
+            R_wc1, c1 = move_camera(motion, rng, R_wc0, c0, depth, centre)
+            scene.extra["depth"] = depth
+        step = (c1 - c0) * scale
+        room = scene.extra.get("room", np.inf) if motion != "legacy" else np.inf
+        if np.linalg.norm(step) > room:
+            step = step * (room / np.linalg.norm(step))
+        scene.R_cw1, scene.t_cw1 = _w2c(R_wc1, c0 + step)
+    if cfg.swap_views:
+        scene.R_cw0, scene.t_cw0, scene.R_cw1, scene.t_cw1 = (
+            scene.R_cw1, scene.t_cw1, scene.R_cw0, scene.t_cw0)
+    scene.extra["motion"] = motion
+    return scene

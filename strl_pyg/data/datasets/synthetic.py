@@ -4,6 +4,13 @@ generated from seed ``seed + i``) and an infinite stream.
 Matches are the generator's ground-truth correspondences (computed on the fly, nothing
 cached), or, with ``matches="frontend"``, front-end matches on the rendered images, computed
 once per pair into the match cache like the real datasets.
+
+``scene_config`` is one :class:`~strl_pyg.synthetic.SceneConfig` for every pair, or a
+:class:`~strl_pyg.synthetic.SceneDistribution` (e.g. ``scene_distribution("mixed")``) that
+draws each pair's config from its seed: kinds, image sizes and intrinsics then vary within one
+dataset (graphs carry normalised coordinates, their own ``K`` and image size, so mixed sizes
+collate into one batch). Pair ids are ``synthetic/<kind>/<seed>`` for a fixed config and
+``synthetic/<distribution>/<kind>/<seed>`` for a distribution.
 """
 
 from __future__ import annotations
@@ -11,7 +18,7 @@ from __future__ import annotations
 import functools
 import os
 from collections.abc import Callable, Iterator
-from dataclasses import asdict, replace
+from dataclasses import asdict, fields, replace
 from typing import Any
 
 import numpy as np
@@ -28,13 +35,54 @@ __all__ = ["SyntheticPairs", "InfiniteSyntheticPairs", "MATCH_SOURCES"]
 MATCH_SOURCES = ("ground_truth", "frontend")
 
 
+#: SceneConfig fields that existed before the motion / intrinsics / photometry knobs: the cache
+#: fingerprint lists the others only when they differ from their defaults, so caches built
+#: before those knobs existed stay valid.
+_LEGACY_SCENE_FIELDS = frozenset((
+    "kind", "image_size", "focal_factor", "noise_px", "outlier_fraction", "low_texture",
+    "repetitive_texture", "max_points", "max_lines", "min_line_length", "texels_per_metre",
+    "max_texture", "image_noise", "near",
+))
+
+
 def _scene_config(config: Any):
-    from strl_pyg.synthetic import SceneConfig
+    from strl_pyg.synthetic import SceneConfig, SceneDistribution
 
     config = SceneConfig() if config is None else config
-    if not isinstance(config, SceneConfig):
-        raise TypeError(f"Expected a SceneConfig (got {type(config).__name__})")
+    if not isinstance(config, (SceneConfig, SceneDistribution)):
+        raise TypeError(
+            f"Expected a SceneConfig or a SceneDistribution (got {type(config).__name__})"
+        )
     return config
+
+
+def _config_for(scene_config: Any, seed: int):
+    """The SceneConfig of pair ``seed``: the fixed one, or drawn from the distribution."""
+    from strl_pyg.synthetic import SceneDistribution
+
+    if isinstance(scene_config, SceneDistribution):
+        return scene_config.config(seed)
+    return scene_config
+
+
+def _label(scene_config: Any, kind: str) -> str:
+    from strl_pyg.synthetic import SceneDistribution
+
+    if isinstance(scene_config, SceneDistribution):
+        return f"{scene_config.name}/{kind}"
+    return kind
+
+
+def _scene_fingerprint(scene_config: Any) -> dict[str, Any]:
+    from strl_pyg.synthetic import SceneDistribution
+
+    if isinstance(scene_config, SceneDistribution):
+        return {"distribution": asdict(scene_config)}
+    defaults = {f.name: f.default for f in fields(scene_config)}
+    return {
+        k: v for k, v in asdict(scene_config).items()
+        if k in _LEGACY_SCENE_FIELDS or v != defaults[k]
+    }
 
 
 def _check_seed(seed: Any) -> int:
@@ -58,9 +106,10 @@ def _match_synthetic(seed: int, scene_config: Any, frontend_config: Any) -> Pair
     from strl_pyg.frontend import match_images
     from strl_pyg.synthetic import generate_pair
 
-    pair = generate_pair(seed, scene_config)
+    pair = generate_pair(seed, _config_for(scene_config, seed))
     matches = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K, config=frontend_config)
-    info = {**matches.info, "seed": seed, "T_0to1": np.asarray(pair.T_0to1).tolist()}
+    info = {**matches.info, "seed": seed, "T_0to1": np.asarray(pair.T_0to1).tolist(),
+            "kind": pair.kind, "motion": pair.info["motion"]}
     return replace(matches, K0=pair.K, K1=pair.K, info=info)
 
 
@@ -70,7 +119,8 @@ class SyntheticPairs(CachedPairDataset):
     Args:
         num_pairs: Size of the dataset.
         seed: First seed (default: ``0``).
-        scene_config: A :class:`~strl_pyg.synthetic.SceneConfig` (default: its defaults).
+        scene_config: A :class:`~strl_pyg.synthetic.SceneConfig` (default: its defaults) or a
+            :class:`~strl_pyg.synthetic.SceneDistribution` (one config per seed).
         matches: ``"ground_truth"`` (default; generated on access, no cache) or
             ``"frontend"`` (front-end matches on the rendered images; needs ``cache_dir`` and
             :meth:`build_cache`).
@@ -113,7 +163,7 @@ class SyntheticPairs(CachedPairDataset):
     def _make_fingerprint(self) -> dict[str, Any]:
         return {
             "kind": "synthetic",
-            "scene": asdict(self.scene_config),
+            "scene": _scene_fingerprint(self.scene_config),
             "frontend": _config_dict(self.frontend_config),
         }
 
@@ -127,7 +177,9 @@ class SyntheticPairs(CachedPairDataset):
 
     def _graph(self, i: int, matches: PairMatches) -> HeteroData:
         T = np.asarray(matches.info["T_0to1"], dtype=np.float64)
-        return _graph(matches, T, self.seeds[i], self.scene_config.kind, self.patch_size,
+        seed = self.seeds[i]
+        kind = matches.info.get("kind") or _config_for(self.scene_config, seed).kind
+        return _graph(matches, T, seed, _label(self.scene_config, kind), self.patch_size,
                       self.keep_images)
 
     def build_cache(self, num_workers: int = 0, **kwargs: Any) -> CacheBuildReport:
@@ -149,15 +201,20 @@ class SyntheticPairs(CachedPairDataset):
         from strl_pyg.synthetic import generate_pair
 
         seed = self.seeds[idx]
-        pair = generate_pair(seed, self.scene_config)
-        return _graph(pair.matches, pair.T_0to1, seed, self.scene_config.kind, self.patch_size,
-                      self.keep_images)
+        pair = generate_pair(seed, _config_for(self.scene_config, seed))
+        return _graph(pair.matches, pair.T_0to1, seed, _label(self.scene_config, pair.kind),
+                      self.patch_size, self.keep_images)
 
     def __repr__(self) -> str:
         return (
             f"{self.__class__.__name__}({self.num_pairs_total}, seed={self.seed}, "
-            f"kind={self.scene_config.kind!r}, matches={self.matches!r})"
+            f"{_describe(self.scene_config)}, matches={self.matches!r})"
         )
+
+
+def _describe(scene_config: Any) -> str:
+    name = getattr(scene_config, "name", None)
+    return f"kind={scene_config.kind!r}" if name is None else f"distribution={name!r}"
 
 
 class InfiniteSyntheticPairs(IterableDataset):
@@ -169,7 +226,8 @@ class InfiniteSyntheticPairs(IterableDataset):
 
     Args:
         seed: First seed (default: ``0``).
-        scene_config: A :class:`~strl_pyg.synthetic.SceneConfig`.
+        scene_config: A :class:`~strl_pyg.synthetic.SceneConfig` or a
+            :class:`~strl_pyg.synthetic.SceneDistribution`.
         patch_size, keep_images: As :func:`~strl_pyg.data.build_pair_graph`.
         transform: Applied to each graph.
     """
@@ -196,12 +254,12 @@ class InfiniteSyntheticPairs(IterableDataset):
         offset, stride = (0, 1) if info is None else (info.id, info.num_workers)
         seed = self.seed + offset
         while True:
-            pair = generate_pair(seed, self.scene_config)
-            data = _graph(pair.matches, pair.T_0to1, seed, self.scene_config.kind,
+            pair = generate_pair(seed, _config_for(self.scene_config, seed))
+            data = _graph(pair.matches, pair.T_0to1, seed, _label(self.scene_config, pair.kind),
                           self.patch_size, self.keep_images)
             yield data if self.transform is None else self.transform(data)
             seed += stride
 
     def __repr__(self) -> str:
-        return f"{self.__class__.__name__}(seed={self.seed}, kind={self.scene_config.kind!r})"
+        return f"{self.__class__.__name__}(seed={self.seed}, {_describe(self.scene_config)})"
 

@@ -1,0 +1,280 @@
+"""The broad generated distribution: motions, intrinsics, the object kind, photometry, the
+named presets, and the dataset paths (ground truth and front end) over mixed image sizes."""
+
+from __future__ import annotations
+
+import hashlib
+import pickle
+from collections import Counter
+
+import numpy as np
+import pytest
+import torch
+from torch_geometric.loader import DataLoader
+
+from strl_pyg.data import keys as K
+from strl_pyg.data.datasets import SyntheticPairs
+from strl_pyg.data.datasets.base import PAIR_ID, SUBSET
+from strl_pyg.data.datasets.synthetic import _scene_fingerprint
+from strl_pyg.frontend import epipolar_residuals
+from strl_pyg.synthetic import (
+    DISTRIBUTIONS,
+    EVAL_DISTRIBUTIONS,
+    MOTIONS,
+    SCENE_KINDS,
+    SceneConfig,
+    SceneDistribution,
+    apply_photometric,
+    eval_distribution,
+    generate_pair,
+    sample_scene_config,
+    scene_distribution,
+)
+from strl_pyg.synthetic.metrics import point_transfer_error
+
+SMALL = (120, 160)
+
+
+def _angle_deg(T: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip((np.trace(T[:3, :3]) - 1) / 2, -1, 1))))
+
+
+def _digest(p) -> str:
+    m = hashlib.sha256()
+    for a in (p.image0, p.image1, p.K, p.T_0to1, p.matches.points0, p.matches.points1,
+              p.matches.lines0, p.matches.lines1):
+        m.update(np.ascontiguousarray(a).tobytes())
+    return m.hexdigest()[:16]
+
+
+@pytest.mark.parametrize(
+    "seed, kwargs, digest",
+    [  # computed with the generator before the new knobs existed (commit 93ac487)
+        (0, dict(kind="street", image_size=(96, 320)), "bbeab7707644b33e"),
+        (3, dict(kind="indoor", image_size=(96, 128)), "4c20c20e7559e2f8"),
+        (7, dict(kind="boxes", image_size=(96, 128), noise_px=0.5, outlier_fraction=0.2),
+         "2cc77a2676aa764c"),
+    ],
+)
+def test_legacy_configs_give_the_same_pairs_as_before(seed, kwargs, digest):
+    assert _digest(generate_pair(seed, SceneConfig(**kwargs))) == digest
+
+
+# Rotation bounds (deg) implied by the motion table of strl_pyg.synthetic.motion.
+_ROT = {"forward": (0, 3.6), "lateral": (0, 3.6), "handheld": (0.5, 5.0),
+        "rotation": (5.0, 15.0), "orbit": (0, 32.0), "wide": (13.0, 47.0)}
+
+
+@pytest.mark.parametrize("motion", MOTIONS)
+@pytest.mark.parametrize("kind", SCENE_KINDS)
+def test_every_kind_and_motion_has_exact_ground_truth(kind, motion):
+    p = generate_pair(1, SceneConfig(kind=kind, motion=motion, image_size=SMALL))
+    m = p.matches
+    assert m.num_points >= 16 and p.info["motion"] == motion
+    pe, le = epipolar_residuals(m, p.T_0to1)
+    assert pe.max() < 1e-6 and (len(le) == 0 or le.max() < 1e-6)
+    assert point_transfer_error(p, m.points0, m.points1).max() < 1e-6
+    lo, hi = _ROT[motion]
+    assert lo - 1e-6 <= _angle_deg(p.T_0to1) <= hi + 1e-6
+    t = p.T_0to1[:3, 3]
+    if motion == "rotation":  # tiny baseline against the scene depth
+        assert np.linalg.norm(t) <= 0.005 * p.info["depth"] + 1e-9
+    if motion == "forward":  # camera 1 ahead: camera-0 origin behind it, t_z < 0
+        assert -t[2] > 0.9 * np.linalg.norm(t)
+    if motion == "lateral":
+        assert abs(t[0]) > 0.9 * np.linalg.norm(t)
+
+
+def test_swapped_views_reverse_the_motion():
+    cfg = SceneConfig(kind="street", motion="forward", image_size=SMALL)
+    fwd = generate_pair(4, cfg)
+    back = generate_pair(4, SceneConfig(**{**cfg.__dict__, "swap_views": True}))
+    np.testing.assert_allclose(back.T_0to1, np.linalg.inv(fwd.T_0to1), atol=1e-9)
+    assert back.T_0to1[2, 3] > 0 and back.info["swapped"]  # backward motion
+    pe, _ = epipolar_residuals(back.matches, back.T_0to1)
+    assert pe.max() < 1e-6
+
+
+def test_baseline_scale_scales_the_translation():
+    cfg = dict(kind="boxes", motion="handheld", image_size=SMALL)
+    a = generate_pair(2, SceneConfig(**cfg))
+    b = generate_pair(2, SceneConfig(**cfg, baseline_scale=0.5))
+    np.testing.assert_allclose(b.T_0to1[:3, :3], a.T_0to1[:3, :3], atol=1e-12)
+    # Camera-1 centre relative to camera 0 halves.
+    c = [-T[:3, :3].T @ T[:3, 3] for T in (a.T_0to1, b.T_0to1)]
+    np.testing.assert_allclose(c[1], 0.5 * c[0], atol=1e-9)
+
+
+def test_intrinsics_follow_the_config():
+    cfg = SceneConfig(kind="indoor", image_size=(100, 200), focal_factor=1.3,
+                      principal_offset=(0.04, -0.03))
+    p = generate_pair(0, SceneConfig(**{**cfg.__dict__, "image_size": (100, 200)}))
+    np.testing.assert_allclose(p.K, [[260, 0, 99.5 + 8], [0, 260, 49.5 - 3], [0, 0, 1]])
+    pe, _ = epipolar_residuals(p.matches, p.T_0to1)
+    assert pe.max() < 1e-6
+
+
+def test_object_kind_has_background_and_matches_on_the_object():
+    seen_background = []
+    for seed in range(6):
+        p = generate_pair(seed, SceneConfig(kind="object", image_size=SMALL))
+        for ids in (p.plane_id0, p.plane_id1):
+            seen_background.append((ids < 0).mean())
+        x = np.round(p.matches.points0).astype(int)
+        on_object = p.plane_id0[x[:, 1], x[:, 0]] < p.info["object_quads"]
+        assert on_object.all()  # ground-truth points on the object only
+        assert np.isinf(p.depth0[p.plane_id0 < 0]).all()
+        assert p.image0[p.plane_id0 < 0].mean() < 60  # a dark background
+    assert min(seen_background) > 0.05  # every view shows background pixels
+
+
+def test_photometric_change_is_one_view_only_and_seeded():
+    base = dict(kind="indoor", image_size=SMALL)
+    plain = generate_pair(5, SceneConfig(**base))
+    photo = dict(photo_gain=1.3, photo_gamma=0.8, photo_blur=1.0, photo_noise=2.0)
+    a = generate_pair(5, SceneConfig(**base, **photo))
+    b = generate_pair(5, SceneConfig(**base, **photo))
+    np.testing.assert_array_equal(a.image0, plain.image0)
+    np.testing.assert_array_equal(a.image1, b.image1)  # same seed, same images
+    assert not np.array_equal(a.image1, plain.image1)
+    assert a.image1.mean() > plain.image1.mean() + 5  # brighter
+    np.testing.assert_array_equal(a.matches.points1, plain.matches.points1)  # same geometry
+    np.testing.assert_array_equal(a.T_0to1, plain.T_0to1)
+    c = generate_pair(6, SceneConfig(**base, **photo))
+    assert not np.array_equal(c.image1, a.image1)
+
+
+def test_apply_photometric_known_values_and_errors():
+    img = np.full((8, 8), 64, np.uint8)
+    out = apply_photometric(img, gain=2.0, gamma=1.0)
+    assert (out == 128).all() and out is not img
+    out = apply_photometric(img, gamma=0.5)  # 255 * sqrt(64 / 255) = 127.75
+    assert (out == 128).all()
+    with pytest.raises(ValueError, match="Expected gain, gamma > 0"):
+        apply_photometric(img, gain=0.0)
+    with pytest.raises(ValueError, match="Expected an rng"):
+        apply_photometric(img, noise=1.0)
+    with pytest.raises(TypeError, match="uint8"):
+        apply_photometric(img.astype(np.float32))
+
+
+def test_mixed_preset_covers_kinds_motions_sizes_and_ranges():
+    dist = scene_distribution("mixed")
+    cfgs = [dist.config(s) for s in range(60)]
+    assert set(Counter(c.kind for c in cfgs)) == set(SCENE_KINDS)
+    assert set(Counter(c.motion for c in cfgs)) == set(MOTIONS)
+    assert {c.image_size for c in cfgs} == set(dist.sizes)
+    assert {c.swap_views for c in cfgs} == {False, True}
+    assert any(c.has_photometric for c in cfgs) and not all(c.has_photometric for c in cfgs)
+    for c in cfgs:
+        lo, hi = dist.object_focal_range if c.kind == "object" else dist.focal_range
+        assert lo <= c.focal_factor <= hi
+        assert max(abs(v) for v in c.principal_offset) <= dist.principal_offset
+        assert 0.5 <= c.baseline_scale <= 2.0
+    assert cfgs[7] == dist.config(7) == sample_scene_config(7, "mixed")  # deterministic
+    small = scene_distribution("mixed_small")
+    assert {small.config(s).image_size for s in range(30)} <= {(240, 320), (192, 640)}
+
+
+@pytest.mark.parametrize("name", sorted(EVAL_DISTRIBUTIONS))
+def test_eval_distributions(name):
+    dist = eval_distribution(name)
+    cfgs = [dist.config(2_000_000 + i) for i in range(20)]
+    assert all(c.kind in dist.kinds and c.motion in dist.motions for c in cfgs)
+    if name == "outliers50":
+        assert all(c.outlier_fraction == 0.5 for c in cfgs)
+    else:
+        assert all(c.outlier_fraction == 0.0 for c in cfgs)
+    if name == "low_texture":
+        assert all(c.low_texture for c in cfgs)
+    if name == "driving":
+        assert all(c.image_size == (370, 1226) and c.kind == "street" for c in cfgs)
+    if name == "object":
+        assert all(c.motion == "orbit" and c.kind == "object" for c in cfgs)
+
+
+def test_distribution_validation():
+    with pytest.raises(ValueError, match="Expected an evaluation distribution"):
+        eval_distribution("mixed")
+    with pytest.raises(ValueError, match="Expected a distribution name"):
+        scene_distribution("forest")
+    with pytest.raises(ValueError, match="Expected kinds"):
+        SceneDistribution(kinds=("forest",))
+    with pytest.raises(ValueError, match="Expected sizes"):
+        SceneDistribution(sizes=((8, 8),))
+    with pytest.raises(ValueError, match="SceneConfig fields in overrides"):
+        SceneDistribution(overrides={"bogus": 1})
+    with pytest.raises(ValueError, match="non-negative integer seed"):
+        DISTRIBUTIONS["mixed"].config(-1)
+    changed = scene_distribution("mixed", sizes=((64, 64),))
+    assert changed.sizes == ((64, 64),) and DISTRIBUTIONS["mixed"].sizes != changed.sizes
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(motion="spin"), "Expected motion"),
+        (dict(baseline_scale=0.0), "baseline_scale"),
+        (dict(principal_offset=(0.5, 0.0)), "principal_offset"),
+        (dict(focal_factor=-1.0), "focal_factor"),
+        (dict(photo_gain=0.0), "photo_gain"),
+        (dict(photo_blur=-1.0), "photo_blur"),
+    ],
+)
+def test_new_config_validation(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        SceneConfig(**kwargs)
+
+
+def test_cache_fingerprint_of_legacy_configs_is_unchanged():
+    fp = _scene_fingerprint(SceneConfig(kind="street", image_size=(128, 320)))
+    assert set(fp) == {
+        "kind", "image_size", "focal_factor", "noise_px", "outlier_fraction", "low_texture",
+        "repetitive_texture", "max_points", "max_lines", "min_line_length",
+        "texels_per_metre", "max_texture", "image_noise", "near",
+    }
+    assert _scene_fingerprint(SceneConfig(motion="wide"))["motion"] == "wide"
+    assert "distribution" in _scene_fingerprint(scene_distribution("mixed"))
+
+
+def _small_mixed(**kw):
+    return scene_distribution("mixed_small", sizes=((96, 128), (120, 160), (64, 192)), **kw)
+
+
+def test_mixed_sizes_collate_with_per_graph_intrinsics():
+    ds = SyntheticPairs(4, seed=20, scene_config=_small_mixed())
+    graphs = [ds[i] for i in range(4)]
+    sizes = {tuple(g[K.IMAGE_SIZE0][0].tolist()) for g in graphs}
+    assert len(sizes) >= 2  # the batch below really mixes sizes
+    assert all(K.IMAGE0 not in g and K.IMAGE1 not in g for g in graphs)  # no full images
+    batch = next(iter(DataLoader(ds, batch_size=4)))
+    assert batch.num_graphs == 4 and batch[K.K0].shape == (4, 3, 3)
+    assert batch[K.IMAGE_SIZE0].shape == (4, 2)
+    for i, g in enumerate(graphs):
+        cfg = ds.scene_config.config(20 + i)
+        torch.testing.assert_close(g[K.K0][0], torch.from_numpy(cfg.intrinsics()).float())
+        assert g[PAIR_ID] == f"synthetic/mixed_small/{cfg.kind}/{20 + i}"
+        assert g[SUBSET] == f"synthetic/mixed_small/{cfg.kind}"
+        # Normalised coordinates: K^-1 applied, so the principal point maps to 0.
+        pts = g[K.POINT]
+        Kinv = torch.linalg.inv(g[K.K0][0].double())
+        xy = torch.cat([pts[K.KPTS0].double(), torch.ones(len(pts[K.KPTS0]), 1)], 1)
+        torch.testing.assert_close(pts[K.POS0].double(), (xy @ Kinv.T)[:, :2], atol=1e-5,
+                                   rtol=1e-5)
+
+
+def test_frontend_path_with_a_distribution(tmp_path):
+    dist = _small_mixed(kinds=("indoor", "object", "boxes"))
+    ds = SyntheticPairs(3, seed=40, scene_config=dist, matches="frontend", cache_dir=tmp_path)
+    job = pickle.loads(pickle.dumps(ds._match_fn()))  # what the worker processes receive
+    m = job(40)
+    assert m.info["kind"] == dist.config(40).kind and m.has_intrinsics
+    report = ds.build_cache(progress=False)
+    assert report.computed + len(ds.failed_pairs()) == 3
+    for i in range(len(ds)):
+        g = ds[i]
+        seed = int(g[PAIR_ID].rsplit("/", 1)[1])
+        np.testing.assert_allclose(g[K.T_0TO1][0].numpy(),
+                                   generate_pair(seed, dist.config(seed)).T_0to1, atol=1e-6)
+    batch = next(iter(DataLoader(ds, batch_size=len(ds))))
+    assert batch.num_graphs == len(ds)
