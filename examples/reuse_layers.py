@@ -2,7 +2,7 @@
 
 `AttentionConv` and `LineEndpointConv` are ordinary PyG `MessagePassing` layers: this script
 builds a small point-cloud classifier on a k-nearest-neighbour graph (sparse path) and the same
-model with complete attention inside each graph (dense path, `edge_index=None`), trains both
+model with complete attention inside each graph (dense path, `complete=True`), trains both
 for a few steps on a toy task and shows that the two paths compute the same function.
 
 Example:
@@ -32,8 +32,9 @@ class PointCloudNet(nn.Module):
 
     def forward(self, pos, batch, edge_index=None):
         x = self.embed(pos)
+        complete = edge_index is None  # no edges given: complete graph per batch entry
         for conv in self.convs:
-            x = conv(x, edge_index, batch)  # edge_index=None: complete graph per batch entry
+            x = conv(x, edge_index, batch, complete=complete)
         return self.head(global_mean_pool(x, batch))
 
 

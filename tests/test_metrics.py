@@ -12,11 +12,14 @@ from strl_pyg.metrics import (
     kitti_odometry_errors,
     kitti_odometry_summary,
     pose_auc,
+    project_to_so3,
     relative_pose_error,
     relative_translation_norms,
     rotation_error_deg,
     translation_angle_error_deg,
     umeyama_alignment,
+    write_kitti_trajectory,
+    write_tum_trajectory,
 )
 
 F64 = torch.float64
@@ -235,3 +238,140 @@ def test_integrate_recovers_gt(kitti_gt):
     np.testing.assert_allclose(relative_translation_norms(out).numpy(), 1.0, atol=1e-6)
     with pytest.raises(ValueError, match="'scales' of shape"):
         integrate_relative_poses(unit, scales=np.ones(3))
+
+
+# ------------------------------------------------------------- SO(3) drift and trajectory files
+def float32_chain(n=2000, seed=0) -> Pose:
+    """``n`` random small float32 relative poses (a driving-like chain)."""
+    g = torch.Generator().manual_seed(seed)
+    q = torch.cat([torch.ones(n, 1), 0.05 * torch.randn(n, 3, generator=g)], dim=1)
+    R = quaternion_to_rotation(q.float())
+    t = torch.randn(n, 3, generator=g) * torch.tensor([0.1, 0.05, 1.0])
+    return Pose(R, t.float())
+
+
+def so3_error(R) -> float:
+    R = np.asarray(R, dtype=np.float64)
+    return float(np.abs(R @ np.swapaxes(R, -1, -2) - np.eye(3)).max())
+
+
+def test_integrated_rotations_stay_on_so3():
+    """The reproduced bug: 1600 float32 steps drifted to |RR^T - I| ~ 8e-6 (evo rejects
+    1e-6). Composition now runs in float64 on projected rotations."""
+    rel = float32_chain(2000)
+    out = integrate_relative_poses(rel)
+    assert out.dtype == F64 and out.shape == (2001,)
+    assert so3_error(out.R.numpy()) < 1e-12
+    assert np.linalg.det(out.R.numpy()).min() == pytest.approx(1.0, abs=1e-12)
+    # the projection only removes rounding: a float64 reference chain agrees to float32 level
+    ref = [np.eye(4)]
+    for T in rel.matrix().double().numpy():
+        ref.append(ref[-1] @ np.linalg.inv(T))
+    np.testing.assert_allclose(out.numpy(), np.stack(ref), atol=1e-3)
+    with pytest.raises(ValueError, match="Expected rotations in 'T_0to1'"):
+        reflection = torch.diag(torch.tensor([1.0, 1, -1]))[None]
+        integrate_relative_poses(Pose(reflection, torch.zeros(1, 3)))
+
+
+def test_project_to_so3_known_answers():
+    R = quaternion_to_rotation(torch.tensor([[0.9, 0.1, -0.3, 0.2]], dtype=F64))
+    torch.testing.assert_close(project_to_so3(R * (1 + 1e-6)), R, atol=1e-12, rtol=0)
+    noisy = R + 1e-6 * torch.randn(1, 3, 3, dtype=F64, generator=torch.Generator().manual_seed(0))
+    assert so3_error(project_to_so3(noisy).numpy()) < 1e-14
+    with pytest.raises(ValueError, match="orthonormal"):
+        project_to_so3(2 * R)
+    with pytest.raises(ValueError, match="det"):
+        project_to_so3(-R)
+    with pytest.raises(ValueError, match=r"\(\*, 3, 3\)"):
+        project_to_so3(torch.zeros(3, 4))
+
+
+def read_like_evo(path, fields: int) -> np.ndarray:
+    """evo's ``csv_read_matrix(delim=" ", comment_str="#")`` and its field-count check."""
+    import csv
+
+    with open(path) as f:
+        rows = list(csv.reader((ln for ln in f if not ln.startswith("#")), delimiter=" "))
+    assert rows and all(len(r) == fields for r in rows), "evo: wrong entries per row"
+    return np.array(rows).astype(float)
+
+
+def quaternion_matrix_like_evo(q_wxyz: np.ndarray) -> np.ndarray:
+    """``transformations.quaternion_matrix`` (used by evo): normalise, then the Hamilton matrix."""
+    q = q_wxyz / np.linalg.norm(q_wxyz, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], axis=1)
+
+
+def test_trajectory_files_read_back_as_evo_and_the_devkit_read_them(tmp_path):
+    traj = integrate_relative_poses(float32_chain(2000))
+    T = traj.numpy()
+
+    kitti = write_kitti_trajectory(tmp_path / "out" / "06.txt", traj)
+    text = kitti.read_text()
+    assert text.count("\n") == 2001 and not any(ln != ln.strip() for ln in text.splitlines())
+    rows = read_like_evo(kitti, 12)
+    # the KITTI devkit: fscanf("%lf" x 12) per pose, whitespace-separated
+    devkit = np.array(text.split(), dtype=np.float64).reshape(-1, 12)
+    np.testing.assert_array_equal(rows, devkit)
+    P = rows.reshape(-1, 3, 4)
+    np.testing.assert_allclose(P, T[:, :3], rtol=0, atol=1e-12)
+    assert so3_error(P[:, :, :3]) < 1e-9
+    assert np.abs(np.linalg.det(P[:, :, :3]) - 1).max() < 1e-9
+
+    stamps = np.linspace(0.0, 207.5, 2001)
+    tum = write_tum_trajectory(tmp_path / "06.tum", traj, timestamps=stamps)
+    m = read_like_evo(tum, 8)
+    np.testing.assert_allclose(m[:, 0], stamps, rtol=0, atol=1e-12)
+    assert (np.diff(m[:, 0]) > 0).all()
+    np.testing.assert_allclose(m[:, 1:4], T[:, :3, 3], rtol=0, atol=1e-12)
+    q_wxyz = np.roll(m[:, 4:], 1, axis=1)  # evo: qx qy qz qw -> w first
+    assert np.abs(np.linalg.norm(q_wxyz, axis=1) - 1).max() < 1e-12
+    R = quaternion_matrix_like_evo(q_wxyz)
+    assert so3_error(R) < 1e-9
+    np.testing.assert_allclose(R, T[:, :3, :3], rtol=0, atol=1e-9)
+    # default timestamps: the frame index
+    m = read_like_evo(write_tum_trajectory(tmp_path / "i.tum", traj[:5]), 8)
+    np.testing.assert_array_equal(m[:, 0], np.arange(5.0))
+
+
+def test_trajectory_writers_are_atomic_and_check_their_input(tmp_path, monkeypatch):
+    import strl_pyg.trajectory as tj
+
+    traj = integrate_relative_poses(float32_chain(20))
+    path = write_kitti_trajectory(tmp_path / "t.txt", traj)
+    before = path.read_text()
+    calls = {"n": 0}
+    real = tj._line
+
+    def failing(values):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise RuntimeError("disk full")
+        return real(values)
+
+    monkeypatch.setattr(tj, "_line", failing)
+    with pytest.raises(RuntimeError, match="disk full"):
+        write_kitti_trajectory(path, integrate_relative_poses(float32_chain(20, seed=1)))
+    monkeypatch.undo()
+    assert path.read_text() == before and [p.name for p in tmp_path.iterdir()] == ["t.txt"]
+
+    bad = traj.matrix().clone()
+    bad[3, :3, :3] *= -1
+    with pytest.raises(ValueError, match="Expected rotations in 'T_w_c'"):
+        write_kitti_trajectory(tmp_path / "bad.txt", bad)
+    bad = traj.matrix().clone()
+    bad[2, 0, 3] = float("nan")
+    with pytest.raises(ValueError, match="finite"):
+        write_tum_trajectory(tmp_path / "bad.tum", bad)
+    with pytest.raises(ValueError, match="strictly increasing"):
+        write_tum_trajectory(tmp_path / "bad.tum", traj, timestamps=np.zeros(21))
+    with pytest.raises(ValueError, match=r"'timestamps' of shape \(21,\)"):
+        write_tum_trajectory(tmp_path / "bad.tum", traj, timestamps=np.arange(3.0))
+    with pytest.raises(ValueError, match="Expected 'T_w_c'"):
+        write_kitti_trajectory(tmp_path / "bad.txt", np.zeros((4, 5)))
+    assert not any(p.name.startswith("bad") for p in tmp_path.iterdir())

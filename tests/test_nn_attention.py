@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from strl_pyg.nn import AttentionConv
+from strl_pyg.nn.attention import AttentionConv, CompleteEdges
 
 
 def complete_edges(b_src: torch.Tensor, b_dst: torch.Tensor) -> torch.Tensor:
@@ -41,7 +41,7 @@ def run_both(conv, x, batch, query=None):
     x_src, x_dst = x if isinstance(x, tuple) else (x, x)
     b_src, b_dst = batch if isinstance(batch, tuple) else (batch, batch)
     ei = complete_edges(b_src, b_dst)
-    for edge_index in (None, ei):
+    for edge_index in (CompleteEdges(), ei):
         conv.zero_grad()
         xs = x_src.detach().clone().requires_grad_()
         xd = xs if x_src is x_dst else x_dst.detach().clone().requires_grad_()
@@ -97,7 +97,7 @@ def test_dense_matches_explicit_single_node_graphs():
     x = torch.randn(3, 16)
     assert_paths_agree(run_both(conv, x, batch), 1e-5)
     # One node attends only to itself: the message is its own value.
-    one = conv(x[:1])
+    one = conv(x[:1], complete=True)
     ref = naive_messages(conv, x[:1], x[:1], torch.tensor([[0], [0]]))
     torch.testing.assert_close(one, ref)
 
@@ -133,7 +133,7 @@ def test_no_source_nodes_at_all():
     x_src = torch.zeros(0, 8, requires_grad=True)
     x_dst = torch.randn(3, 16, requires_grad=True)
     batch = (torch.zeros(0, dtype=torch.long), torch.tensor([0, 0, 1]))
-    dense = conv((x_src, x_dst), None, batch)
+    dense = conv((x_src, x_dst), None, batch, complete=True)
     explicit = conv((x_src, x_dst), torch.zeros(2, 0, dtype=torch.long), batch)
     torch.testing.assert_close(dense, explicit)
     dense.sum().backward()
@@ -148,11 +148,11 @@ def test_mask_blocks_attention_across_graphs():
     x = torch.randn(8, 16)
     x2 = x.clone()
     x2[3:] = 100 * torch.randn(5, 16)
-    out, out2 = conv(x, None, batch), conv(x2, None, batch)
+    out, out2 = conv(x, None, batch, complete=True), conv(x2, CompleteEdges(batch))
     torch.testing.assert_close(out[:3], out2[:3])
     assert not torch.allclose(out[3:], out2[3:])
     # Graph 0 alone gives the same as graph 0 inside the batch (padded keys carry no weight).
-    torch.testing.assert_close(conv(x[:3]), out[:3], atol=1e-6, rtol=1e-6)
+    torch.testing.assert_close(conv(x[:3], complete=True), out[:3], atol=1e-6, rtol=1e-6)
 
 
 def test_reset_parameters_reinitialises():
@@ -161,3 +161,41 @@ def test_reset_parameters_reinitialises():
     conv.reset_parameters()
     changed = [not torch.equal(a, b) for a, b in zip(before, conv.parameters(), strict=True)]
     assert sum(changed) >= 4  # every linear weight; LayerNorm defaults are constants
+
+
+# -------------------------------------------------------------------------- complete-attention API
+def test_missing_edge_index_is_an_error_not_complete_attention():
+    """The reproduced bug: ``conv(x, None)`` (a forgotten edge_index) meant complete attention."""
+    conv = AttentionConv(16, heads=2)
+    x = torch.randn(5, 16)
+    batch = torch.zeros(5, dtype=torch.long)
+    for call in (lambda: conv(x, None), lambda: conv(x), lambda: conv(x, None, batch)):
+        with pytest.raises(ValueError, match=r"Expected an edge_index \[2, E\].*complete=True"):
+            call()
+    with pytest.raises(ValueError, match="edge_index=None with complete=True"):
+        conv(x, complete_edges(torch.zeros(5).long(), torch.zeros(5).long()), complete=True)
+
+
+def test_complete_edges_marker_carries_the_graph_ids():
+    torch.manual_seed(6)
+    conv = AttentionConv((8, 16), heads=2)
+    b_src, b_dst = torch.tensor([0, 0, 1, 2, 2]), torch.tensor([0, 1, 1, 1, 2, 2])
+    x_src, x_dst = torch.randn(5, 8), torch.randn(6, 16)
+    ref = conv((x_src, x_dst), complete_edges(b_src, b_dst))
+    for out in (conv((x_src, x_dst), CompleteEdges(b_src, b_dst)),
+                conv((x_src, x_dst), CompleteEdges(b_src, b_dst), (b_src, b_dst)),
+                conv((x_src, x_dst), CompleteEdges(), (b_src, b_dst)),
+                conv((x_src, x_dst), None, (b_src, b_dst), complete=True)):
+        torch.testing.assert_close(out, ref, atol=1e-5, rtol=1e-5)
+    # marker and batch argument disagree, or ids of the wrong length: one-line errors
+    with pytest.raises(ValueError, match="agree with the graph ids"):
+        conv((x_src, x_dst), CompleteEdges(b_src, b_dst), (b_src, torch.zeros(6).long()))
+    with pytest.raises(ValueError, match="one target graph id per target node"):
+        conv((x_src, x_dst), CompleteEdges(b_src))  # batch_dst defaults to batch_src
+    with pytest.raises(ValueError, match="one source graph id per source node"):
+        conv((x_src, x_dst), None, (b_src[:4], b_dst), complete=True)
+    with pytest.raises(ValueError, match="together with 'batch_dst'"):
+        CompleteEdges(None, b_dst)
+    with pytest.raises(TypeError, match="1-D long tensor"):
+        CompleteEdges(b_src.float())
+    assert repr(CompleteEdges(b_src, b_dst)) == "CompleteEdges(batch_src=[5], batch_dst=[6])"

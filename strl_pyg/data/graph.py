@@ -7,7 +7,9 @@ every node of a pair to every node of it) are **implicit** by default: each such
 carries only a ``dense`` marker and layers run dense attention over per-graph blocks, so a
 graph's memory grows O(N), not O(N^2) (a 576-node graph would otherwise hold 331,776 edges per
 edge family). :func:`materialize_complete_edges` turns the markers into explicit
-``edge_index`` tensors for users who want sparse or pruned attention.
+``edge_index`` tensors for users who want sparse or pruned attention. The graphs are
+:class:`~strl_pyg.data.pair_graph.PairGraph` objects, whose PyG conversions keep or refuse the
+implicit edges instead of dropping them (see :mod:`strl_pyg.data.pair_graph`).
 """
 
 from __future__ import annotations
@@ -20,10 +22,19 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor
-from torch_geometric.data import Batch, HeteroData
+from torch_geometric.data import HeteroData
 
 from strl_pyg.data import keys as K
 from strl_pyg.data.matches import PairMatches
+from strl_pyg.data.pair_graph import (
+    ImplicitEdgesError,
+    PairGraph,
+    complete_edge_index,
+    edge_index_dict,
+    has_implicit_complete_edges,
+    implicit_edge_types,
+    materialize_complete_edges,
+)
 from strl_pyg.io import atomic_open
 
 __all__ = [
@@ -31,9 +42,13 @@ __all__ = [
     "normalize_coords",
     "sample_patches",
     "image_to_tensor",
+    "PairGraph",
+    "ImplicitEdgesError",
     "complete_edge_index",
+    "edge_index_dict",
     "materialize_complete_edges",
     "has_implicit_complete_edges",
+    "implicit_edge_types",
     "line_edge_index",
     "save_graph",
     "load_graph",
@@ -118,69 +133,6 @@ def line_edge_index(num_lines: int) -> Tensor:
     return torch.stack([src, src ^ 1])
 
 
-def complete_edge_index(
-    batch_src: Tensor, batch_dst: Tensor, num_graphs: int | None = None
-) -> Tensor:
-    """All ``(j, i)`` pairs whose source ``j`` and target ``i`` belong to the same graph.
-
-    Both batch vectors must be sorted (as PyG's collation makes them). Self-loops are included
-    when source and target are the same node set.
-
-    Args:
-        batch_src: Graph id of each source node ``[N_src]``.
-        batch_dst: Graph id of each target node ``[N_dst]``.
-        num_graphs: Number of graphs (inferred when omitted).
-
-    Returns:
-        ``edge_index`` ``[2, sum_b N_src_b * N_dst_b]``, grouped by target node.
-    """
-    if num_graphs is None:
-        num_graphs = (
-            int(
-                max(
-                    batch_src.max().item() if batch_src.numel() else -1,
-                    batch_dst.max().item() if batch_dst.numel() else -1,
-                )
-            )
-            + 1
-        )
-    count_src = torch.bincount(batch_src, minlength=num_graphs)
-    ptr_src = torch.cat([count_src.new_zeros(1), count_src.cumsum(0)])
-    per_dst = count_src[batch_dst]  # sources of each target node
-    dst = torch.repeat_interleave(torch.arange(batch_dst.numel()), per_dst)
-    start = torch.repeat_interleave(per_dst.cumsum(0) - per_dst, per_dst)
-    src = ptr_src[batch_dst][dst] + torch.arange(dst.numel()) - start
-    return torch.stack([src, dst])
-
-
-def _batch_of(data: HeteroData, node_type: str) -> Tensor:
-    store = data[node_type]
-    batch = getattr(store, "batch", None)
-    return batch if batch is not None else torch.zeros(store.num_nodes, dtype=torch.long)
-
-
-def has_implicit_complete_edges(data: HeteroData) -> bool:
-    """True when the complete edge types carry ``dense`` markers instead of edge indices."""
-    return all(K.DENSE in data[et] for et in K.COMPLETE_EDGE_TYPES if et in data.edge_types)
-
-
-def materialize_complete_edges(data: HeteroData) -> HeteroData:
-    """Replaces every implicit complete edge type by an explicit ``edge_index`` (in place).
-
-    Works on single graphs and on batches. Memory grows O(N^2): intended for sparse or pruned
-    attention, and as the reference path that tests compare the dense path against.
-    """
-    num_graphs = data.num_graphs if isinstance(data, Batch) else 1
-    for et in K.COMPLETE_EDGE_TYPES:
-        src, _, dst = et
-        data[et].edge_index = complete_edge_index(
-            _batch_of(data, src), _batch_of(data, dst), num_graphs
-        )
-        if K.DENSE in data[et]:
-            del data[et][K.DENSE]
-    return data
-
-
 def _as_pose(T_0to1: Any) -> Tensor:
     if hasattr(T_0to1, "matrix") and callable(T_0to1.matrix):  # strl_pyg.geometry.Pose
         T_0to1 = T_0to1.matrix()
@@ -211,7 +163,7 @@ def build_pair_graph(
     complete_edges: str = "implicit",
     normalization: str = "auto",
     keep_images: bool = False,
-) -> HeteroData:
+) -> PairGraph:
     """Builds the Str-L Pose pair graph of one image pair.
 
     Node features (all float32):
@@ -240,8 +192,8 @@ def build_pair_graph(
             by the ``+R`` image-encoder ablation).
 
     Returns:
-        A validated :class:`~torch_geometric.data.HeteroData` with node types ``point`` and
-        ``endpoint``; see :mod:`strl_pyg.data.keys` for the full layout.
+        A :class:`~strl_pyg.data.pair_graph.PairGraph` (a ``HeteroData``) with node types
+        ``point`` and ``endpoint``; see :mod:`strl_pyg.data.keys` for the full layout.
     """
     if not isinstance(matches, PairMatches):
         raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")
@@ -283,7 +235,7 @@ def build_pair_graph(
         ],
         K.ENDPOINT: [ln.reshape(-1, 2) for ln in lines],
     }
-    data = HeteroData()
+    data = PairGraph()
     for node_type, (xy0, xy1) in coords.items():
         store = data[node_type]
         store.num_nodes = xy0.shape[0]
@@ -330,8 +282,9 @@ def save_graph(data: HeteroData, path: str | os.PathLike) -> Path:
     return path
 
 
-def load_graph(path: str | os.PathLike) -> HeteroData:
-    """Loads a graph written by :func:`save_graph`, with clear errors for bad files."""
+def load_graph(path: str | os.PathLike) -> PairGraph:
+    """Loads a graph written by :func:`save_graph` as a :class:`PairGraph`, with clear errors
+    for bad files."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"Expected a graph file at '{path}' (got no such file)")
@@ -343,4 +296,4 @@ def load_graph(path: str | os.PathLike) -> HeteroData:
         ) from err
     if not isinstance(raw, dict) or K.POINT not in raw:
         raise ValueError(f"Expected a pair-graph dict in '{path}' (got {type(raw).__name__})")
-    return HeteroData.from_dict(raw)
+    return PairGraph.from_dict(raw)

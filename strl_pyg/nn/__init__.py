@@ -1,7 +1,7 @@
 """Reusable layers of Str-L Pose: attention and line-endpoint message passing, node encoders,
 and the weighted fusion head."""
 
-from strl_pyg.nn.attention import AttentionConv
+from strl_pyg.nn.attention import AttentionConv, CompleteEdges
 from strl_pyg.nn.encoders import (
     ImageEncoder,
     LineSegmentEncoder,
@@ -14,6 +14,7 @@ from strl_pyg.nn.line import LineEndpointConv
 
 __all__ = [
     "AttentionConv",
+    "CompleteEdges",
     "LineEndpointConv",
     "SpatialCoordinateEncoder",
     "LineSegmentEncoder",

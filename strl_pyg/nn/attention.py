@@ -10,9 +10,65 @@ from torch import Tensor, nn
 from torch_geometric.nn import MessagePassing
 from torch_geometric.utils import softmax, to_dense_batch
 
-__all__ = ["AttentionConv", "mlp", "reset_mlp"]
+__all__ = ["AttentionConv", "CompleteEdges", "mlp", "reset_mlp"]
 
 PairTensor = tuple[Tensor, Tensor]
+
+
+class CompleteEdges:
+    """An ``edge_index`` stand-in that asks :class:`AttentionConv` for complete attention:
+    every source node to every target node **of the same graph**, without an O(N^2) edge list.
+
+    It carries the graph ids itself, so that code that hands edges around per edge type
+    (:func:`torch_geometric.nn.to_hetero`, :func:`strl_pyg.data.edge_index_dict`) cannot
+    lose them and attend across the graphs of a batch.
+
+    Args:
+        batch_src: Graph id of each source node ``[N_src]``, or ``None``: take the layer's
+            ``batch`` argument (no ``batch`` either: all nodes form one graph).
+        batch_dst: Graph id of each target node ``[N_dst]`` (default: ``batch_src``, for
+            self-attention on one node set).
+    """
+
+    __slots__ = ("batch_src", "batch_dst")
+
+    def __init__(self, batch_src: Tensor | None = None, batch_dst: Tensor | None = None) -> None:
+        if batch_src is None and batch_dst is not None:
+            raise ValueError("Expected 'batch_src' together with 'batch_dst' (got only batch_dst)")
+        for name, b in (("batch_src", batch_src), ("batch_dst", batch_dst)):
+            if b is not None and (not isinstance(b, Tensor) or b.dim() != 1
+                                  or b.dtype != torch.long):
+                got = f"{b.dtype} {tuple(b.shape)}" if isinstance(b, Tensor) else type(b).__name__
+                raise TypeError(f"Expected '{name}' as a 1-D long tensor or None (got {got})")
+        self.batch_src = batch_src
+        self.batch_dst = batch_src if batch_dst is None else batch_dst
+
+    def __repr__(self) -> str:
+        def n(b):
+            return "None" if b is None else f"[{b.numel()}]"
+
+        return f"CompleteEdges(batch_src={n(self.batch_src)}, batch_dst={n(self.batch_dst)})"
+
+
+def _graph_ids(name: str, ids: Tensor | None, n: int) -> Tensor | None:
+    if ids is not None and ids.numel() != n:
+        raise ValueError(f"Expected one {name} graph id per {name} node (got {ids.numel()} ids "
+                         f"for {n} nodes)")
+    return ids
+
+
+def _complete_batches(
+    marker: CompleteEdges, batch, n_src: int, n_dst: int
+) -> tuple[Tensor | None, Tensor | None]:
+    """Graph ids of the source and target nodes: the marker's, else the ``batch`` argument's."""
+    b_src, b_dst = _pair(batch)
+    if marker.batch_src is not None:
+        for mine, given in ((marker.batch_src, b_src), (marker.batch_dst, b_dst)):
+            if given is not None and not torch.equal(mine, given.to(mine.device)):
+                raise ValueError("Expected the 'batch' argument to agree with the graph ids "
+                                 "that CompleteEdges carries (got different graph ids)")
+        b_src, b_dst = marker.batch_src, marker.batch_dst
+    return _graph_ids("source", b_src, n_src), _graph_ids("target", b_dst, n_dst)
 
 
 def mlp(channels: list[int]) -> nn.Sequential:
@@ -61,12 +117,18 @@ class AttentionConv(MessagePassing):
 
     Two paths compute the same function:
 
-    * ``edge_index`` given: message passing over the explicit edges ``(j, i)``, attention
+    * ``edge_index`` ``[2, E]``: message passing over the explicit edges ``(j, i)``, attention
       normalised per target with :func:`torch_geometric.utils.softmax`.
-    * ``edge_index=None``: complete bipartite edges between all source and target nodes that
-      share a graph id in ``batch``; computed block-wise with
+    * complete attention, asked for explicitly with ``complete=True`` or an ``edge_index``
+      that is a :class:`CompleteEdges` marker: complete bipartite edges between all source
+      and target nodes that share a graph id (the marker's, else ``batch``; no ids at all:
+      one graph); computed block-wise with
       :func:`torch.nn.functional.scaled_dot_product_attention` on padded per-graph blocks and a
       boolean key mask. No :math:`O(N^2)` edge list is built.
+
+    A missing ``edge_index`` (``None`` without ``complete=True``) is an error, never complete
+    attention: under :func:`~torch_geometric.nn.to_hetero` an edge type without
+    ``edge_index`` arrives as ``None``.
 
     Args:
         channels (int or tuple): Size of each source and target feature (and of the output,
@@ -85,7 +147,8 @@ class AttentionConv(MessagePassing):
         - **input:**
           node features :math:`(|\mathcal{V}|, C)` or
           :math:`((|\mathcal{V_s}|, C_s), (|\mathcal{V_t}|, C_t))`,
-          edge indices :math:`(2, |\mathcal{E}|)` or :obj:`None`,
+          edge indices :math:`(2, |\mathcal{E}|)` or a :class:`CompleteEdges` marker (or
+          :obj:`None` with ``complete=True``),
           graph ids :math:`(|\mathcal{V}|)` or :math:`((|\mathcal{V_s}|), (|\mathcal{V_t}|))`
           or :obj:`None` (one graph), query :math:`(|\mathcal{V_t}|, C_t)` or :obj:`None`
         - **output:** node features :math:`(|\mathcal{V}_t|, C_t)`
@@ -129,10 +192,29 @@ class AttentionConv(MessagePassing):
     def forward(
         self,
         x: Tensor | PairTensor,
-        edge_index: Tensor | None = None,
+        edge_index: Tensor | CompleteEdges | None = None,
         batch: Tensor | tuple[Tensor | None, Tensor | None] | None = None,
         query: Tensor | None = None,
+        *,
+        complete: bool = False,
     ) -> Tensor:
+        """Args: ``x`` node features (or a ``(source, target)`` pair); ``edge_index``
+        ``[2, E]`` or a :class:`CompleteEdges` marker; ``batch`` graph ids for complete
+        attention (a tensor, or a ``(source, target)`` pair); ``query`` the query features of
+        the target nodes (default: the target features); ``complete=True``: complete attention
+        within each graph of ``batch``, with ``edge_index=None``."""
+        if complete:
+            if edge_index is not None:
+                raise ValueError("Expected edge_index=None with complete=True (got an "
+                                 f"edge_index of type {type(edge_index).__name__})")
+            edge_index = CompleteEdges()
+        if edge_index is None:
+            raise ValueError(
+                "Expected an edge_index [2, E], or complete attention asked for with "
+                "complete=True or a CompleteEdges marker (got edge_index=None; on a pair "
+                "graph with implicit complete edges pass strl_pyg.data.edge_index_dict(data) "
+                "or call materialize_complete_edges(data))"
+            )
         x_src, x_dst = _pair(x)
         g = x_dst if query is None else query
         if g.shape[0] != x_dst.shape[0]:
@@ -145,12 +227,12 @@ class AttentionConv(MessagePassing):
         v = self.lin_v(x_src).view(-1, H, D)
         size = (x_src.shape[0], x_dst.shape[0])
 
-        if edge_index is not None:
+        if isinstance(edge_index, CompleteEdges):
+            b_src, b_dst = _complete_batches(edge_index, batch, *size)
+            msg = self._dense(q, k, v, b_src, b_dst)
+        else:
             alpha = self.edge_updater(edge_index, q=q, k=k, size=size)
             msg = self.propagate(edge_index, v=v, alpha=alpha, size=size)
-        else:
-            b_src, b_dst = _pair(batch)
-            msg = self._dense(q, k, v, b_src, b_dst)
         msg = self.lin_out(msg.reshape(-1, H * D))
         return x_dst + self.update_mlp(torch.cat([x_dst, msg], dim=-1))
 

@@ -1,0 +1,248 @@
+"""The pair-graph class and its complete edge types, implicit or explicit.
+
+Complete edge types (intra-graph self-attention and geometric-to-visual cross-attention connect
+every node of a pair to every node of it) are **implicit** by default: each such edge type
+carries only a ``dense`` marker (one bool per graph) and layers run dense attention over
+per-graph blocks, so a graph's memory grows O(N), not O(N^2).
+:func:`materialize_complete_edges` turns the markers into explicit ``edge_index`` tensors.
+
+PyG reads edges through ``edge_index`` alone, so on a plain ``HeteroData`` an implicit edge type
+looks like an edge type without edges: ``to_homogeneous`` drops it, ``edge_index_dict`` omits it
+(and a model made with ``to_hetero`` then receives ``None`` for it). :class:`PairGraph` closes
+these paths:
+
+* ``to_homogeneous``, ``has_isolated_nodes``, ``is_undirected``, ``connected_components`` and
+  ``num_edges`` give the result of the explicit edges (the first four on a materialised copy;
+  the input is left implicit);
+* ``edge_index_dict``, ``collect("edge_index")`` and the graph-store view that PyG's samplers
+  read (``get_all_edge_attrs``) raise :class:`ImplicitEdgesError`, naming
+  :func:`materialize_complete_edges` and :func:`edge_index_dict`, instead of leaving edge
+  types out;
+* ``validate`` also checks the markers.
+
+Batching (``Batch.from_data_list``), ``to_data_list``, ``subgraph``, ``node_type_subgraph``,
+``.to(device)``, copying and pickling keep the class and the markers (a subgraph of a complete
+graph is complete on the kept nodes, which is what the marker says).
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import torch
+from torch import Tensor
+from torch_geometric.data import Batch, HeteroData
+
+from strl_pyg.data import keys as K
+from strl_pyg.nn.attention import CompleteEdges
+
+__all__ = [
+    "PairGraph",
+    "ImplicitEdgesError",
+    "complete_edge_index",
+    "edge_index_dict",
+    "has_implicit_complete_edges",
+    "implicit_edge_types",
+    "materialize_complete_edges",
+]
+
+
+class ImplicitEdgesError(ValueError):
+    """A PyG path that reads ``edge_index`` met implicit complete edge types."""
+
+
+def complete_edge_index(
+    batch_src: Tensor, batch_dst: Tensor, num_graphs: int | None = None
+) -> Tensor:
+    """All ``(j, i)`` pairs whose source ``j`` and target ``i`` belong to the same graph.
+
+    Both batch vectors must be sorted (as PyG's collation makes them). Self-loops are included
+    when source and target are the same node set.
+
+    Args:
+        batch_src: Graph id of each source node ``[N_src]``.
+        batch_dst: Graph id of each target node ``[N_dst]``.
+        num_graphs: Number of graphs (inferred when omitted).
+
+    Returns:
+        ``edge_index`` ``[2, sum_b N_src_b * N_dst_b]``, grouped by target node, on the device
+        of ``batch_dst``.
+    """
+    if num_graphs is None:
+        num_graphs = (
+            int(
+                max(
+                    batch_src.max().item() if batch_src.numel() else -1,
+                    batch_dst.max().item() if batch_dst.numel() else -1,
+                )
+            )
+            + 1
+        )
+    dev = batch_dst.device
+    batch_src = batch_src.to(dev)
+    count_src = torch.bincount(batch_src, minlength=num_graphs)
+    ptr_src = torch.cat([count_src.new_zeros(1), count_src.cumsum(0)])
+    per_dst = count_src[batch_dst]  # sources of each target node
+    dst = torch.repeat_interleave(torch.arange(batch_dst.numel(), device=dev), per_dst)
+    start = torch.repeat_interleave(per_dst.cumsum(0) - per_dst, per_dst)
+    src = ptr_src[batch_dst][dst] + torch.arange(dst.numel(), device=dev) - start
+    return torch.stack([src, dst])
+
+
+def _batch_of(data: HeteroData, node_type: str) -> Tensor:
+    store = data[node_type]
+    batch = getattr(store, "batch", None)
+    if batch is not None:
+        return batch
+    device = next((v.device for v in store.values() if isinstance(v, Tensor)), None)
+    return torch.zeros(store.num_nodes, dtype=torch.long, device=device)
+
+
+def _num_graphs(data: HeteroData) -> int:
+    return data.num_graphs if isinstance(data, Batch) else 1
+
+
+def implicit_edge_types(data: HeteroData) -> list[tuple[str, str, str]]:
+    """The edge types that carry a ``dense`` marker and no ``edge_index``."""
+    return [et for et in data.edge_types
+            if K.DENSE in data[et] and K.EDGE_INDEX not in data[et]]
+
+
+def has_implicit_complete_edges(data: HeteroData) -> bool:
+    """True when the complete edge types carry ``dense`` markers instead of edge indices."""
+    return all(K.DENSE in data[et] for et in K.COMPLETE_EDGE_TYPES if et in data.edge_types)
+
+
+def materialize_complete_edges(data: HeteroData) -> HeteroData:
+    """Replaces every implicit complete edge type by an explicit ``edge_index`` (in place).
+
+    Works on single graphs and on batches, on any device. Memory grows O(N^2): intended for
+    sparse or pruned attention, for PyG code that needs every edge, and as the reference path
+    that tests compare the dense path against.
+    """
+    num_graphs = _num_graphs(data)
+    for et in K.COMPLETE_EDGE_TYPES:
+        src, _, dst = et
+        data[et].edge_index = complete_edge_index(
+            _batch_of(data, src), _batch_of(data, dst), num_graphs
+        )
+        if K.DENSE in data[et]:
+            del data[et][K.DENSE]
+    return data
+
+
+def edge_index_dict(data: HeteroData) -> dict[tuple[str, str, str], Tensor | CompleteEdges]:
+    """``data.edge_index_dict`` with a :class:`~strl_pyg.nn.CompleteEdges` marker (carrying
+    the graph ids of its source and target nodes) for every implicit complete edge type: the
+    edge input of a :func:`torch_geometric.nn.to_hetero` model built from
+    :class:`~strl_pyg.nn.AttentionConv` layers.
+
+    Every edge type of ``data`` is present; explicit types map to their ``edge_index``. Layers
+    that take only tensors need :func:`materialize_complete_edges` instead.
+    """
+    implicit = set(implicit_edge_types(data))
+    out: dict[tuple[str, str, str], Tensor | CompleteEdges] = {}
+    for et in data.edge_types:
+        if et in implicit:
+            src, _, dst = et
+            batched = isinstance(data, Batch)
+            out[et] = CompleteEdges(_batch_of(data, src), _batch_of(data, dst)) if batched \
+                else CompleteEdges()
+        elif K.EDGE_INDEX in data[et]:
+            out[et] = data[et].edge_index
+        else:
+            raise ValueError(f"Expected '{K.EDGE_INDEX}' or '{K.DENSE}' on edge type {et} "
+                             "(got neither)")
+    return out
+
+
+def _explicit(data: HeteroData) -> HeteroData:
+    """``data`` itself when nothing is implicit, else a materialised shallow copy."""
+    if not implicit_edge_types(data):
+        return data
+    return materialize_complete_edges(copy.copy(data))
+
+
+def _refuse(data: HeteroData, what: str) -> None:
+    implicit = implicit_edge_types(data)
+    if implicit:
+        raise ImplicitEdgesError(
+            f"Expected explicit edges for {what} (got implicit complete edge types "
+            f"{implicit[0]} and {len(implicit) - 1} more): call "
+            "materialize_complete_edges(data) first, or pass "
+            "strl_pyg.data.edge_index_dict(data) to strl_pyg layers"
+        )
+
+
+class PairGraph(HeteroData):
+    """A :class:`~torch_geometric.data.HeteroData` pair graph whose implicit complete edge
+    types survive PyG's conversions, or make them refuse (see the module docstring). Returned
+    by :func:`~strl_pyg.data.build_pair_graph` and :func:`~strl_pyg.data.load_graph`; a plain
+    ``HeteroData`` converts with ``PairGraph.from_dict(data.to_dict())``."""
+
+    def collect(self, key: str, allow_empty: bool = False) -> dict[Any, Any]:
+        if key == K.EDGE_INDEX:
+            _refuse(self, "edge_index / edge_index_dict")
+        return super().collect(key, allow_empty)
+
+    def get_all_edge_attrs(self) -> list:
+        _refuse(self, "the graph-store view (PyG samplers and loaders)")
+        return super().get_all_edge_attrs()
+
+    def to_homogeneous(self, *args: Any, **kwargs: Any):
+        """As :meth:`HeteroData.to_homogeneous`, with the implicit complete edges
+        materialised first (on a copy): the same result as for explicit edges."""
+        return HeteroData.to_homogeneous(_explicit(self), *args, **kwargs)
+
+    def has_isolated_nodes(self) -> bool:
+        return HeteroData.has_isolated_nodes(_explicit(self))
+
+    def is_undirected(self) -> bool:
+        return HeteroData.is_undirected(_explicit(self))
+
+    def connected_components(self) -> list:
+        return HeteroData.connected_components(_explicit(self))
+
+    @property
+    def num_edges(self) -> int:
+        """All edges, the implicit complete ones counted as if explicit."""
+        implicit = set(implicit_edge_types(self))
+        total = 0
+        for et, store in self.edge_items():
+            if et not in implicit:
+                total += store.num_edges
+                continue
+            n = _num_graphs(self)
+            src, _, dst = et
+            count_src = torch.bincount(_batch_of(self, src), minlength=n)
+            count_dst = torch.bincount(_batch_of(self, dst), minlength=n)
+            total += int((count_src * count_dst.to(count_src.device)).sum())
+        return total
+
+    def validate(self, raise_on_error: bool = True) -> bool:
+        """:meth:`HeteroData.validate`, plus: each complete edge type carries exactly one of
+        ``dense`` (a bool per graph) and ``edge_index``."""
+        status = super().validate(raise_on_error)
+        n = _num_graphs(self)
+        for et in K.COMPLETE_EDGE_TYPES:
+            if et not in self.edge_types:
+                continue
+            store = self[et]
+            has_dense, has_ei = K.DENSE in store, K.EDGE_INDEX in store
+            problem = None
+            if has_dense == has_ei:
+                got = "both" if has_dense else "neither"
+                problem = (f"Expected edge type {et} to carry either '{K.DENSE}' or "
+                           f"'{K.EDGE_INDEX}' (got {got})")
+            elif has_dense:
+                d = store[K.DENSE]
+                if not isinstance(d, Tensor) or d.dtype != torch.bool or d.shape != (n,):
+                    got = f"{d.dtype} {tuple(d.shape)}" if isinstance(d, Tensor) else type(d)
+                    problem = (f"Expected '{K.DENSE}' of edge type {et} as one bool per graph, "
+                               f"shape ({n},) (got {got})")
+            if problem is not None:
+                if raise_on_error:
+                    raise ValueError(problem)
+                status = False
+        return status
