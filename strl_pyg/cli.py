@@ -118,30 +118,38 @@ def _intrinsics(args) -> tuple[np.ndarray | None, np.ndarray | None]:
 # ----------------------------------------------------------------------------- the pipeline
 def predict_pair(model, matches, resample_seed: int | None = 0,
                  warmup: bool = False) -> dict[str, Any]:
-    """Runs the model on one pair's matches; returns the pose and its uncertainty.
+    """Runs the network alone on one pair's matches; returns its pose and uncertainty.
 
-    The graph is resampled to the model's training counts (384 points, 192 lines, by random
-    repetition/deletion with a fixed seed) unless ``resample_seed`` is None. With ``warmup``,
-    one untimed forward pass runs first, so ``time_ms`` is the steady-state time.
+    The graph is built and resampled as the checkpoint stores (:attr:`StrLPose.metadata
+    <strl_pyg.model.StrLPose.metadata>`; 384 points, 192 lines for old checkpoints) with seed
+    ``resample_seed``, or not resampled when it is None. With ``warmup``, one untimed forward
+    pass runs first, so ``time_ms`` is the steady-state time. For the recommended pose of all
+    methods use :class:`strl_pyg.inference.PoseEstimator`.
     """
     import torch
 
-    from strl_pyg.evaluation import predict_pose
+    from strl_pyg.inference import forward_pose, prepare_graph
 
-    resample = None if resample_seed is None else (384, 192)
-    seed = resample_seed or 0
+    def run():
+        graph = prepare_graph(matches, model, resample_seed or 0,
+                              "model" if resample_seed is not None else None)
+        return forward_pose(model, graph)
+
     if warmup:
-        predict_pose(model, matches, resample, seed)
+        run()
     t0 = time.perf_counter()
-    out = predict_pose(model, matches, resample, seed)
+    out = run()
     ms = (time.perf_counter() - t0) * 1e3
-    sigma = torch.exp(0.5 * out.log_var[0])
+    q, t, lv = (x[0].detach().cpu().double() for x in (out.quaternion, out.translation,
+                                                       out.log_var))
+    from strl_pyg.geometry import Pose
+
     return {
-        "T_0to1": out.T_0to1[0].numpy(),
-        "quaternion": out.quaternion[0].numpy(),
-        "translation": out.translation[0].numpy(),
-        "sigma": sigma.numpy(),
-        "log_var": out.log_var[0].numpy(),
+        "T_0to1": Pose.from_quaternion(q, t).matrix().numpy(),
+        "quaternion": q.numpy(),
+        "translation": t.numpy(),
+        "sigma": torch.exp(0.5 * lv).numpy(),
+        "log_var": lv.numpy(),
         "time_ms": ms,
     }
 
@@ -177,32 +185,36 @@ def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _classical(matches) -> dict[str, Any] | None:
-    from strl_pyg.baselines import estimate_relative_pose
-
-    if not matches.has_intrinsics or matches.num_points < 5:
-        return None
-    res = estimate_relative_pose(matches, method="opencv")
-    return {"T_0to1": res.pose.matrix().numpy(), "success": bool(res.success),
-            "inliers": int(np.asarray(res.inliers).sum()), "time_ms": float(res.time_ms),
-            "result": res}
+#: Names of the methods in text output.
+METHOD_LABELS = {"regression": "Str-L Pose", "opencv": "OpenCV MAGSAC", "poselib": "PoseLib",
+                 "fused": "fused"}
 
 
-def _fused(pred: dict[str, Any], classical: dict[str, Any] | None, matches):
-    if classical is None or not classical["success"]:
-        return None
-    try:
-        from strl_pyg.fusion import fuse_poses
-    except ImportError:
-        return None
-    import torch
+def _estimator(model, baseline: bool = True):
+    from strl_pyg.inference import PoseEstimator
 
-    from strl_pyg.geometry import Pose
+    return PoseEstimator(model, methods=None if baseline else ("regression",))
 
-    T = torch.as_tensor(pred["T_0to1"], dtype=torch.float64)
-    fused = fuse_poses(Pose.from_matrix(T), torch.as_tensor(pred["log_var"]),
-                       classical["result"], matches)
-    return {"T_0to1": fused.pose.matrix().numpy()}
+
+def _print_estimate(est, indent: str = "") -> None:
+    """The recommended pose in words: status, method, uncertainty, warnings; then each
+    method's own result."""
+    pose = est.pose
+    if pose.status == "ok":
+        label = METHOD_LABELS.get(pose.method, pose.method)
+        print(f"{indent}pose: ok, from {pose.method} ({label}): {_fmt_pose(pose.T_0to1)}")
+        if pose.sigma is not None:
+            print(f"{indent}  sigma (1st order): rotation {pose.sigma['rotation_deg']:.3f} deg, "
+                  f"translation direction {pose.sigma['translation_deg']:.3f} deg")
+    else:
+        print(f"{indent}pose: {pose.status}, no pose given")
+    for w in pose.warnings:
+        print(f"{indent}warning: {w}")
+    print(f"{indent}methods:")
+    for name, r in est.methods.items():
+        detail = _fmt_pose(r.T_0to1) if r.status == "ok" else "; ".join(r.warnings)
+        extra = f", {r.num_inliers} inliers" if r.num_inliers is not None else ""
+        print(f"{indent}  {name:<11} {r.status:<10} {detail}  ({r.time_ms:.1f} ms{extra})")
 
 
 # ----------------------------------------------------------------------------- subcommands
@@ -219,33 +231,35 @@ def cmd_demo(args) -> int:
     tm = matches.info.get("timings_ms", {})
     print(f"front end: {matches.num_points} points, {matches.num_lines} lines "
           f"in {tm.get('total', float('nan')):.0f} ms")
-    pred = predict_pair(model, matches, warmup=True)
-    classical = _classical(matches)
-    fused = _fused(pred, classical, matches)
+    pred = predict_pair(model, matches, warmup=True)  # warm-up: steady-state times below
+    est = _estimator(model).estimate(matches)
     T_gt = pair.T_0to1
-    rows = [("ground truth", T_gt, None), ("Str-L Pose", pred["T_0to1"], pred["time_ms"])]
-    if classical is not None:
-        rows.append(("OpenCV MAGSAC", classical["T_0to1"], classical["time_ms"]))
-    if fused is not None:
-        rows.append(("fused", fused["T_0to1"], None))
-    print(f"\n{'method':<14} {'rot err':>8} {'t err':>8} {'ms':>7}   pose")
+    print(f"\n{'method':<14} {'status':<10} {'rot err':>8} {'t err':>8} {'ms':>7}   pose")
+    print(f"{'ground truth':<14} {'':<10} {0.0:8.3f} {0.0:8.3f} {'-':>7}   {_fmt_pose(T_gt)}")
     report = {}
-    for name, T, ms in rows:
-        r, t = _pose_errors(T, T_gt)
-        ms_s = f"{ms:7.1f}" if ms is not None else "      -"
-        print(f"{name:<14} {r:8.3f} {t:8.3f} {ms_s}   {_fmt_pose(T)}")
-        report[name] = {"rot_err_deg": r, "trans_err_deg": t}
+    for name, r in est.methods.items():
+        label = METHOD_LABELS.get(name, name)
+        if r.status != "ok":
+            print(f"{label:<14} {r.status:<10} {'-':>8} {'-':>8} {r.time_ms:7.1f}   "
+                  f"{'; '.join(r.warnings)}")
+            continue
+        rot, tr = _pose_errors(r.T_0to1, T_gt)
+        print(f"{label:<14} {r.status:<10} {rot:8.3f} {tr:8.3f} {r.time_ms:7.1f}   "
+              f"{_fmt_pose(r.T_0to1)}")
+        report[label] = {"rot_err_deg": rot, "trans_err_deg": tr}
     s = pred["sigma"]
-    print(f"\npredicted sigma: quaternion {np.array2string(s[:4], precision=4)}, "
+    print(f"\npredicted sigma (Str-L Pose): quaternion {np.array2string(s[:4], precision=4)}, "
           f"translation {np.array2string(s[4:], precision=4)}")
+    print(f"recommended pose: {est.status}" + (f", from {est.pose.method}" if est.pose.method
+                                               else "")
+          + "".join(f"\nwarning: {w}" for w in est.warnings))
     p_err, l_err = epipolar_residuals(matches, T_gt)
     out = Path(args.out)
     png = save_matches_png(out / "demo_matches.png", matches, point_inliers=p_err < 2.0,
                            line_inliers=l_err < 2.0)
     print(f"matches drawn (green: epipolar error < 2 px under the true pose): {png}")
     if args.json:
-        print(json.dumps(_jsonable({"prediction": {k: v for k, v in pred.items()},
-                                    "errors": report})))
+        print(json.dumps({**est.to_dict(), "prediction": _jsonable(pred), "errors": report}))
     return 0
 
 
@@ -274,35 +288,24 @@ def cmd_match(args) -> int:
 
 
 def cmd_predict(args) -> int:
+    """Pose of two images: the recommended ``"pose"`` record (:mod:`strl_pyg.inference`)
+    and every method's own result. Exit status 0 when the pose's status is ``"ok"``, 1 when it
+    is ``"degenerate"`` or ``"failed"`` (the result is printed either way)."""
     inputs = _read_pair_args(args)  # fail on bad files before any heavy work
     model = load_model(args.checkpoint)
-    matches = _match(inputs, args)
-    pred = predict_pair(model, matches)
-    classical = _classical(matches) if not args.no_baseline else None
-    result = {"model": {k: pred[k] for k in ("T_0to1", "quaternion", "translation", "sigma",
-                                              "time_ms")},
-              "num_points": matches.num_points, "num_lines": matches.num_lines,
-              "translation_kind": model.config.translation,
-              "intrinsics": matches.has_intrinsics}
-    if classical is not None:
-        result["opencv"] = {k: classical[k] for k in ("T_0to1", "success", "inliers", "time_ms")}
-        fused = _fused(pred, classical, matches)
-        if fused is not None:
-            result["fused"] = fused
+    from strl_pyg.frontend import FrontendConfig
+
+    img0, img1, K0, K1 = inputs
+    est = _estimator(model, baseline=not args.no_baseline).estimate_images(
+        img0, img1, K0, K1, frontend_config=FrontendConfig(detector=args.detector))
+    code = 0 if est.status == "ok" else 1
     if args.json:
-        print(json.dumps(_jsonable(result)))
-        return 0
-    print(f"matches: {matches.num_points} points, {matches.num_lines} lines")
-    if not matches.has_intrinsics:
-        print("note: no intrinsics given (--K/--K0/--K1): coordinates were normalised by the "
-              "image size and no classical baseline was run")
-    print(f"Str-L Pose: {_fmt_pose(pred['T_0to1'])}  ({pred['time_ms']:.1f} ms)")
-    print(f"  sigma: {np.array2string(pred['sigma'], precision=4)}")
-    if "opencv" in result:
-        print(f"OpenCV:     {_fmt_pose(classical['T_0to1'])}  ({classical['inliers']} inliers)")
-    if "fused" in result:
-        print(f"fused:      {_fmt_pose(result['fused']['T_0to1'])}")
-    return 0
+        print(json.dumps({**est.to_dict(), "translation_kind": model.config.translation,
+                          "intrinsics": K0 is not None}))
+        return code
+    print(f"matches: {est.num_points} points, {est.num_lines} lines")
+    _print_estimate(est)
+    return code
 
 
 def cmd_train(args, parser) -> int:

@@ -38,17 +38,15 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import torch
 from tqdm.auto import tqdm
 
 from strl_pyg.baselines import MIN_POINTS, estimate_relative_pose
-from strl_pyg.data.graph import build_pair_graph
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.data.transforms import FixedSizeResample
 from strl_pyg.fusion import fuse_poses
 from strl_pyg.geometry import Pose
+from strl_pyg.inference import forward_pose, prepare_graph, prepare_matches
 from strl_pyg.metrics import (
     integrate_relative_poses,
     kitti_odometry_errors,
@@ -214,54 +212,14 @@ def kitti_eval_pairs(root: str | os.PathLike, cache_dir: str | os.PathLike,
 
 
 # ----------------------------------------------------------------------------- model
-def _patch_layout(patch_features: int) -> tuple[int, int]:
-    for channels in (1, 3):
-        p = math.isqrt(patch_features // channels)
-        if patch_features % channels == 0 and p * p * channels == patch_features and p % 2:
-            return channels, p
-    raise ValueError(
-        f"Expected patch_features = C * p * p with C in (1, 3) and odd p (got {patch_features})"
-    )
-
-
-def _convert_image(image: np.ndarray | None, channels: int) -> np.ndarray | None:
-    if image is None:
-        return None
-    if channels == 1 and image.ndim == 3:
-        return cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY)
-    if channels == 3 and image.ndim == 2:
-        return np.repeat(image[..., None], 3, axis=2)
-    return image
-
-
-def prepare_matches(matches: PairMatches, model: torch.nn.Module) -> tuple[PairMatches, int]:
-    """Matches whose images have the channels the model's patches expect, and the patch
-    size: ``(matches, patch_size)``."""
-    cfg = model.config
-    if cfg.visual is None:
-        return matches, 1
-    if not matches.has_images:
-        raise ValueError(f"Expected images in the matches for a model with visual={cfg.visual!r} "
-                         "(got none)")
-    channels, p = _patch_layout(cfg.patch_features) if cfg.visual == "pixel" else (
-        cfg.image_channels, 1)
-    return replace(matches, image0=_convert_image(matches.image0, channels),
-                   image1=_convert_image(matches.image1, channels)), p
-
-
-@torch.no_grad()
 def predict_pose(model: torch.nn.Module, matches: PairMatches,
                  resample: tuple[int, int] | None = (384, 192), seed: int = 0,
                  device: str | torch.device = "cpu") -> Any:
-    """The model's ``PoseOutput`` (one pair) on the graph of ``matches`` (module docstring)."""
-    m, p = prepare_matches(matches, model)
-    data = build_pair_graph(m, patch_size=p, keep_images=model.config.visual == "cnn")
-    if resample is not None:
-        data = FixedSizeResample(resample[0], resample[1], seed=seed)(data)
-    from torch_geometric.data import Batch
-
-    model.eval()
-    return model(Batch.from_data_list([data]).to(device))
+    """The model's ``PoseOutput`` (one pair) on the graph of ``matches`` (module docstring):
+    :func:`strl_pyg.inference.prepare_graph` then :func:`strl_pyg.inference.forward_pose`
+    (``no_grad``, eval mode, the graph cast to the model's dtype); ``resample="model"``
+    takes the counts the checkpoint stores."""
+    return forward_pose(model, prepare_graph(matches, model, seed, resample), device)
 
 
 # ----------------------------------------------------------------------------- report

@@ -11,6 +11,7 @@ sees graph-contiguous nodes; the geometric and the visual stream share this node
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
@@ -416,15 +417,86 @@ class StrLPose(nn.Module):
 
     # ------------------------------------------------------------------ checkpoints
     _FORMAT = "strl_pyg.StrLPose"
-    _VERSION = 1
+    _VERSION = 2  # 2 added "metadata"; version 1 files load with default_metadata()
+    _READABLE_VERSIONS = (1, 2)
+    #: Checkpoints shipped in the package (``strl_pyg/weights/``), for :meth:`from_pretrained`:
+    #: ``name -> (file, metadata used when the file stores none)``.
+    PRETRAINED: dict[str, tuple[str, dict[str, Any]]] = {
+        "synthetic": ("strl_pose_synthetic.pt", {"training_data": (
+            "generated street/indoor/boxes scenes only: 3000 pairs, ground-truth matches with "
+            "0.7 px noise and 10% outliers, 4000 steps of batch 16, swap augmentation")}),
+    }
 
-    def save(self, path: str | os.PathLike) -> Path:
-        """Writes the config and the weights to ``path`` atomically (temp file + rename)."""
+    @staticmethod
+    def default_metadata(config: StrLPoseConfig) -> dict[str, Any]:
+        """What a checkpoint without metadata (version 1) is assumed to be trained with:
+        ``resample`` ``[384, 192]`` (points, lines of :class:`~strl_pyg.data.FixedSizeResample`,
+        ``None`` = not resampled); ``patch_channels`` the channels images are converted to
+        before sampling (1 grey, 3 RGB; ``image_channels`` for ``visual="cnn"``, ``None``
+        without visual input) and ``patch_size`` (odd ``p`` with ``patch_features =
+        channels * p * p``; ``None`` unless ``visual="pixel"``), both from the config;
+        ``training_data`` ``None`` (unknown)."""
+        channels = size = None
+        if config.visual == "cnn":
+            channels = config.image_channels
+        elif config.visual == "pixel":
+            for c in (1, 3):
+                p = math.isqrt(config.patch_features // c)
+                if c * p * p == config.patch_features and p % 2:
+                    channels, size = c, p
+                    break
+            else:
+                raise ValueError(f"Expected patch_features = C * p * p with C in (1, 3) and odd "
+                                 f"p (got {config.patch_features})")
+        return {"resample": [384, 192], "patch_channels": channels, "patch_size": size,
+                "training_data": None}
+
+    @staticmethod
+    def _check_metadata(md: Any, config: StrLPoseConfig) -> dict[str, Any]:
+        if not isinstance(md, dict) or not all(isinstance(k, str) for k in md):
+            raise ValueError(f"Expected metadata as a dict with str keys (got {type(md).__name__})")
+        out = {**StrLPose.default_metadata(config), **md}
+        rs = out["resample"]
+        if rs is not None:
+            rs = list(rs) if isinstance(rs, (list, tuple)) else rs
+            if not (isinstance(rs, list) and len(rs) == 2 and all(
+                    isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in rs)):
+                raise ValueError(f"Expected metadata 'resample' as [points, lines] >= 0 or None "
+                                 f"(got {out['resample']!r})")
+            out["resample"] = rs
+        default = StrLPose.default_metadata(config)
+        for key in ("patch_channels", "patch_size"):
+            if out[key] != default[key]:
+                raise ValueError(f"Expected metadata '{key}' {default[key]!r} for this config "
+                                 f"(visual={config.visual!r}, patch_features="
+                                 f"{config.patch_features}) (got {out[key]!r})")
+        if out["training_data"] is not None and not isinstance(out["training_data"], str):
+            raise ValueError(f"Expected metadata 'training_data' as a str or None "
+                             f"(got {type(out['training_data']).__name__})")
+        return out
+
+    @property
+    def metadata(self) -> dict[str, Any]:
+        """Training metadata (:meth:`default_metadata` keys plus any free-form ones) stored in
+        the checkpoint; the defaults when none was stored or set."""
+        md = self.__dict__.get("_metadata")
+        return dict(md) if md is not None else self.default_metadata(self.config)
+
+    @metadata.setter
+    def metadata(self, value: dict[str, Any]) -> None:
+        self._metadata = self._check_metadata(value, self.config)
+
+    def save(self, path: str | os.PathLike, metadata: dict[str, Any] | None = None) -> Path:
+        """Writes the config, the weights and the training metadata (:attr:`metadata` updated
+        with ``metadata``; plain str/int/float/bool/None/list/dict values) to ``path``
+        atomically (temp file + rename)."""
         path = Path(path)
+        md = self._check_metadata({**self.metadata, **(metadata or {})}, self.config)
         payload = {
             "format": self._FORMAT,
             "version": self._VERSION,
             "config": self.config.to_dict(),
+            "metadata": md,
             "state_dict": {k: v.detach().cpu() for k, v in self.state_dict().items()},
         }
         with atomic_open(path) as f:
@@ -448,8 +520,8 @@ class StrLPose(nn.Module):
         if not isinstance(payload, dict) or payload.get("format") != cls._FORMAT:
             got = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
             raise ValueError(f"Expected a '{cls._FORMAT}' checkpoint at {path} (got {got!r})")
-        if payload.get("version") != cls._VERSION:
-            raise ValueError(f"Expected checkpoint version {cls._VERSION} "
+        if payload.get("version") not in cls._READABLE_VERSIONS:
+            raise ValueError(f"Expected checkpoint version in {cls._READABLE_VERSIONS} "
                              f"(got {payload.get('version')!r})")
         model = cls(StrLPoseConfig.from_dict(payload["config"]))
         try:
@@ -458,7 +530,28 @@ class StrLPose(nn.Module):
             raise ValueError(
                 f"Expected weights matching the checkpoint's config at {path} (got {err})"
             ) from err
+        if payload.get("metadata") is not None:
+            model.metadata = payload["metadata"]
         return model
+
+    @classmethod
+    def from_pretrained(cls, name: str = "synthetic", map_location: Any = "cpu") -> StrLPose:
+        """A shipped checkpoint (:attr:`PRETRAINED`), read from the installed package (not the
+        working directory), in eval mode."""
+        if name not in cls.PRETRAINED:
+            raise ValueError(f"Expected a pretrained name in {tuple(cls.PRETRAINED)} "
+                             f"(got {name!r})")
+        from importlib.resources import as_file, files
+
+        file, fallback = cls.PRETRAINED[name]
+        with as_file(files("strl_pyg") / "weights" / file) as path:
+            if not Path(path).is_file():
+                raise FileNotFoundError(f"Expected the shipped checkpoint '{file}' in the "
+                                        f"strl_pyg package at {path} (got none)")
+            model = cls.load(path, map_location)
+        if "_metadata" not in model.__dict__:
+            model.metadata = fallback
+        return model.eval()
 
     def __repr__(self) -> str:
         c = self.config

@@ -50,16 +50,18 @@ def test_predict_real_kitti_pair_json(checkpoint, kitti_pair, capsys):
     code = cli.main(["predict", img0, img1, "--K", calib, "--checkpoint", checkpoint, "--json"])
     assert code == 0
     result = json.loads(capsys.readouterr().out)
-    T = np.asarray(result["model"]["T_0to1"])
+    assert result["pose"]["status"] == "ok" and result["pose"]["method"] in result["methods"]
+    T = np.asarray(result["methods"]["regression"]["T_0to1"])
     assert T.shape == (4, 4) and np.allclose(T[3], [0, 0, 0, 1])
     R = T[:3, :3]
     assert np.allclose(R @ R.T, np.eye(3), atol=1e-4)
-    assert len(result["model"]["sigma"]) == 7 and result["num_points"] > 50
+    assert len(result["methods"]["regression"]["info"]["sigma_components"]) == 7
+    assert result["num_points"] > 50
     # the classical estimate on the same matches agrees with KITTI's ground truth
     rows = np.loadtxt(poses)[:2]
     c2w = Pose.from_kitti_row(rows)
     T_gt = (c2w[1].inv() @ c2w[0]).matrix()
-    T_cv = np.asarray(result["opencv"]["T_0to1"])
+    T_cv = np.asarray(result["methods"]["opencv"]["T_0to1"])
     assert float(rotation_error_deg(T_cv[:3, :3], T_gt[:3, :3])) < 1.0
 
 

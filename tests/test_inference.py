@@ -1,0 +1,353 @@
+"""The inference API (strl_pyg.inference): one call from matches or images to a pose record
+with a status, every method by name, checkpoint metadata, dtypes, and ``strl-pose predict``."""
+
+import json
+import os
+import re
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from strl_pyg import cli, inference
+from strl_pyg.baselines import BaselineResult
+from strl_pyg.data import PairMatches
+from strl_pyg.geometry import Pose
+from strl_pyg.inference import (
+    METHODS,
+    MethodResult,
+    PoseEstimator,
+    forward_pose,
+    prepare_graph,
+)
+from strl_pyg.metrics import relative_pose_error
+from strl_pyg.model import StrLPose, StrLPoseConfig
+from strl_pyg.synthetic import generate_pair
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+SEED = 2_000_017  # held out from training
+HAVE_POSELIB = METHODS["poselib"].available()
+KEYS = {"method", "status", "T_0to1", "sigma", "covariance", "warnings", "time_ms",
+        "num_inliers", "info"}
+
+# The "Using it" snippet proposed for README.md (/tmp/brief/readme_inference.md).
+# TODO(lead): once it is pasted into README.md, replace this constant by
+# ``SNIPPET = readme_python_block("PoseEstimator")`` so the test runs the README verbatim.
+SNIPPET = """\
+from strl_pyg import PairMatches
+from strl_pyg.inference import PoseEstimator
+from strl_pyg.synthetic import generate_pair
+
+pair = generate_pair(2_000_017)            # stands in for your data: images, K, matches
+m = pair.matches
+estimator = PoseEstimator()                # the shipped model (StrLPose.from_pretrained())
+
+# From your own match lists (pixels; endpoint k of line i in image 0 matches endpoint k of
+# line i in image 1):
+matches = PairMatches(m.points0, m.points1, m.lines0, m.lines1,  # [Np,2] [Np,2] [Nl,2,2] [Nl,2,2]
+                      K0=pair.K, K1=pair.K, image0=pair.image0, image1=pair.image1)
+est = estimator.estimate(matches)
+print(est.pose.status, est.pose.method, est.pose.warnings)   # ok poselib []
+if est.pose.status == "ok":
+    T_0to1 = est.pose.T_0to1      # [4, 4] numpy: camera-0 points into camera 1, X1 = R X0 + t
+    print(est.pose.sigma)         # {'rotation_deg': ..., 'translation_deg': ...}
+network = est.methods["regression"]   # each method by name: regression, opencv, poselib, fused
+
+# From images (K1 defaults to K0: one camera):
+est = estimator.estimate_images(pair.image0, pair.image1, K0=pair.K)
+print(est.to_dict()["pose"]["status"])    # the "pose" record of `strl-pose predict --json`
+"""
+
+
+def readme_python_block(must_contain: str) -> str:
+    """The first ```python block of README.md that contains ``must_contain``."""
+    text = (REPO_ROOT / "README.md").read_text()
+    blocks = [b for b in re.findall(r"```python\n(.*?)```", text, re.S) if must_contain in b]
+    assert blocks, f"no python block with {must_contain!r} in README.md"
+    return blocks[0]
+
+
+# ----------------------------------------------------------------------------- fixtures
+@pytest.fixture(scope="module")
+def model():
+    return StrLPose.from_pretrained()
+
+
+@pytest.fixture(scope="module")
+def pair():
+    return generate_pair(SEED)
+
+
+@pytest.fixture(scope="module")
+def estimate(model, pair):
+    return PoseEstimator(model).estimate(pair.matches)
+
+
+def tiny(**kw):
+    return StrLPose(StrLPoseConfig(hidden=16, layers=1, heads=2, patch_features=1, **kw))
+
+
+# ----------------------------------------------------------------------------- checkpoints
+def test_from_pretrained_does_not_depend_on_the_working_directory(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    m = StrLPose.from_pretrained("synthetic")
+    assert not m.training
+    md = m.metadata
+    assert md["resample"] == [384, 192] and md["patch_channels"] == 1 and md["patch_size"] == 1
+    assert "generated" in md["training_data"]
+    with pytest.raises(ValueError, match="Expected a pretrained name"):
+        StrLPose.from_pretrained("kitti-2030")
+
+
+def test_metadata_round_trips_through_a_checkpoint(tmp_path):
+    m = tiny()
+    path = m.save(tmp_path / "m.pt", metadata={"resample": (100, 50), "training_data": "x",
+                                               "steps": 10})
+    payload = torch.load(path, weights_only=True)
+    assert payload["version"] == 2
+    md = StrLPose.load(path).metadata
+    assert md == {"resample": [100, 50], "patch_channels": 1, "patch_size": 1,
+                  "training_data": "x", "steps": 10}
+
+
+def test_version_1_checkpoints_load_with_documented_defaults(tmp_path):
+    m = tiny(visual="pixel")
+    payload = {"format": "strl_pyg.StrLPose", "version": 1, "config": m.config.to_dict(),
+               "state_dict": m.state_dict()}
+    torch.save(payload, tmp_path / "v1.pt")
+    md = StrLPose.load(tmp_path / "v1.pt").metadata
+    assert md == {"resample": [384, 192], "patch_channels": 1, "patch_size": 1,
+                  "training_data": None}
+    rgb = StrLPose(StrLPoseConfig(hidden=16, layers=1, heads=2, patch_features=27))
+    assert (rgb.metadata["patch_channels"], rgb.metadata["patch_size"]) == (3, 3)
+    torch.save({**payload, "version": 7}, tmp_path / "v7.pt")
+    with pytest.raises(ValueError, match="Expected checkpoint version"):
+        StrLPose.load(tmp_path / "v7.pt")
+
+
+@pytest.mark.parametrize("md, message", [
+    ({"resample": [384]}, "resample"),
+    ({"patch_channels": 3}, "patch_channels"),
+    ({"training_data": 5}, "training_data"),
+])
+def test_bad_metadata_is_refused(md, message, tmp_path):
+    with pytest.raises(ValueError, match=f"Expected metadata '{message}'"):
+        tiny().save(tmp_path / "m.pt", metadata=md)
+
+
+def test_the_graph_follows_the_stored_resample_counts(pair):
+    m = tiny()
+    m.metadata = {"resample": [50, 20]}
+    g = prepare_graph(pair.matches, m)
+    assert g["point"].num_nodes == 50 and g["endpoint"].num_nodes == 40
+    assert g["point"].patch0.shape == (50, 1)  # grey patches, as the checkpoint stores
+    from strl_pyg.evaluation import predict_pose
+
+    out = predict_pose(m, pair.matches, resample="model")
+    ref = forward_pose(m, g)
+    assert torch.equal(out.quaternion, ref.quaternion)
+
+
+# ----------------------------------------------------------------------------- the estimate
+def test_estimate_gives_a_recommended_pose_and_every_method(estimate, pair):
+    names = ["regression", "opencv"] + (["poselib"] if HAVE_POSELIB else []) + ["fused"]
+    assert list(estimate.methods) == names
+    pose = estimate.pose
+    assert pose.status == "ok" and not pose.warnings
+    assert pose.method == ("poselib" if HAVE_POSELIB else "opencv")
+    assert pose.T_0to1.shape == (4, 4) and pose.T_0to1.dtype == np.float64
+    np.testing.assert_array_equal(pose.T_0to1, estimate.methods[pose.method].T_0to1)
+    R = pose.T_0to1[:3, :3]
+    np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-9)
+    assert pose.covariance.shape == (5, 5) and set(pose.sigma) == {"rotation_deg",
+                                                                   "translation_deg"}
+    for name, r in estimate.methods.items():
+        assert r.status == "ok", (name, r.warnings)
+        rot, tr = relative_pose_error(r.T_0to1[None], pair.T_0to1[None])
+        limit = (2.0, 10.0) if name == "regression" else (0.5, 3.0)
+        assert float(rot[0]) < limit[0] and float(tr[0]) < limit[1], name
+        assert r.sigma["rotation_deg"] > 0
+    assert len(estimate.methods["regression"].info["log_var"]) == 7
+
+
+def test_identical_images_are_degenerate_not_a_confident_motion(model, pair):
+    est = PoseEstimator(model).estimate_images(pair.image0, pair.image0, K0=pair.K)
+    assert est.num_points > 100  # the front end matches everything, at zero displacement
+    assert est.status == "degenerate" and est.T_0to1 is None and est.pose.method is None
+    assert any("zero parallax" in w for w in est.warnings)
+    assert all(r.status == "degenerate" and r.T_0to1 is None for r in est.methods.values())
+
+
+def test_fewer_matches_than_the_solvers_need_is_degenerate(model, pair):
+    m = pair.matches
+    few = PairMatches(m.points0[:3], m.points1[:3], K0=pair.K, K1=pair.K,
+                      image0=pair.image0, image1=pair.image1)
+    est = PoseEstimator(model).estimate(few)
+    assert est.status == "degenerate" and est.T_0to1 is None
+    assert any("too few point matches" in w for w in est.warnings)
+    tiny_imgs = PoseEstimator(model).estimate_images(pair.image0[:16, :16],
+                                                     pair.image1[:16, :16])
+    assert tiny_imgs.status == "degenerate" and tiny_imgs.T_0to1 is None
+
+
+def test_a_failed_classical_solver_is_failed_and_not_used(model, pair, monkeypatch):
+    def no_model(matches, method, *args, **kwargs):
+        n = matches.num_points
+        return BaselineResult(Pose.identity(), np.zeros(n, bool), 1.0, method, False)
+
+    monkeypatch.setattr(inference, "estimate_relative_pose", no_model)
+    est = PoseEstimator(model).estimate(pair.matches)
+    classical = ["opencv"] + (["poselib"] if HAVE_POSELIB else [])
+    for name in classical:
+        r = est.methods[name]
+        assert r.status == "failed" and r.T_0to1 is None and "found no pose" in r.warnings[0]
+    assert est.methods["fused"].status == "failed"
+    assert est.status == "ok" and est.pose.method == "regression"
+    assert any(w.startswith("opencv failed") for w in est.warnings)
+
+
+def test_all_methods_failing_gives_status_failed(pair, monkeypatch):
+    monkeypatch.setattr(inference, "estimate_relative_pose",
+                        lambda m, method, *a, **k: BaselineResult(
+                            Pose.identity(), np.zeros(m.num_points, bool), 1.0, method, False))
+    est = PoseEstimator(methods=("opencv",)).estimate(pair.matches)
+    assert est.status == "failed" and est.T_0to1 is None and est.to_dict()["pose"]["T_0to1"] is None
+
+
+def test_one_K_for_images_of_different_sizes_warns(pair):
+    big = cv2.resize(pair.image1, (1280, 384), interpolation=cv2.INTER_LINEAR)
+    est = PoseEstimator(methods=("opencv",))
+    one_K = est.estimate_images(pair.image0, big, K0=pair.K)
+    assert any("different sizes" in w for w in one_K.warnings)
+    S = np.diag([2.0, 2.0, 1.0])
+    S[:2, 2] = 0.5  # x' = 2 (x + 0.5) - 0.5
+    own = est.estimate_images(pair.image0, big, K0=pair.K, K1=S @ pair.K)
+    assert own.status == "ok" and not own.warnings
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda K: K.__setitem__((0, 2), 5000.0), "principal point"),
+    (lambda K: K.__setitem__((0, 0), 1e5), "focal length"),
+    (lambda K: K.__setitem__((1, 1), 10.0), "focal length"),
+])
+def test_an_implausible_K_warns(pair, change, message):
+    K = pair.K.copy()
+    change(K)
+    est = PoseEstimator(methods=("opencv",)).estimate(replace(pair.matches, K0=K, K1=K))
+    assert any(message in w for w in est.warnings), est.warnings
+
+
+def test_no_intrinsics_runs_the_network_only_and_says_so(model, pair):
+    m = replace(pair.matches, K0=None, K1=None)
+    est = PoseEstimator(model).estimate(m)
+    assert est.methods["opencv"].status == "failed"
+    assert est.status == "ok" and est.pose.method == "regression"
+    assert any("no intrinsics" in w for w in est.warnings)
+
+
+@pytest.mark.parametrize("dtype, tol", [(torch.bfloat16, 2.0), (torch.float64, 1e-3)])
+def test_low_and_high_precision_models_run_on_the_float32_graph(pair, dtype, tol):
+    ref = StrLPose.from_pretrained()
+    m = StrLPose.from_pretrained().to(dtype)
+    g = prepare_graph(pair.matches, m)
+    from torch_geometric.data import Batch
+
+    with pytest.raises(RuntimeError):  # the raw forward mixes dtypes
+        with torch.no_grad():
+            m(Batch.from_data_list([g]))
+    est = PoseEstimator(m, methods=("regression",)).estimate(pair.matches)
+    r = est.methods["regression"]
+    assert r.status == "ok" and np.isfinite(r.T_0to1).all()
+    base = PoseEstimator(ref, methods=("regression",)).estimate(pair.matches)
+    rot, _ = relative_pose_error(r.T_0to1[None], base.T_0to1[None])
+    assert float(rot[0]) < tol
+
+
+def test_a_model_of_mixed_dtypes_errors_in_one_line(pair):
+    m = tiny()
+    m.fusion.double()
+    with pytest.raises(TypeError, match=r"Expected model parameters of one floating dtype"):
+        forward_pose(m, prepare_graph(pair.matches, m))
+
+
+def test_a_new_method_is_one_registration(pair, monkeypatch):
+    def identity_guess(matches, context):
+        assert "opencv" in context.results  # runs after the ones registered before it
+        return MethodResult("guess", "ok", np.eye(4))
+
+    monkeypatch.setattr(inference, "METHODS", dict(inference.METHODS))
+    inference.register_method("guess", identity_guess)
+    monkeypatch.setattr(inference, "RECOMMENDED_ORDER", ("guess", "opencv"))
+    est = PoseEstimator(methods=("opencv", "guess")).estimate(pair.matches)
+    assert est.pose.method == "guess" and list(est.methods) == ["opencv", "guess"]
+    with pytest.raises(ValueError, match="already registered"):
+        inference.register_method("guess", identity_guess)
+
+
+def test_method_results_hold_a_pose_only_when_ok():
+    assert MethodResult("x", "failed", np.eye(4)).T_0to1 is None
+    with pytest.raises(ValueError, match="Expected a finite T_0to1"):
+        MethodResult("x", "ok", None)
+    with pytest.raises(ValueError, match="Expected status"):
+        MethodResult("x", "fine", np.eye(4))
+
+
+def test_to_dict_is_json_with_the_documented_keys(estimate):
+    d = json.loads(json.dumps(estimate.to_dict(), allow_nan=False))
+    assert set(d) == {"pose", "methods", "num_points", "num_lines"}
+    assert set(d["pose"]) == KEYS and np.asarray(d["pose"]["T_0to1"]).shape == (4, 4)
+    assert all(set(v) == KEYS for v in d["methods"].values())
+
+
+# ----------------------------------------------------------------------------- command line
+@pytest.fixture(scope="module")
+def pngs(pair, tmp_path_factory):
+    d = tmp_path_factory.mktemp("imgs")
+    for name, img in (("a.png", pair.image0), ("b.png", pair.image1)):
+        cv2.imwrite(str(d / name), img)
+    cv2.imwrite(str(d / "big.png"), cv2.resize(pair.image1, (1280, 384)))
+    K = pair.K
+    return d, f"{K[0, 0]},{K[1, 1]},{K[0, 2]},{K[1, 2]}"
+
+
+def test_predict_json_round_trips_with_the_pose_record(pngs, capsys):
+    d, K = pngs
+    code = cli.main(["predict", str(d / "a.png"), str(d / "b.png"), "--K", K, "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0
+    assert set(out["pose"]) == KEYS and out["pose"]["status"] == "ok"
+    assert out["pose"]["method"] == ("poselib" if HAVE_POSELIB else "opencv")
+    assert np.asarray(out["pose"]["T_0to1"]).shape == (4, 4)
+    assert set(out["pose"]["sigma"]) == {"rotation_deg", "translation_deg"}
+    assert {"regression", "opencv", "fused"} <= set(out["methods"])
+    assert out["translation_kind"] == "direction" and out["intrinsics"] is True
+
+
+def test_predict_identical_images_is_degenerate_with_exit_status_1(pngs, capsys):
+    d, K = pngs
+    code = cli.main(["predict", str(d / "a.png"), str(d / "a.png"), "--K", K, "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 1 and out["pose"]["status"] == "degenerate" and out["pose"]["T_0to1"] is None
+
+
+def test_predict_text_says_status_method_and_warnings(pngs, capsys):
+    d, K = pngs
+    code = cli.main(["predict", str(d / "a.png"), str(d / "big.png"), "--K", K])
+    out = capsys.readouterr().out
+    assert code == 0 and re.search(r"pose: ok, from (poselib|opencv)", out)
+    assert "warning: the images have different sizes" in out and "regression" in out
+
+
+# ----------------------------------------------------------------------------- README
+def test_readme_snippet_runs_from_another_directory(tmp_path):
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    res = subprocess.run([sys.executable, "-c", SNIPPET], cwd=tmp_path, env=env,
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    lines = res.stdout.splitlines()
+    assert lines[0].startswith("ok ") and lines[-1] == "ok"
