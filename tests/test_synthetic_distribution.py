@@ -13,7 +13,7 @@ import torch
 from torch_geometric.loader import DataLoader
 
 from strl_pyg.data import keys as K
-from strl_pyg.data.datasets import SyntheticPairs
+from strl_pyg.data.datasets import InfiniteSyntheticPairs, SyntheticPairs
 from strl_pyg.data.datasets.base import PAIR_ID, SUBSET
 from strl_pyg.data.datasets.synthetic import _scene_fingerprint
 from strl_pyg.frontend import epipolar_residuals
@@ -83,6 +83,16 @@ def test_every_kind_and_motion_has_exact_ground_truth(kind, motion):
         assert -t[2] > 0.9 * np.linalg.norm(t)
     if motion == "lateral":
         assert abs(t[0]) > 0.9 * np.linalg.norm(t)
+
+
+def test_mixed_object_pairs_with_long_focal_keep_the_object_in_view():
+    # Regression: a scaled orbit translation moved the object out of a narrow (f = 4.8 W)
+    # view, so no attempt had any correspondence (RuntimeError).
+    cfg = scene_distribution("mixed_small", kinds=("object",), sizes=((240, 320),)).config(1007)
+    assert cfg.motion == "wide" and cfg.focal_factor > 4
+    p = generate_pair(1007, cfg)
+    assert p.matches.num_points >= 16
+    assert (p.plane_id0 >= 0).any() and (p.plane_id1 >= 0).any()
 
 
 def test_swapped_views_reverse_the_motion():
@@ -171,6 +181,7 @@ def test_mixed_preset_covers_kinds_motions_sizes_and_ranges():
         assert lo <= c.focal_factor <= hi
         assert max(abs(v) for v in c.principal_offset) <= dist.principal_offset
         assert 0.5 <= c.baseline_scale <= 2.0
+        assert c.baseline_scale == 1.0 or c.motion not in ("orbit", "wide")
     assert cfgs[7] == dist.config(7) == sample_scene_config(7, "mixed")  # deterministic
     small = scene_distribution("mixed_small")
     assert {small.config(s).image_size for s in range(30)} <= {(240, 320), (192, 640)}
@@ -219,6 +230,8 @@ def test_distribution_validation():
         (dict(focal_factor=-1.0), "focal_factor"),
         (dict(photo_gain=0.0), "photo_gain"),
         (dict(photo_blur=-1.0), "photo_blur"),
+        (dict(motion="orbit", baseline_scale=2.0), "baseline_scale 1.0 with the 'orbit'"),
+        (dict(kind="object", baseline_scale=2.0), "baseline_scale 1.0 with the 'orbit'"),
     ],
 )
 def test_new_config_validation(kwargs, match):
@@ -261,6 +274,17 @@ def test_mixed_sizes_collate_with_per_graph_intrinsics():
         xy = torch.cat([pts[K.KPTS0].double(), torch.ones(len(pts[K.KPTS0]), 1)], 1)
         torch.testing.assert_close(pts[K.POS0].double(), (xy @ Kinv.T)[:, :2], atol=1e-5,
                                    rtol=1e-5)
+
+
+def test_infinite_stream_draws_each_config_from_its_seed():
+    dist = _small_mixed()
+    stream = iter(InfiniteSyntheticPairs(seed=5, scene_config=dist))
+    for seed in (5, 6):
+        g, cfg = next(stream), dist.config(seed)
+        assert g[PAIR_ID] == f"synthetic/mixed_small/{cfg.kind}/{seed}"
+        assert tuple(g[K.IMAGE_SIZE0][0].tolist()) == cfg.image_size
+    with pytest.raises(TypeError, match="SceneConfig or a SceneDistribution"):
+        SyntheticPairs(1, scene_config={"kind": "street"})
 
 
 def test_frontend_path_with_a_distribution(tmp_path):

@@ -40,7 +40,9 @@ class SceneConfig:
         motion: camera motion from view 0 to view 1, one of :data:`MOTIONS`, or ``None`` for
             the kind's own (:data:`DEFAULT_MOTION`). (default: ``None``)
         baseline_scale: factor on the camera translation after the motion is drawn: the scene
-            depth relative to the baseline (``> 1``: more parallax). (default: ``1.0``)
+            depth relative to the baseline (``> 1``: more parallax). Must be 1 for the orbit
+            and wide motions (and the object kind's default, orbit), whose baseline follows
+            from the orbit angle with camera 1 fixating the centre. (default: ``1.0``)
         swap_views: render view 1 as image 0 and view 0 as image 1 (forward motion becomes
             backward motion). (default: False)
         noise_px: std of the Gaussian noise added to every ground-truth coordinate, pixels.
@@ -123,6 +125,11 @@ class SceneConfig:
             raise ValueError(f"Expected motion in {MOTIONS} or None (got {self.motion!r})")
         if not (np.isfinite(self.baseline_scale) and self.baseline_scale > 0):
             raise ValueError(f"Expected a positive baseline_scale (got {self.baseline_scale})")
+        if self.baseline_scale != 1.0 and self.resolved_motion in ("orbit", "wide"):
+            raise ValueError(
+                f"Expected baseline_scale 1.0 with the {self.resolved_motion!r} motion, whose "
+                f"baseline follows from the orbit angle (got {self.baseline_scale})"
+            )
         if not (self.photo_gain > 0 and self.photo_gamma > 0):
             raise ValueError(
                 f"Expected photo_gain, photo_gamma > 0 (got {self.photo_gain}, "

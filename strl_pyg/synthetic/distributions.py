@@ -29,13 +29,14 @@ name            kinds                   motions              image sizes (H, W) 
 
 Common to all unless noted: focal log-uniform in 0.5-1.5 W (object kind: 0.5-6 W, the
 Middlebury dino has 5.2 W), principal point within +-5 % of the size, ``baseline_scale``
-log-uniform in 0.5-2, views swapped with probability 0.5 (backward motion), a photometric change
-of image 1 with probability 0.7 (gain 0.6-1.5, gamma 0.7-1.4, blur 0-1.5 px, noise 0-4 grey
-levels), sensor noise 0.5-3 grey levels, low / repetitive texture with probability 0.15 / 0.05,
-ground-truth match noise 0-1 px and outliers 0-30 % (used by ``matches="ground_truth"`` only;
-front-end matches come from the images). The evaluation distributions give the ground-truth
-matches 0.5 px of noise and no outliers (but ``outliers50``) and swap no views for ``driving``
-and ``object``; change any field with ``eval_distribution(name, field=value)``.
+log-uniform in 0.5-2 (1 for orbit and wide), views swapped with probability 0.5 (backward
+motion), a photometric change of image 1 with probability 0.7 (gain 0.6-1.5, gamma 0.7-1.4,
+blur 0-1.5 px, noise 0-4 grey levels), sensor noise 0.5-3 grey levels, low / repetitive
+texture with probability 0.15 / 0.05, ground-truth match noise 0-1 px and outliers 0-30 %
+(used by ``matches="ground_truth"`` only; front-end matches come from the images). The
+evaluation distributions give the ground-truth matches 0.5 px of noise and no outliers (but
+``outliers50``) and swap no views for ``driving`` and ``object``; change any field with
+``eval_distribution(name, field=value)``.
 """
 
 from __future__ import annotations
@@ -171,7 +172,8 @@ class SceneDistribution:
         fields = dict(
             kind=kind, motion=motion, image_size=size, focal_factor=focal,
             principal_offset=off,
-            baseline_scale=_loguniform(rng, *self.baseline_scale_range),
+            baseline_scale=(1.0 if motion in ("orbit", "wide")
+                            else _loguniform(rng, *self.baseline_scale_range)),
             swap_views=bool(rng.random() < self.swap_prob),
             image_noise=float(rng.uniform(*self.image_noise_range)),
             low_texture=low, repetitive_texture=rep,

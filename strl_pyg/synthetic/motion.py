@@ -11,9 +11,9 @@ motion     translation (view-0 camera frame)              rotation
 forward    ``z`` U(0.04, 0.12) d; ``x, y`` within 0.01 d   yaw 3, pitch 1.5, roll 1 deg at most
 lateral    ``x`` +-U(0.04, 0.12) d; ``y`` 0.01 d, ``z``    yaw 3, pitch 1.5, roll 1 deg at most
            0.02 d at most
-orbit      around the centre point (at depth ``d``, or     U(5, 25) deg about a near-vertical
-           the object centre): keeps looking at it         axis, +-5 deg of elevation, 1 deg
-                                                           jitter
+orbit      around the centre point (the object centre,     U(5, 25) deg about a near-vertical
+           or on the optical axis at depth ``d``, nearer   axis, +-5 deg of elevation, 1 deg
+           if the free space needs): keeps looking at it   jitter
 handheld   random direction, U(0.01, 0.05) d               random axis, U(0.5, 5) deg
 rotation   random direction, at most 0.005 d (tiny)        random axis, U(5, 15) deg
 wide       as orbit                                        U(20, 40) deg about a near-vertical
@@ -21,7 +21,8 @@ wide       as orbit                                        U(20, 40) deg about a
 ========== ============================================== =====================================
 
 Except for the object kind, the translation is then capped at the kind's free space (so the
-camera stays on the road or in the room).
+camera stays on the road or in the room; the default orbit centre is chosen near enough for
+the orbit to fit, so the cap only trims the few percent that the elevation change adds).
 """
 
 from __future__ import annotations
@@ -95,8 +96,11 @@ def _unit(rng: np.random.Generator) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def _orbit(rng, R_wc0, c0, centre, lo_deg: float, hi_deg: float):
+def _orbit(rng, R_wc0, c0, centre, depth: float, room: float, lo_deg: float, hi_deg: float):
     angle = rng.choice([-1.0, 1.0]) * rng.uniform(lo_deg, hi_deg) * _DEG
+    if centre is None:  # on the optical axis, near enough for the orbit to fit the free space
+        radius = min(depth, 0.95 * room / (2 * np.sin(abs(angle) / 2)))
+        centre = c0 + R_wc0[:, 2] * radius
     axis = np.array([0.0, 1.0, 0.0]) + rng.normal(0.0, 0.15, 3)
     Q = axis_angle(axis, angle) @ axis_angle(R_wc0[:, 0], rng.uniform(-5, 5) * _DEG)
     c1 = centre + Q @ (c0 - centre)
@@ -111,13 +115,16 @@ def move_camera(
     c0: np.ndarray,
     depth: float,
     centre: np.ndarray | None = None,
+    room: float = np.inf,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Draws view 1 ``(R_wc1, c1)`` from view 0 for one of the motions of the module table.
 
     Args:
         motion: one of :data:`strl_pyg.synthetic.MOTIONS`.
         depth: ``d``, the scene depth of view 0 (metres, > 0).
-        centre: orbit centre (world); default: the point at depth ``d`` on the optical axis.
+        centre: orbit centre (world); default: the point on the optical axis at depth ``d``,
+            or nearer where the orbit would otherwise move the camera further than ``room``.
+        room: free space around camera 0 (metres), for the default orbit centre.
     """
     d = float(depth)
     if motion == "forward":
@@ -135,10 +142,9 @@ def move_camera(
         t = _unit(rng) * rng.uniform(0.0, 0.005) * d
         return R_wc0 @ axis_angle(_unit(rng), rng.uniform(5.0, 15.0) * _DEG), c0 + R_wc0 @ t
     if motion in ("orbit", "wide"):
-        if centre is None:
-            centre = c0 + R_wc0[:, 2] * d
         lo, hi = (5.0, 25.0) if motion == "orbit" else (20.0, 40.0)
-        return _orbit(rng, R_wc0, c0, np.asarray(centre, dtype=np.float64), lo, hi)
+        centre = None if centre is None else np.asarray(centre, dtype=np.float64)
+        return _orbit(rng, R_wc0, c0, centre, d, room, lo, hi)
     raise ValueError(
         f"Expected motion in ('forward', 'lateral', 'orbit', 'handheld', 'rotation', 'wide') "
         f"(got {motion!r})"

@@ -22,8 +22,8 @@ from strl_pyg.synthetic.textures import TextureMaker, pyramid
 
 __all__ = ["SceneConfig", "Quad", "Scene", "build_scene", "SCENE_KINDS"]
 
-#: Per kind: the range the scene depth ``d`` of view 0 is clamped to (metres), and the
-#: largest camera translation of the new motions (free space; ``inf``: unbounded).
+#: Per kind: the range the scene depth ``d`` of view 0 is clamped to (metres). The builders
+#: store the largest translation of the new motions as ``extra["room"]`` (free space).
 _DEPTH_RANGE = {"street": (4.0, 20.0), "indoor": (1.0, 6.0), "boxes": (3.0, 15.0)}
 
 
@@ -305,8 +305,8 @@ def build_scene(rng: np.random.Generator, cfg: SceneConfig) -> Scene:
 
     The kind's builder places camera 0 (and, for the legacy motions, camera 1); any other
     motion then redraws camera 1 (:func:`strl_pyg.synthetic.motion.move_camera`, its
-    translation capped at the kind's free space), ``baseline_scale`` scales the translation
-    and ``swap_views`` swaps the two cameras.
+    translation capped at the kind's free space, an orbit centred near enough to fit it),
+    ``baseline_scale`` scales the translation and ``swap_views`` swaps the two cameras.
     """
     builder = _Builder(rng, cfg)
     if cfg.kind == "object":
@@ -320,12 +320,13 @@ def build_scene(rng: np.random.Generator, cfg: SceneConfig) -> Scene:
         R_wc1, c1 = scene.R_cw1.T, -scene.R_cw1.T @ scene.t_cw1
         if motion != "legacy":
             centre = scene.extra.get("centre")
+            room = scene.extra.get("room", np.inf)
             if centre is not None:
                 depth = scene.extra["radius"]
             else:
                 lo, hi = _DEPTH_RANGE[cfg.kind]
                 depth = float(np.clip(scene_depth(scene.quads, c0, R_wc0), lo, hi))
-            R_wc1, c1 = move_camera(motion, rng, R_wc0, c0, depth, centre)
+            R_wc1, c1 = move_camera(motion, rng, R_wc0, c0, depth, centre, room)
             scene.extra["depth"] = depth
         step = (c1 - c0) * scale
         room = scene.extra.get("room", np.inf) if motion != "legacy" else np.inf
