@@ -10,7 +10,10 @@ Examples:
     # KITTI odometry (official layout), 2 processes with DistributedDataParallel
     torchrun --nproc_per_node 2 examples/train.py --dataset kitti --data-root /data/kitti
 
-All settings live in strl_pyg.training.TrainConfig; every run stores them in its checkpoint.
+All settings live in strl_pyg.train_config.TrainConfig; every run stores them in its
+checkpoint. The default model takes its patch channels from the data (generated scenes and
+KITTI are grey, DeMoN is RGB). Bad flags, an unwritable --out, a missing or refused checkpoint
+(all load with weights_only=True) end with one error line and exit code 2.
 """
 
 from __future__ import annotations
@@ -18,14 +21,22 @@ from __future__ import annotations
 import argparse
 import sys
 
-from strl_pyg.training import add_train_arguments, run_from_args
+from strl_pyg.cli import check_train_files, run_guarded
+from strl_pyg.train_config import add_train_arguments
+
+
+def _run(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
+    check_train_files(args)  # before torch is imported
+    from strl_pyg.training import run_from_args
+
+    return run_from_args(args, ap)
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     add_train_arguments(ap)
-    return run_from_args(ap.parse_args(argv), ap)
+    return run_guarded(_run, ap.parse_args(argv), ap)
 
 
 if __name__ == "__main__":

@@ -3,11 +3,16 @@
 The main entry points::
 
     from strl_pyg import PairMatches, build_pair_graph, StrLPose, StrLPoseConfig
+
+The names are imported on first use, so ``import strl_pyg`` (and the ``strl-pose`` command's
+``--help``) does not load torch, PyG, OpenCV or kornia.
 """
 
-from strl_pyg.data import PairMatches, build_pair_graph
-from strl_pyg.geometry import Pose
-from strl_pyg.model import ABLATIONS, PoseOutput, StrLPose, StrLPoseConfig
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from strl_pyg._lazy import lazy_exports
 
 __version__ = "0.1.0"
 
@@ -21,3 +26,19 @@ __all__ = [
     "ABLATIONS",
     "__version__",
 ]
+
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "PairMatches": "strl_pyg.data.matches",
+    "build_pair_graph": "strl_pyg.data.graph",
+    "Pose": "strl_pyg.geometry",
+    "StrLPose": "strl_pyg.model",
+    "StrLPoseConfig": "strl_pyg.model",
+    "PoseOutput": "strl_pyg.model",
+    "ABLATIONS": "strl_pyg.model",
+}, globals())
+
+if TYPE_CHECKING:  # for type checkers and IDEs; never executed
+    from strl_pyg.data.graph import build_pair_graph
+    from strl_pyg.data.matches import PairMatches
+    from strl_pyg.geometry import Pose
+    from strl_pyg.model import ABLATIONS, PoseOutput, StrLPose, StrLPoseConfig

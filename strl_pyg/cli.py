@@ -3,7 +3,19 @@
 Subcommands: ``demo`` (the main job on an embedded default: a generated pair goes through
 matching, graph and model), ``match``, ``predict``, ``train``, ``evaluate`` and ``bench``.
 Every error in the user's input ends with a one-line ``error: Expected ... (got ...)`` on
-stderr and exit code 2.
+stderr and exit code 2 (no traceback): bad flags and values, missing files, folders given as
+files, undecodable images, bad intrinsics, empty or foreign match files, checkpoints that are
+corrupt or would need code to load (refused: all checkpoints load with ``weights_only=True``),
+and outputs that cannot be written (checked before any work).
+
+Large images are downscaled for matching so that their longer side is at most ``--max-side``
+pixels (default :data:`MAX_SIDE`; ``0`` keeps the full resolution), with the intrinsics scaled
+by the same factors under the package's pixel-centre convention (centre of the top-left pixel
+at ``(0, 0)``: ``x' = (x + 0.5) s - 0.5``). Saved matches are mapped back to the original
+pixel frame; the relative pose does not depend on the image scale.
+
+``strl-pose --help`` and argument errors return without importing torch: the parser is built
+from torch-free modules and every command imports its heavy modules when it runs.
 """
 
 from __future__ import annotations
@@ -18,11 +30,16 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["main", "read_intrinsics", "read_image_file", "default_checkpoint", "predict_pair"]
+__all__ = ["main", "run_guarded", "check_train_files", "build_parser", "read_intrinsics",
+           "read_image_file", "default_checkpoint", "predict_pair", "downscale_for_matching",
+           "PairInputs", "MAX_SIDE"]
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 DEFAULT_WEIGHTS = WEIGHTS_DIR / "strl_pose_synthetic.pt"
 DEMO_SEED = 2_000_017  # held out: training uses seeds < 2,000,000
+#: Default longest image side for matching (``--max-side``); larger images are downscaled.
+#: A 6000x4000 pair at full resolution needs ~6 GB in the front end.
+MAX_SIDE = 1600
 
 
 class UsageError(ValueError):
@@ -50,15 +67,25 @@ def read_image_file(path: str | os.PathLike) -> np.ndarray:
     import cv2
 
     path = Path(path)
+    if path.is_dir():
+        raise UsageError(f"Expected an image file at '{path}' (got a folder)")
     if not path.is_file():
         raise UsageError(f"Expected an image file at '{path}' (got no such file)")
+    if path.stat().st_size == 0:
+        raise UsageError(f"Expected a readable image at '{path}' (got an empty file)")
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None or img.size == 0:
         raise UsageError(f"Expected a readable image at '{path}' (got a file OpenCV cannot decode)")
     if img.dtype == np.uint16:
         img = (img / 257).astype(np.uint8)
+    if img.dtype != np.uint8:  # float / int32 TIFF or EXR: not an 8- or 16-bit image
+        raise UsageError(f"Expected an 8- or 16-bit image at '{path}' (got dtype {img.dtype})")
     if img.ndim == 3 and img.shape[2] == 4:
         img = img[..., :3]
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[..., 0]
+    if img.ndim == 3 and img.shape[2] == 2:  # grey + alpha
+        img = np.ascontiguousarray(img[..., 0])
     if img.ndim == 3:
         img = np.ascontiguousarray(img[..., ::-1])  # BGR -> RGB
     return img
@@ -80,8 +107,15 @@ def read_intrinsics(text_or_path: str) -> np.ndarray:
     """Intrinsics from ``"fx,fy,cx,cy"``, nine comma-separated numbers, or a file holding a
     3x3 matrix (DeMoN ``cam.txt``), a 3x4 projection, or KITTI ``calib.txt`` (``P0:`` row)."""
     path = Path(text_or_path)
+    if path.is_dir():
+        raise UsageError(f"Expected an intrinsics file or 'fx,fy,cx,cy' (got the folder "
+                         f"'{path}')")
     if path.is_file():
-        text = path.read_text()
+        try:
+            text = path.read_text()
+        except (OSError, UnicodeDecodeError) as err:
+            raise UsageError(f"Expected a text intrinsics file at '{path}' (got "
+                             f"{type(err).__name__})") from None
         rows = {ln.split(":", 1)[0].strip(): ln.split(":", 1)[1] for ln in text.splitlines()
                 if ":" in ln}
         body = rows.get("P0", rows.get("P2", text if not rows else None))
@@ -98,6 +132,8 @@ def read_intrinsics(text_or_path: str) -> np.ndarray:
         values = [float(v) for v in body.split()]
     except ValueError as err:
         raise UsageError(f"Expected numbers for intrinsics in {source} (got {err})") from err
+    if not all(np.isfinite(values)):
+        raise UsageError(f"Expected finite numbers for intrinsics in {source} (got {values})")
     K = _K_from_numbers(values, source)
     from strl_pyg.data.matches import _check_K
 
@@ -113,6 +149,70 @@ def _intrinsics(args) -> tuple[np.ndarray | None, np.ndarray | None]:
     if args.K:
         K0 = K1 = read_intrinsics(args.K)
     return K0, K1
+
+
+def downscale_for_matching(image: np.ndarray, K: np.ndarray | None, max_side: int
+                           ) -> tuple[np.ndarray, np.ndarray | None, tuple[float, float]]:
+    """Shrinks ``image`` (area interpolation) so its longer side is at most ``max_side``
+    pixels (``0``: unchanged) and scales ``K`` to match.
+
+    With pixel centres at integer coordinates (OpenCV), a resize by ``(s_x, s_y)`` maps
+    ``x' = (x + 0.5) s_x - 0.5``: ``fx' = s_x fx``, ``cx' = (cx + 0.5) s_x - 0.5`` (likewise
+    y). Returns the image, ``K`` and the factors ``(s_x, s_y)`` (``(1, 1)`` when unchanged).
+    """
+    h, w = image.shape[:2]
+    if max_side <= 0 or max(h, w) <= max_side:
+        return image, K, (1.0, 1.0)
+    import cv2
+
+    s = max_side / max(h, w)
+    nw, nh = max(1, round(w * s)), max(1, round(h * s))
+    small = cv2.resize(image, (nw, nh), interpolation=cv2.INTER_AREA)
+    sx, sy = nw / w, nh / h
+    if K is not None:
+        S = np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5], [0.0, 0.0, 1.0]])
+        K = S @ np.asarray(K, dtype=np.float64)
+    return small, K, (sx, sy)
+
+
+class PairInputs(tuple):
+    """``(image0, image1, K0, K1)`` as matched (downscaled to ``--max-side``), unpacking like
+    a 4-tuple, with the originals: ``original`` (the same 4-tuple at full resolution) and
+    ``scales`` (``((s_x, s_y)`` of image 0, of image 1)``)."""
+
+    original: tuple
+    scales: tuple[tuple[float, float], tuple[float, float]]
+
+    @property
+    def downscaled(self) -> bool:
+        return self.scales != ((1.0, 1.0), (1.0, 1.0))
+
+    def to_original_frame(self, matches):
+        """``matches`` of the downscaled images expressed in the original pixel frame
+        (coordinates ``x = (x' + 0.5) / s - 0.5``, original sizes, intrinsics and images)."""
+        if not self.downscaled:
+            return matches
+        from strl_pyg.data.matches import PairMatches
+
+        def back(xy: np.ndarray, s: tuple[float, float]) -> np.ndarray:
+            return (np.asarray(xy, dtype=np.float64) + 0.5) / np.asarray(s) - 0.5
+
+        imgs = []
+        for small, full in ((matches.image0, self.original[0]), (matches.image1, self.original[1])):
+            if small is not None and small.ndim == 2 and full.ndim == 3:
+                import cv2
+
+                full = cv2.cvtColor(full, cv2.COLOR_RGB2GRAY)
+            imgs.append(None if small is None else full)
+        (s0, s1), info = self.scales, dict(matches.info)
+        info["downscaled_for_matching"] = {"scale0": list(s0), "scale1": list(s1)}
+        return PairMatches(
+            points0=back(matches.points0, s0), points1=back(matches.points1, s1),
+            lines0=back(matches.lines0, s0), lines1=back(matches.lines1, s1),
+            point_scores=matches.point_scores, line_scores=matches.line_scores,
+            image_size0=self.original[0].shape[:2], image_size1=self.original[1].shape[:2],
+            K0=self.original[2], K1=self.original[3], image0=imgs[0], image1=imgs[1],
+            info=info)
 
 
 # ----------------------------------------------------------------------------- the pipeline
@@ -219,6 +319,9 @@ def _print_estimate(est, indent: str = "") -> None:
 
 # ----------------------------------------------------------------------------- subcommands
 def cmd_demo(args) -> int:
+    from strl_pyg.io import check_output_dir
+
+    check_output_dir(args.out, "a folder for --out")  # before any work
     from strl_pyg.frontend import epipolar_residuals, match_images
     from strl_pyg.synthetic import SceneConfig, generate_pair
     from strl_pyg.viz.matches import save_matches_png
@@ -263,10 +366,20 @@ def cmd_demo(args) -> int:
     return 0
 
 
-def _read_pair_args(args) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+def _read_pair_args(args) -> PairInputs:
+    """Reads the pair's images and intrinsics and downscales them to ``--max-side``."""
     img0, img1 = read_image_file(args.image0), read_image_file(args.image1)
     K0, K1 = _intrinsics(args)
-    return img0, img1, K0, K1
+    max_side = getattr(args, "max_side", MAX_SIDE)
+    small0, sK0, s0 = downscale_for_matching(img0, K0, max_side)
+    small1, sK1, s1 = downscale_for_matching(img1, K1, max_side)
+    inputs = PairInputs((small0, small1, sK0, sK1))
+    inputs.original, inputs.scales = (img0, img1, K0, K1), (s0, s1)
+    if inputs.downscaled:
+        print(f"note: images downscaled for matching to at most {max_side} px "
+              f"({img0.shape[1]}x{img0.shape[0]} -> {small0.shape[1]}x{small0.shape[0]}); "
+              "--max-side 0 keeps the full resolution", file=sys.stderr)
+    return inputs
 
 
 def _match(inputs, args):
@@ -277,9 +390,15 @@ def _match(inputs, args):
 
 
 def cmd_match(args) -> int:
+    from strl_pyg.io import check_output_file
+
+    check_output_file(args.out, "a file path for --out")  # before any work
+    if args.png:
+        check_output_file(args.png, "a file path for --png")
+    inputs = _read_pair_args(args)
     from strl_pyg.viz.matches import save_matches_png
 
-    matches = _match(_read_pair_args(args), args)
+    matches = inputs.to_original_frame(_match(inputs, args))
     path = matches.save(args.out)
     print(f"{matches.num_points} points, {matches.num_lines} lines -> {path}")
     if args.png:
@@ -309,12 +428,44 @@ def cmd_predict(args) -> int:
 
 
 def cmd_train(args, parser) -> int:
+    check_train_files(args)  # before torch is imported
     from strl_pyg.training import run_from_args
 
     return run_from_args(args, parser)
 
 
+def check_train_files(args) -> None:
+    """Checks the files a training run needs (``--out`` writable, ``--init-from`` present,
+    ``<out>/last.pt`` for ``--resume``) before torch is imported; raises ``UsageError`` /
+    ``OSError`` with one-line messages."""
+    from strl_pyg.io import check_output_dir
+
+    check_output_dir(args.out, "a run folder for --out")
+    if args.init_from:
+        _check_input_file(args.init_from, "weights file for --init-from")
+    if args.resume:
+        _check_input_file(Path(args.out) / "last.pt", "training checkpoint for --resume")
+
+
+def _check_input_file(path: str | os.PathLike, what: str) -> None:
+    path = Path(path)
+    if path.is_dir():
+        raise UsageError(f"Expected a {what} at '{path}' (got a folder)")
+    if not path.is_file():
+        raise UsageError(f"Expected a {what} at '{path}' (got no such file)")
+
+
 def cmd_evaluate(argv: list[str]) -> int:
+    pre = argparse.ArgumentParser(add_help=False, allow_abbrev=False)
+    pre.add_argument("--out", nargs="?", default=None)  # a missing value is the real
+    pre.add_argument("--checkpoint", nargs="?", default=None)  # parser's to report
+    known, _ = pre.parse_known_args(argv)
+    if known.out:
+        from strl_pyg.io import check_output_dir
+
+        check_output_dir(known.out, "a folder for --out")  # before any work
+    if known.checkpoint:
+        _check_input_file(known.checkpoint, "model checkpoint for --checkpoint")
     try:
         from strl_pyg.evaluation import main as evaluate_main
     except ImportError as err:
@@ -345,6 +496,8 @@ def cmd_bench(args) -> int:
         return (time.perf_counter() - t0) / n * 1e3
 
     n = args.repeat
+    if n < 1:
+        raise UsageError(f"Expected a positive --repeat (got {n})")
     ms_match = timed(lambda: match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K),
                      max(1, n // 5))
     m = pair.matches
@@ -371,16 +524,38 @@ def _add_pair_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--K0", help="intrinsics of image 0 (same formats)")
     p.add_argument("--K1", help="intrinsics of image 1 (default: --K0)")
     p.add_argument("--detector", choices=("sift", "orb"), default="sift")
+    p.add_argument("--max-side", type=_non_negative_int, default=MAX_SIDE, metavar="PX",
+                   help=f"downscale images whose longer side exceeds PX for matching, K scaled "
+                        f"alike (default {MAX_SIDE}; 0: full resolution)")
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"Expected an integer >= 0 (got {text!r})") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"Expected an integer >= 0 (got {text!r})")
+    return value
+
+
+class _Parser(argparse.ArgumentParser):
+    """Reports a bad command line as one line (``UsageError``, exit code 2 in :func:`main`)
+    instead of argparse's usage block."""
+
+    def error(self, message: str):
+        raise UsageError(f"Expected valid arguments (got {message}); see '{self.prog} --help'")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from strl_pyg.training import add_train_arguments
+    """The ``strl-pose`` parser; building it imports neither torch nor the training code."""
+    from strl_pyg.train_config import add_train_arguments
 
-    ap = argparse.ArgumentParser(prog="strl-pose", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _Parser(prog="strl-pose", description=__doc__,
+                 formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="command", required=True)
     p = sub.add_parser("demo", help="the main job on a generated pair (no downloads)")
-    p.add_argument("--seed", type=int, default=DEMO_SEED)
+    p.add_argument("--seed", type=_non_negative_int, default=DEMO_SEED)
     p.add_argument("--kind", choices=("street", "indoor", "boxes"), default="street")
     p.add_argument("--checkpoint", default=None, help="default: the shipped weights")
     p.add_argument("--out", default="outputs/demo", help="folder for the match drawing")
@@ -404,25 +579,49 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def main(argv: list[str] | None = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
+def _report(err: BaseException) -> int:
+    from strl_pyg.io import one_line
+
+    text = one_line(err.args[0] if isinstance(err, KeyError) and err.args else err)
+    if isinstance(err, OSError) and not text.startswith("Expected"):
+        name = f" '{err.filename}'" if err.filename else ""
+        text = f"Expected a usable path{name} (got {err.strerror or type(err).__name__})"
+    print(f"error: {text}", file=sys.stderr)
+    return 2
+
+
+def run_guarded(fn, *args) -> int:
+    """Runs ``fn(*args)`` and returns its exit code; a user error (bad flag or value, bad or
+    missing file, unwritable output, refused checkpoint: ``UsageError``, ``OSError``, or a
+    library ``ValueError`` / ``TypeError`` / ``KeyError`` saying "Expected ...") is printed as
+    one ``error: ...`` line on stderr and gives exit code 2, never a traceback."""
     try:
-        if argv[:1] == ["evaluate"]:
-            return cmd_evaluate(argv[1:])
-        parser = build_parser()
-        args = parser.parse_args(argv)
-        if args.command == "train":
-            return cmd_train(args, parser)
-        return {"demo": cmd_demo, "match": cmd_match, "predict": cmd_predict,
-                "bench": cmd_bench}[args.command](args)
-    except (UsageError, FileNotFoundError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    except ValueError as err:  # validation errors of the library: "Expected ... (got ...)"
+        return int(fn(*args) or 0)
+    except (UsageError, OSError) as err:  # bad flags, missing / unwritable paths
+        return _report(err)
+    except (ValueError, TypeError, KeyError) as err:  # the library's "Expected ... (got ...)"
         if "Expected" not in str(err):
             raise
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+        return _report(err)
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+
+
+def _dispatch(argv: list[str]) -> int:
+    if argv[:1] == ["evaluate"]:
+        return cmd_evaluate(argv[1:])
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command == "train":
+        return cmd_train(args, parser)
+    return {"demo": cmd_demo, "match": cmd_match, "predict": cmd_predict,
+            "bench": cmd_bench}[args.command](args)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """The ``strl-pose`` entry point; returns the exit code (0, or 2 for a user error)."""
+    return run_guarded(_dispatch, list(sys.argv[1:] if argv is None else argv))
 
 
 if __name__ == "__main__":

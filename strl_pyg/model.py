@@ -23,7 +23,7 @@ from torch_geometric.data import Batch, HeteroData
 
 from strl_pyg.data import keys as K
 from strl_pyg.geometry import Pose, quaternion_to_rotation
-from strl_pyg.io import atomic_open
+from strl_pyg.io import atomic_open, safe_torch_load
 from strl_pyg.nn import (
     AttentionConv,
     ImageEncoder,
@@ -508,15 +508,8 @@ class StrLPose(nn.Module):
         """Rebuilds a model saved with :meth:`save`; raises ``ValueError`` on a corrupt,
         foreign or mismatched checkpoint."""
         path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"Expected a checkpoint file at {path} (got none)")
-        try:
-            payload = torch.load(path, map_location=map_location, weights_only=True)
-        except Exception as err:
-            raise ValueError(
-                f"Expected a readable StrLPose checkpoint at {path} (got {type(err).__name__}: "
-                f"{str(err).splitlines()[0] if str(err) else ''})"
-            ) from err
+        # weights_only=True: a file that would run code is refused (io.UnsafeFileError)
+        payload = safe_torch_load(path, "StrLPose checkpoint", map_location)
         if not isinstance(payload, dict) or payload.get("format") != cls._FORMAT:
             got = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
             raise ValueError(f"Expected a '{cls._FORMAT}' checkpoint at {path} (got {got!r})")

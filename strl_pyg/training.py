@@ -22,7 +22,7 @@ import random
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -37,10 +37,11 @@ from tqdm.auto import tqdm
 from strl_pyg.data import keys as K
 from strl_pyg.data.transforms import FixedSizeResample, RandomSwap
 from strl_pyg.geometry import Pose, rotation_to_quaternion
-from strl_pyg.io import atomic_open
+from strl_pyg.io import UnsafeFileError, atomic_open, safe_torch_load
 from strl_pyg.loss import PoseLoss
 from strl_pyg.metrics import pose_auc, relative_pose_error
-from strl_pyg.model import ABLATIONS, StrLPose, StrLPoseConfig
+from strl_pyg.model import StrLPose
+from strl_pyg.train_config import DATASETS, TrainConfig, add_train_arguments  # noqa: F401
 
 __all__ = [
     "TrainConfig",
@@ -56,71 +57,7 @@ __all__ = [
     "plot_history",
 ]
 
-DATASETS = ("synthetic", "kitti", "demon")
-CHECKPOINT_VERSION = 1
-
-
-@dataclass
-class TrainConfig:
-    """Everything that decides a training run (stored in each checkpoint)."""
-
-    dataset: str = "synthetic"  # synthetic | kitti | demon
-    data_root: str | None = None  # dataset root (kitti: the odometry root; demon: DeepSfM root)
-    cache_dir: str = "outputs/match_cache"  # front-end match cache of real datasets
-    scene: dict[str, Any] = field(default_factory=dict)  # SceneConfig fields (synthetic)
-    scene_kinds: list[str] = field(default_factory=lambda: ["street", "indoor", "boxes"])
-    train_pairs: int = 2048  # synthetic: pairs in the training set (seeds 0..N-1)
-    val_pairs: int = 128  # synthetic: held-out pairs (seeds from 1_000_000)
-    kitti_k: int = 1  # kitti: frame gap of a pair
-    train_sequences: list[str] | None = None  # kitti: override the standard split (00-08)
-    val_sequences: list[str] | None = None  # kitti: override the standard split (09-10)
-    limit: int | None = None  # real datasets: keep only the first pairs (smoke runs)
-    model: str = "full"  # ablation row of the paper (StrLPoseConfig.ablation)
-    model_overrides: dict[str, Any] = field(default_factory=dict)  # other StrLPoseConfig fields
-    lr: float = 1e-4  # Adam, as the paper
-    batch_size: int = 16  # global batch (split over DDP ranks), as the paper
-    steps: int = 2000  # optimiser steps
-    val_every: int = 200  # validate and checkpoint every this many steps (and at the end)
-    num_points: int = 384  # resampled per pair, as the paper
-    num_lines: int = 192
-    patch_size: int = 1  # the paper's single pixel
-    swap_prob: float = 0.5  # training pairs have their images exchanged with this probability
-    init_from: str | None = None  # start from these weights (model.pt or last.pt); fine-tuning
-    grad_clip: float | None = 10.0  # max gradient norm (None: off)
-    seed: int = 0
-    out_dir: str = "runs/default"
-    num_workers: int = 0  # data-loading processes
-    device: str = "cpu"
-    tensorboard: bool = True  # also log to TensorBoard when it is installed
-    in_memory: bool = True  # keep generated / loaded graphs in memory after first access
-
-    def __post_init__(self) -> None:
-        if self.dataset not in DATASETS:
-            raise ValueError(f"Expected dataset in {DATASETS} (got {self.dataset!r})")
-        for name in ("batch_size", "steps", "val_every", "train_pairs", "val_pairs", "kitti_k"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or value < 1:
-                raise ValueError(f"Expected a positive integer '{name}' (got {value!r})")
-        if not 0.0 <= self.swap_prob <= 1.0:
-            raise ValueError(f"Expected swap_prob in [0, 1] (got {self.swap_prob!r})")
-        if not self.lr > 0:
-            raise ValueError(f"Expected a positive learning rate (got {self.lr!r})")
-        if self.dataset != "synthetic" and not self.data_root:
-            raise ValueError(f"Expected --data-root for dataset '{self.dataset}' (got none)")
-
-    def model_config(self) -> StrLPoseConfig:
-        overrides = dict(self.model_overrides)
-        if self.dataset == "kitti":
-            overrides.setdefault("translation", "metric")
-        return StrLPoseConfig.ablation(self.model, **overrides)
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"Expected TrainConfig fields (got unknown keys {unknown})")
-        return cls(**d)
+CHECKPOINT_VERSION = 2  # 2: every value loads with torch.load(weights_only=True)
 
 
 # ----------------------------------------------------------------------------- data
@@ -309,8 +246,31 @@ def evaluate_model(model: torch.nn.Module, loader, loss_fn: PoseLoss | None = No
 
 
 # ----------------------------------------------------------------------------- checkpoints
+def _check_plain(value: Any, where: str = "state") -> None:
+    """Raises ``TypeError`` unless ``value`` holds only what ``torch.load(weights_only=True)``
+    reads back: tensors, numbers, strings, ``None`` and lists / tuples / dicts of them."""
+    if value is None or isinstance(value, (Tensor, bool, int, float, str, torch.device,
+                                           torch.dtype)):
+        return
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _check_plain(k, f"{where} key")
+            _check_plain(v, f"{where}[{k!r}]")
+        return
+    if isinstance(value, (list, tuple)):
+        for i, v in enumerate(value):
+            _check_plain(v, f"{where}[{i}]")
+        return
+    raise TypeError(f"Expected tensors, numbers, strings and plain containers in a checkpoint "
+                    f"(got {type(value).__module__}.{type(value).__qualname__} at {where})")
+
+
 def save_checkpoint(path: str | os.PathLike, state: dict[str, Any]) -> Path:
-    """Writes a checkpoint atomically (temporary file in the same folder, then rename)."""
+    """Writes a training checkpoint atomically (temporary file in the same folder, then
+    rename). ``state`` must hold only tensors, numbers, strings and plain containers, so that
+    :func:`load_checkpoint` reads it back with ``weights_only=True`` (``TypeError`` otherwise,
+    before anything is written)."""
+    _check_plain(state)
     path = Path(path)
     with atomic_open(path) as f:
         torch.save(state, f)
@@ -318,32 +278,46 @@ def save_checkpoint(path: str | os.PathLike, state: dict[str, Any]) -> Path:
 
 
 def load_checkpoint(path: str | os.PathLike) -> dict[str, Any]:
-    """Loads a training checkpoint with clear errors for missing or corrupt files."""
+    """Loads a training checkpoint (``last.pt``) safely: ``torch.load(weights_only=True)``,
+    so a file that would run code is refused (:class:`~strl_pyg.io.UnsafeFileError`) and never
+    executed. Clear one-line errors for missing, corrupt, foreign or old files."""
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"Expected a checkpoint at '{path}' (got no such file)")
     try:
-        state = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as err:
-        raise ValueError(f"Expected a readable checkpoint at '{path}' (got {err})") from err
+        state = safe_torch_load(path, "checkpoint")
+    except UnsafeFileError as err:
+        if "numpy" in str(err):  # version 1 stored numpy's RNG state as an array
+            raise UnsafeFileError(f"{err}; training checkpoints before version "
+                                  f"{CHECKPOINT_VERSION} cannot be continued: start from that "
+                                  "run's model.pt with --init-from") from None
+        raise
     need = {"version", "train_config", "model_config", "model", "optimizer", "step"}
     if not isinstance(state, dict) or not need <= set(state):
         got = sorted(state) if isinstance(state, dict) else type(state).__name__
         raise ValueError(f"Expected a training checkpoint with keys {sorted(need)} in '{path}' "
                          f"(got {got})")
+    if state["version"] != CHECKPOINT_VERSION:
+        raise ValueError(f"Expected training checkpoint version {CHECKPOINT_VERSION} in "
+                         f"'{path}' (got {state['version']!r})")
     return state
 
 
 def _rng_state() -> dict[str, Any]:
-    # the legacy global numpy state is what third-party augmentation code draws from
-    return {"torch": torch.get_rng_state(), "numpy": np.random.get_state(),  # noqa: NPY002
+    # the legacy global numpy state is what third-party augmentation code draws from; it is
+    # stored as a tensor and numbers so the checkpoint loads with weights_only=True
+    kind, keys, pos, has_gauss, cached = np.random.get_state()  # noqa: NPY002
+    return {"torch": torch.get_rng_state(),
+            "numpy": {"kind": str(kind), "keys": torch.from_numpy(keys.astype(np.int64)),
+                      "pos": int(pos), "has_gauss": int(has_gauss), "cached": float(cached)},
             "python": random.getstate()}
 
 
 def _set_rng_state(state: dict[str, Any]) -> None:
     torch.set_rng_state(state["torch"])
-    np.random.set_state(state["numpy"])  # noqa: NPY002
-    random.setstate(state["python"])
+    n = state["numpy"]
+    np.random.set_state((n["kind"], n["keys"].numpy().astype(np.uint32), n["pos"],  # noqa: NPY002
+                         n["has_gauss"], n["cached"]))
+    version, internal, gauss = state["python"]
+    random.setstate((version, tuple(internal), gauss))
 
 
 # ----------------------------------------------------------------------------- the loop
@@ -402,8 +376,16 @@ def _unaugmented_poses(batch: HeteroData) -> Tensor:
 
 def _init_weights(model: StrLPose, path: str | os.PathLike) -> None:
     """Loads the weights of a model checkpoint (``model.pt``) or training checkpoint
-    (``last.pt``) into ``model``; the architectures must match."""
+    (``last.pt``) into ``model``; the architectures must match. Both load with
+    ``weights_only=True`` (a file that would run code is refused)."""
     path = Path(path)
+    payload = safe_torch_load(path, "weights file (model.pt or last.pt)")
+    if isinstance(payload, dict) and "format" in payload:
+        state = StrLPose.load(path).state_dict()
+    else:
+        state = load_checkpoint(path)["model"]
+    # A model that adds the geometric head may start from regression-only weights: the new
+    # head's parameters are the only ones allowed to be missing.
     try:
         state = StrLPose.load(path).state_dict()
     except ValueError:
@@ -596,47 +578,6 @@ def _parse_value(text: str):
         return json.loads(text)
     except json.JSONDecodeError:
         return text
-
-
-def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """Adds the training flags (one per :class:`TrainConfig` field that users set) to ``ap``."""
-    d = TrainConfig()
-    ap.add_argument("--dataset", choices=DATASETS, default=d.dataset)
-    ap.add_argument("--data-root", default=None, help="dataset root (kitti, demon)")
-    ap.add_argument("--cache-dir", default=d.cache_dir, help="front-end match cache")
-    ap.add_argument("--model", choices=sorted(ABLATIONS), default=d.model,
-                    help="ablation row of the paper (default: full)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="model config override, e.g. --set hidden=64 --set layers=3")
-    ap.add_argument("--scene", action="append", default=[], metavar="KEY=VALUE",
-                    help="SceneConfig field of generated scenes, e.g. --scene noise_px=0.5")
-    ap.add_argument("--scene-kinds", default=",".join(d.scene_kinds),
-                    help="generated scene kinds, comma-separated")
-    ap.add_argument("--train-pairs", type=int, default=d.train_pairs)
-    ap.add_argument("--val-pairs", type=int, default=d.val_pairs)
-    ap.add_argument("--kitti-k", type=int, default=d.kitti_k, help="frame gap of KITTI pairs")
-    ap.add_argument("--train-sequences", default=None, help="KITTI sequences, comma-separated")
-    ap.add_argument("--val-sequences", default=None, help="KITTI sequences, comma-separated")
-    ap.add_argument("--limit", type=int, default=None, help="keep only the first pairs")
-    ap.add_argument("--lr", type=float, default=d.lr)
-    ap.add_argument("--batch-size", type=int, default=d.batch_size)
-    ap.add_argument("--steps", type=int, default=d.steps)
-    ap.add_argument("--val-every", type=int, default=d.val_every)
-    ap.add_argument("--num-points", type=int, default=d.num_points)
-    ap.add_argument("--num-lines", type=int, default=d.num_lines)
-    ap.add_argument("--patch-size", type=int, default=d.patch_size)
-    ap.add_argument("--swap-prob", type=float, default=d.swap_prob,
-                    help="probability of exchanging the two images of a training pair")
-    ap.add_argument("--init-from", default=None,
-                    help="start from these weights (model.pt or last.pt), e.g. to fine-tune")
-    ap.add_argument("--seed", type=int, default=d.seed)
-    ap.add_argument("--workers", type=int, default=d.num_workers)
-    ap.add_argument("--device", default=d.device)
-    ap.add_argument("--out", default=d.out_dir, help="run folder (checkpoint, logs, curves)")
-    ap.add_argument("--resume", action="store_true", help="continue from <out>/last.pt")
-    ap.add_argument("--no-tensorboard", action="store_true")
-    ap.add_argument("--no-progress", action="store_true")
-    return ap
 
 
 def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:

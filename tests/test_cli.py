@@ -125,3 +125,234 @@ def test_bench_prints_a_timing_table(tmp_path, capsys):
     out = capsys.readouterr().out
     rows = [r for r in out.splitlines() if r.startswith("| ") and "ms" not in r.split("|")[2]]
     assert len(rows) == 4 and all(float(r.split("|")[2]) > 0 for r in rows)
+
+
+# ----------------------------------------------------------------------------- start-up time
+def _run_python(code: str) -> tuple[str, float]:
+    import subprocess
+    import sys
+    import time
+
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout, time.perf_counter() - t0
+
+
+HEAVY = ("torch", "torch_geometric", "cv2", "kornia", "strl_pyg.training")
+
+
+@pytest.mark.parametrize("argv, code", [
+    (["--help"], 0), (["train", "--help"], 0), (["predict", "--help"], 0),
+    (["bench", "--repeat", "x"], 2), (["predict"], 2), (["frobnicate"], 2),
+    (["train", "--steps", "ten"], 2), (["match", "a.png", "b.png", "--max-side", "-1"], 2),
+])
+def test_help_and_argument_errors_do_not_import_torch(argv, code):
+    out, seconds = _run_python(
+        "import contextlib, io, sys\nfrom strl_pyg.cli import main\n"
+        "err = io.StringIO()\n"
+        "with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):\n"
+        f"    try:\n        rc = main({argv!r})\n    except SystemExit as e:\n"
+        "        rc = e.code\n"
+        f"print(rc, [m for m in {HEAVY!r} if m in sys.modules], repr(err.getvalue()))")
+    rc, heavy, err = out.split(" ", 2)
+    assert int(rc) == code and heavy == "[]", out
+    if code == 2:  # one line, no usage block, no traceback
+        assert eval(err).count("\n") == 1 and eval(err).startswith("error: Expected")
+    assert seconds < 5.0  # measured: ~0.3 s (benchmarks/bench_startup.py); loose for CI
+
+
+def test_import_strl_pyg_is_light_and_names_resolve_lazily():
+    out, _ = _run_python(
+        f"import sys, strl_pyg\nprint([m for m in {HEAVY!r} if m in sys.modules])\n"
+        "from strl_pyg import StrLPose, PairMatches\nfrom strl_pyg.data import datasets, keys\n"
+        "print(StrLPose.__module__, PairMatches.__module__, datasets.__name__, keys.__name__)")
+    first, second = out.splitlines()
+    assert first == "[]"
+    assert second == ("strl_pyg.model strl_pyg.data.matches strl_pyg.data.datasets "
+                      "strl_pyg.data.keys")
+
+
+def test_train_choices_match_the_model_ablations():
+    from strl_pyg.model import ABLATIONS
+    from strl_pyg.train_config import ABLATION_NAMES
+
+    assert tuple(ABLATIONS) == ABLATION_NAMES
+
+
+# ----------------------------------------------------------------------------- outputs first
+@pytest.fixture
+def no_frontend(monkeypatch):
+    """Makes any matching fail loudly: the checks under test must come before the work."""
+    import strl_pyg.frontend
+
+    def boom(*a, **k):
+        raise AssertionError("the front end ran before the output was checked")
+
+    monkeypatch.setattr(strl_pyg.frontend, "match_images", boom)
+
+
+@pytest.mark.parametrize("case", ["out_is_dir", "out_under_file", "png_is_dir"])
+def test_match_checks_outputs_before_any_work(case, tmp_path, capsys, no_frontend):
+    img = tmp_path / "img.png"
+    cv2.imwrite(str(img), np.random.default_rng(0).integers(0, 255, (60, 80), np.uint8))
+    (tmp_path / "file").write_text("x")
+    out, png = str(tmp_path / "m.npz"), None
+    if case == "out_is_dir":
+        out = str(tmp_path)
+    elif case == "out_under_file":
+        out = str(tmp_path / "file" / "m.npz")
+    else:
+        png = str(tmp_path)
+    argv = ["match", str(img), str(img), "--out", out] + (["--png", png] if png else [])
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("error: Expected") and ".tmp" not in err
+    assert ("folder" in err) if case != "out_under_file" else ("is a file" in err)
+
+
+@pytest.mark.parametrize("argv", [
+    ["demo", "--out", "{file}"],
+    ["train", "--out", "{file}", "--steps", "1"],
+    ["evaluate", "--out", "{file}", "--num-pairs", "1"],
+])
+def test_other_commands_check_out_before_any_work(argv, tmp_path, capsys, no_frontend):
+    (tmp_path / "file").write_text("x")
+    argv = [str(tmp_path / "file") if a == "{file}" else a for a in argv]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: Expected") and "which is a file" in err
+
+
+@pytest.mark.skipif(__import__("os").geteuid() == 0, reason="root writes to read-only folders")
+def test_unwritable_out_folder(tmp_path, capsys, no_frontend):
+    ro = tmp_path / "ro"
+    ro.mkdir(mode=0o555)
+    img = tmp_path / "img.png"
+    cv2.imwrite(str(img), np.zeros((20, 20), np.uint8))
+    assert cli.main(["match", str(img), str(img), "--out", str(ro / "m.npz")]) == 2
+    assert "writable" in capsys.readouterr().err
+
+
+def test_atomic_writer_names_the_target_not_a_temporary(tmp_path):
+    from strl_pyg.io import atomic_open
+
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(OSError, match="Expected to write") as exc:
+        with atomic_open(tmp_path / "file" / "m.npz"):
+            pass
+    assert ".tmp" not in str(exc.value)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda p: p.mkdir(), "got a folder"),
+    (lambda p: p.write_bytes(b""), "empty file"),
+    (lambda p: cv2.imwrite(str(p.with_suffix(".tiff")), np.zeros((8, 8), np.float32))
+     and p.with_suffix(".tiff").rename(p), "8- or 16-bit"),
+])
+def test_bad_image_files_get_their_own_message(make, message, tmp_path, capsys):
+    bad = tmp_path / "bad.png"
+    make(bad)
+    assert cli.main(["match", str(bad), str(bad), "--out", str(tmp_path / "m.npz")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err
+
+
+def test_folder_as_intrinsics_and_nan_intrinsics(tmp_path):
+    with pytest.raises(cli.UsageError, match="folder"):
+        cli.read_intrinsics(str(tmp_path))
+    with pytest.raises(cli.UsageError, match="finite"):
+        cli.read_intrinsics("nan,100,50,50")
+
+
+def test_library_key_error_becomes_one_line(capsys, monkeypatch):
+    def fail(args):
+        raise KeyError("Expected keys ['points0'] in match file 'm.npz' (got [])")
+
+    monkeypatch.setattr(cli, "cmd_bench", fail)
+    assert cli.main(["bench"]) == 2
+    assert capsys.readouterr().err == "error: Expected keys ['points0'] in match file " \
+                                      "'m.npz' (got [])\n"
+
+
+# ----------------------------------------------------------------------------- --max-side
+def test_downscale_scales_K_under_the_pixel_centre_convention():
+    K = np.array([[500.0, 0, 319.5], [0, 480.0, 239.5], [0, 0, 1]])
+    img = np.zeros((480, 640), np.uint8)
+    small, Ks, (sx, sy) = cli.downscale_for_matching(img, K, 320)
+    assert small.shape == (240, 320) and (sx, sy) == (0.5, 0.5)
+    # a 3D point projects to x in the full image and to (x + 0.5) s - 0.5 in the small one
+    X = np.array([0.3, -0.2, 2.0])
+    x_full, x_small = (K @ X)[:2] / X[2], (Ks @ X)[:2] / X[2]
+    assert np.allclose(x_small, (x_full + 0.5) * 0.5 - 0.5)
+    assert np.allclose(Ks[:2, 2], [159.5, 119.5])  # the centre stays the centre
+    same, K_same, s = cli.downscale_for_matching(img, K, 0)
+    assert same is img and K_same is K and s == (1.0, 1.0)
+
+
+def test_match_of_a_large_pair_reports_the_original_frame(kitti_pair, tmp_path, capsys):
+    """KITTI frames upscaled 3x (nearest) are downscaled back exactly by --max-side: the
+    matches equal those of the original frames, mapped as x_big = 3 x + 1."""
+    img0, img1, calib, _ = kitti_pair
+    big = []
+    for i, src in enumerate((img0, img1)):
+        g = cv2.imread(src, cv2.IMREAD_GRAYSCALE)
+        path = tmp_path / f"big{i}.png"
+        cv2.imwrite(str(path), cv2.resize(g, None, fx=3, fy=3, interpolation=cv2.INTER_NEAREST))
+        big.append(str(path))
+        w = g.shape[1]
+    K = cli.read_intrinsics(calib)
+    K_big = np.array([[3, 0, 1.0], [0, 3, 1.0], [0, 0, 1]]) @ K
+    k_big = ",".join(str(v) for v in (K_big[0, 0], K_big[1, 1], K_big[0, 2], K_big[1, 2]))
+    k = ",".join(str(v) for v in (K[0, 0], K[1, 1], K[0, 2], K[1, 2]))
+    assert cli.main(["match", img0, img1, "--K", k, "--out", str(tmp_path / "a.npz")]) == 0
+    assert cli.main(["match", *big, "--K", k_big, "--max-side", str(w),
+                     "--out", str(tmp_path / "b.npz")]) == 0
+    assert "downscaled for matching" in capsys.readouterr().err
+    from strl_pyg.data import PairMatches
+
+    a, b = PairMatches.load(tmp_path / "a.npz"), PairMatches.load(tmp_path / "b.npz")
+    assert b.image_size0 == (3 * a.image_size0[0], 3 * a.image_size0[1])
+    assert np.allclose(b.K0, K_big) and b.image0.shape == tuple(b.image_size0)
+    assert a.num_points > 50 and b.num_points == a.num_points
+    assert np.allclose(b.points0, 3 * a.points0 + 1, atol=1e-6)
+    assert np.allclose(b.lines1, 3 * a.lines1 + 1, atol=1e-6)
+
+
+# ----------------------------------------------------------------------------- training default
+def test_default_train_config_model_accepts_its_default_data():
+    """The default model config takes its patch channels from the data (generated scenes
+    are grey): the default model runs on a default training graph."""
+    from dataclasses import replace
+
+    from torch_geometric.loader.dataloader import Collater
+
+    from strl_pyg.model import StrLPose
+    from strl_pyg.train_config import DATA_CHANNELS, TrainConfig
+    from strl_pyg.training import build_datasets
+
+    cfg = replace(TrainConfig(), train_pairs=1, val_pairs=1)
+    g = build_datasets(cfg)[0][0]
+    assert g["point"].patch0.shape[1] == DATA_CHANNELS["synthetic"] * cfg.patch_size ** 2
+    out = StrLPose(cfg.model_config())(Collater(None)([g]))
+    assert out.quaternion.shape == (1, 4)
+    assert TrainConfig(dataset="demon", data_root="x").model_config().patch_features == 3
+    assert TrainConfig(patch_size=3).model_config().patch_features == 9
+    assert TrainConfig(model_overrides={"patch_features": 3}).model_config().patch_features == 3
+
+
+@pytest.mark.slow
+def test_readme_training_command_runs_on_defaults(tmp_path):
+    """Exactly the README's command, 3 steps (validation on the default 128 pairs: ~2 min)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "examples" / "train.py"
+    proc = subprocess.run([sys.executable, str(script), "--steps", "3", "--out", "run"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=850)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert result["step"] == 3 and np.isfinite(result["rot_err_deg"])
+    assert (tmp_path / "run" / "last.pt").is_file() and (tmp_path / "run" / "model.pt").is_file()

@@ -1,28 +1,30 @@
-"""Match containers, pair graphs, transforms and datasets."""
+"""Match containers, pair graphs, transforms and datasets.
 
-from strl_pyg.data import datasets, keys
-from strl_pyg.data.graph import (
-    build_pair_graph,
-    complete_edge_index,
-    has_implicit_complete_edges,
-    load_graph,
-    materialize_complete_edges,
-    save_graph,
-)
-from strl_pyg.data.matches import PairMatches, load_external_matches
-from strl_pyg.data.transforms import (
-    FixedSizeResample,
-    MaterializeCompleteEdges,
-    RandomSwap,
-    swap_images,
-)
+Names are imported on first use: ``from strl_pyg.data import PairMatches`` needs only numpy;
+graphs, transforms and datasets load torch and PyG when first touched.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from strl_pyg._lazy import lazy_exports
+
+_GRAPH = "strl_pyg.data.graph"
+_TRANSFORMS = "strl_pyg.data.transforms"
 
 __all__ = [
     "datasets",
     "keys",
     "PairMatches",
     "load_external_matches",
+    "load_hloc_matches",
+    "from_lightglue",
+    "MatchFormatError",
     "build_pair_graph",
+    "PairGraph",
+    "ImplicitEdgesError",
+    "edge_index_dict",
     "complete_edge_index",
     "has_implicit_complete_edges",
     "materialize_complete_edges",
@@ -33,3 +35,49 @@ __all__ = [
     "RandomSwap",
     "swap_images",
 ]
+
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "datasets": "",
+    "keys": "",
+    "PairMatches": "strl_pyg.data.matches",
+    "load_external_matches": "strl_pyg.data.external",
+    "load_hloc_matches": "strl_pyg.data.external_hloc",
+    "from_lightglue": "strl_pyg.data.external",
+    "MatchFormatError": "strl_pyg.data.external",
+    "build_pair_graph": _GRAPH,
+    "PairGraph": _GRAPH,
+    "ImplicitEdgesError": _GRAPH,
+    "edge_index_dict": _GRAPH,
+    "complete_edge_index": _GRAPH,
+    "has_implicit_complete_edges": _GRAPH,
+    "materialize_complete_edges": _GRAPH,
+    "save_graph": _GRAPH,
+    "load_graph": _GRAPH,
+    "FixedSizeResample": _TRANSFORMS,
+    "MaterializeCompleteEdges": _TRANSFORMS,
+    "RandomSwap": _TRANSFORMS,
+    "swap_images": _TRANSFORMS,
+}, globals())
+
+if TYPE_CHECKING:  # for type checkers and IDEs; never executed
+    from strl_pyg.data import datasets, keys
+    from strl_pyg.data.external import MatchFormatError, from_lightglue, load_external_matches
+    from strl_pyg.data.external_hloc import load_hloc_matches
+    from strl_pyg.data.graph import (
+        ImplicitEdgesError,
+        PairGraph,
+        build_pair_graph,
+        complete_edge_index,
+        edge_index_dict,
+        has_implicit_complete_edges,
+        load_graph,
+        materialize_complete_edges,
+        save_graph,
+    )
+    from strl_pyg.data.matches import PairMatches
+    from strl_pyg.data.transforms import (
+        FixedSizeResample,
+        MaterializeCompleteEdges,
+        RandomSwap,
+        swap_images,
+    )
