@@ -103,6 +103,7 @@ def stubs(files):
         return {"step": 0, "history": []}
 
     with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(files["dir"])  # relative outputs (defaults, garbage values) land in tmp
         mp.setattr(synthetic, "generate_pair", generate_small)
         mp.setattr(training, "train", fake_train)
         mp.setattr(evaluation, "synthetic_eval_pairs", lambda *a, **k: [])
