@@ -147,10 +147,13 @@ def _opencv(matches, threshold_px, confidence, max_iterations, seed) -> Baseline
     p0 = np.ascontiguousarray(matches.points0)
     x1 = normalize_points(matches.points1, matches.K1).numpy()
     p1 = np.ascontiguousarray(x1 @ K0[:2, :2].T + K0[:2, 2])
-    E, mask = cv2.findEssentialMat(
-        p0, p1, K0, method=cv2.USAC_MAGSAC, prob=confidence, threshold=float(threshold_px),
-        maxIters=int(max_iterations),
-    )
+    try:
+        E, mask = cv2.findEssentialMat(
+            p0, p1, K0, method=cv2.USAC_MAGSAC, prob=confidence, threshold=float(threshold_px),
+            maxIters=int(max_iterations),
+        )
+    except cv2.error:  # OpenCV 5's USAC asserts on some degenerate samples: no model found
+        E, mask = None, None
     if E is None or E.shape[0] < 3 or mask is None:
         return _failed(n, "opencv", (time.perf_counter() - start) * 1e3)
     best = None

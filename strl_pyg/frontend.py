@@ -219,10 +219,13 @@ def _fit_fundamental(p0, p1, cfg: FrontendConfig):
     if len(p0) < 8:
         return None, np.zeros(len(p0), bool)
     cv2.setRNGSeed(int(cfg.seed))
-    F, mask = cv2.findFundamentalMat(
-        p0, p1, cv2.USAC_MAGSAC, cfg.ransac_threshold, cfg.ransac_confidence,
-        int(cfg.ransac_max_iters),
-    )
+    try:
+        F, mask = cv2.findFundamentalMat(
+            p0, p1, cv2.USAC_MAGSAC, cfg.ransac_threshold, cfg.ransac_confidence,
+            int(cfg.ransac_max_iters),
+        )
+    except cv2.error:  # OpenCV 5's USAC asserts on some degenerate samples: no model found
+        return None, np.zeros(len(p0), bool)
     if F is None or F.shape != (3, 3) or mask is None:
         return None, np.zeros(len(p0), bool)
     return F, mask.reshape(-1).astype(bool)

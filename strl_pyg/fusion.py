@@ -63,6 +63,7 @@ __all__ = [
     "FusedPose",
     "FUSION_MODES",
     "MIN_INLIERS",
+    "GATE_CHI2",
     "PARAMETER_NAMES",
     "tangent_basis",
     "so3_exp",
@@ -85,6 +86,8 @@ PARAMETER_NAMES = ("w_x", "w_y", "w_z", "d_1", "d_2")
 FUSION_MODES = ("information", "diagonal")
 #: Inliers needed for a classical covariance: 5 parameters plus one degree of freedom.
 MIN_INLIERS = 6
+#: 99 % quantile of the chi-square law with 5 degrees of freedom (the consistency gate).
+GATE_CHI2 = 15.086
 
 
 # ----------------------------------------------------------------------------- manifolds
@@ -350,7 +353,8 @@ class FusedPose:
             :data:`PARAMETER_NAMES` (rad for ``w``, rad on the sphere for ``d``).
         weights: ``[5]`` weight of the network per parameter (``diag(Lambda^-1 Lambda_n)``;
             the classical estimate gets ``1 - weights``): 1 = network only, 0 = classical.
-        source: ``"fused"``, or ``"network"`` when the classical estimate failed.
+        source: ``"fused"``; ``"network"`` when the classical estimate failed; ``"classical"``
+            when the consistency gate refused to fuse (``info["gate"]`` says why).
         network_covariance, classical_covariance: ``[5, 5]`` inputs (``None`` on failure).
         info: ``num_inliers``, ``sigma_px``, ``sign_disagreement``, ``mode``.
     """
@@ -412,8 +416,17 @@ def fuse_poses(
     min_sigma_px: float = 0.05,
     threshold_px: float | None = 1.0,
     inflation: float = 1.0,
+    gate_chi2: float | None = GATE_CHI2,
+    network_scale: float = 1.0,
 ) -> FusedPose:
     """Fuses the network's ``T_0to1`` with a classical robust estimate (module docstring).
+
+    Consistency gate: with the network pose ``x_n`` in the classical chart, the squared
+    Mahalanobis distance ``d2 = x_n^T (Sigma_c + Sigma_n)^+ x_n`` follows a chi-square law with
+    5 degrees of freedom when both estimates are right and their covariances honest. Where
+    ``d2 > gate_chi2`` (default :data:`GATE_CHI2`, its 99 % quantile) the two disagree beyond
+    their combined uncertainty, so nothing is fused: the classical estimate is returned with
+    ``source = "classical"`` and ``info["gate"]`` holds ``d2``, the threshold and the reason.
 
     Args:
         net_pose: unbatched :class:`~strl_pyg.geometry.Pose`, or a ``PoseOutput`` of one pair.
@@ -428,6 +441,9 @@ def fuse_poses(
             :func:`~strl_pyg.baselines.estimate_relative_pose`); see
             :func:`classical_covariance`.
         inflation: variance multiplier of the classical covariance (default 1).
+        gate_chi2: consistency-gate threshold on ``d2``; ``None`` fuses always.
+        network_scale: variance multiplier of the network covariance (its calibration,
+            e.g. the fitted scale a checkpoint stores; default 1).
 
     Returns:
         :class:`FusedPose`.
@@ -469,8 +485,20 @@ def fuse_poses(
     basis = tangent_basis(t_c)
     info_c, cov_c, sigma_px = classical_covariance(classical.pose, matches, inliers,
                                                    min_sigma_px, threshold_px, inflation)
-    cov_n = network_covariance(q, t_net, lv, basis)
+    cov_n = network_covariance(q, t_net, lv, basis) * network_scale
     x_n = pose_to_tangent(net, R_c, t_c, basis)
+    d2 = float(x_n @ torch.linalg.pinv(cov_c + cov_n, hermitian=True) @ x_n)
+    gate = {"d2": d2, "threshold": gate_chi2, "fused": True}
+    if gate_chi2 is not None and not d2 <= gate_chi2:
+        gate.update(fused=False, reason=(
+            f"network and classical poses disagree beyond their combined uncertainty "
+            f"(Mahalanobis d2 = {d2:.1f} > {gate_chi2:.1f}): classical estimate kept"))
+        return FusedPose(
+            Pose(R_c, t_c * scale), cov_c, torch.zeros(5, dtype=torch.float64), "classical",
+            cov_n, cov_c,
+            {"num_inliers": n_in, "sigma_px": sigma_px,
+             "sign_disagreement": bool(float(t_net @ t_c) < 0), "mode": mode, "gate": gate},
+        )
     if mode == "diagonal":
         info_c = torch.diag(1.0 / cov_c.diagonal().clamp_min(1e-300))
         info_n = torch.diag(1.0 / cov_n.diagonal().clamp_min(1e-300))
@@ -484,5 +512,5 @@ def fuse_poses(
     return FusedPose(
         pose, cov, gain.diagonal().clone(), "fused", cov_n, cov_c,
         {"num_inliers": n_in, "sigma_px": sigma_px,
-         "sign_disagreement": bool(float(t_net @ t_c) < 0), "mode": mode},
+         "sign_disagreement": bool(float(t_net @ t_c) < 0), "mode": mode, "gate": gate},
     )

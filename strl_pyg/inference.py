@@ -176,6 +176,7 @@ class MethodContext:
 
     estimator: PoseEstimator
     results: dict[str, MethodResult]
+    cache: dict[str, Any] = field(default_factory=dict)  # shared work, e.g. a forward pass
 
     @property
     def model(self) -> torch.nn.Module:
@@ -392,6 +393,93 @@ def _classical(name: str) -> MethodFn:
     return fn
 
 
+def _full_forward(matches: PairMatches, ctx: MethodContext):
+    """The network on every match (no resampling: the geometric head weighs each match),
+    computed once per pair and shared by ``geometric`` and ``guided``."""
+    if "full_forward" not in ctx.cache:
+        est, model = ctx.estimator, ctx.model
+        start = time.perf_counter()
+        out = forward_pose(model, prepare_graph(matches, model, est.seed, resample=None),
+                           est.device)
+        ctx.cache["full_forward"] = (out, (time.perf_counter() - start) * 1e3)
+    return ctx.cache["full_forward"]
+
+
+def _no_head(name: str, ctx: MethodContext) -> MethodResult | None:
+    if not getattr(ctx.model.config, "geometric", False):
+        return MethodResult(name, "failed", warnings=[
+            f"{name} needs a model with the geometric head (config.geometric=True); this "
+            "checkpoint has only the regression head"])
+    return None
+
+
+def _with_covariance(name: str, pose_T: np.ndarray, matches: PairMatches, thr: float,
+                     **kw: Any) -> MethodResult:
+    from strl_pyg.fusion import classical_covariance
+    from strl_pyg.geometry import Pose
+    from strl_pyg.guided import _normalised, _sampson
+
+    pose = Pose.from_matrix(torch.as_tensor(pose_T, dtype=torch.float64))
+    x0, x1, focal = _normalised(matches)
+    inl = (_sampson(pose.R, pose.t, x0, x1) < thr / focal).numpy()
+    warnings = list(kw.pop("warnings", []))
+    cov = None
+    try:
+        cov = classical_covariance(pose, matches, inl, threshold_px=thr)[1].numpy()
+    except ValueError as err:
+        warnings.append(f"{name}: no covariance ({err})")
+    return MethodResult(name, "ok", pose_T, cov, warnings, num_inliers=int(inl.sum()), **kw)
+
+
+def _geometric(matches: PairMatches, ctx: MethodContext) -> MethodResult:
+    from strl_pyg.essential import DEGENERATE, refine_pose
+    from strl_pyg.geometry import Pose
+    from strl_pyg.guided import _normalised
+
+    bad = _no_head("geometric", ctx)
+    if bad is not None:
+        return bad
+    out, ms = _full_forward(matches, ctx)
+    geo = out.geometric
+    status = int(geo.status[0])
+    if status != 0:
+        why = "degenerate weighted solve (too few effective matches or rank-deficient)" \
+            if status == DEGENERATE else "no intrinsics: the weighted solve needs K0, K1"
+        return MethodResult("geometric", "degenerate" if status == DEGENERATE else "failed",
+                            time_ms=ms, warnings=[f"geometric: {why}"], raw=out)
+    start = time.perf_counter()
+    w = torch.sigmoid(geo.point_logits.double().cpu())
+    x0, x1, focal = _normalised(matches)
+    R, t = refine_pose(geo.R[:1].cpu(), geo.t[:1].cpu(), x0[None], x1[None], w[None],
+                       iterations=10, tau=ctx.estimator.threshold_px / focal)
+    T = Pose(R[0], t[0]).matrix().numpy()
+    ms += (time.perf_counter() - start) * 1e3
+    return _with_covariance("geometric", T, matches, ctx.estimator.threshold_px, time_ms=ms,
+                            info={"mean_weight": float(w.mean())}, raw=out)
+
+
+def _guided(matches: PairMatches, ctx: MethodContext) -> MethodResult:
+    from strl_pyg.guided import guided_estimate
+
+    bad = _no_head("guided", ctx)
+    if bad is not None:
+        return bad
+    base = "poselib" if _have_poselib() else "opencv"
+    out, ms = _full_forward(matches, ctx)
+    w = torch.sigmoid(out.geometric.point_logits.double().cpu()).numpy()
+    prior = ctx.results.get(base)
+    classical = prior.raw if prior is not None and prior.status == "ok" else None
+    res = guided_estimate(matches, w, base, ctx.estimator.threshold_px, seed=ctx.estimator.seed,
+                          classical=classical)
+    ms += res.time_ms
+    if not res.success:
+        return MethodResult("guided", "failed", time_ms=ms, raw=res,
+                            warnings=[f"guided {base}: no hypothesis found"])
+    info = {"base": base, "candidate": res.info["candidate"], "refined": res.info["refined"]}
+    return _with_covariance("guided", res.pose.matrix().numpy(), matches,
+                            ctx.estimator.threshold_px, time_ms=ms, info=info, raw=res)
+
+
 def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     from strl_pyg.fusion import fuse_poses
 
@@ -402,15 +490,31 @@ def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:
         return MethodResult("fused", "failed", warnings=[
             "fused needs an 'ok' regression and an 'ok' classical estimate (poselib or opencv)"])
     start = time.perf_counter()
-    f = fuse_poses(net.raw, None, cls.raw, matches, threshold_px=ctx.estimator.threshold_px)
+    scale = _calibration(ctx.model).get("regression", 1.0)
+    f = fuse_poses(net.raw, None, cls.raw, matches, threshold_px=ctx.estimator.threshold_px,
+                   network_scale=scale)
     ms = (time.perf_counter() - start) * 1e3 + net.time_ms + cls.time_ms
-    if f.source != "fused":
+    if f.source == "network":
         return MethodResult("fused", "failed", time_ms=ms, raw=f, warnings=[
             f"fused: too few {cls.method} inliers for a covariance ({f.info['num_inliers']})"])
+    gate = f.info.get("gate", {})
     info = {"classical": cls.method, "network_weight": f.weights,
-            "sign_disagreement": f.info["sign_disagreement"]}
+            "sign_disagreement": f.info["sign_disagreement"], "used": f.source,
+            "gate_d2": gate.get("d2")}
+    warnings = [] if f.source == "fused" else [f"fused: {gate.get('reason')}"]
     return MethodResult("fused", "ok", f.pose.matrix().numpy(), f.covariance.numpy(),
-                        time_ms=ms, num_inliers=f.info["num_inliers"], info=info, raw=f)
+                        warnings, time_ms=ms, num_inliers=f.info["num_inliers"], info=info,
+                        raw=f)
+
+
+def _calibration(model: torch.nn.Module | None) -> dict[str, float]:
+    """Per-method covariance scales fitted on held-out data (checkpoint metadata
+    ``"calibration"``; ``{}`` when the checkpoint has none)."""
+    if model is None:
+        return {}
+    md = getattr(model, "metadata", None)
+    cal = md.get("calibration", {}) if isinstance(md, dict) else {}
+    return {str(k): float(v) for k, v in cal.items()} if isinstance(cal, dict) else {}
 
 
 def _have_poselib() -> bool:
@@ -425,6 +529,8 @@ register_method("regression", _regression, needs_intrinsics=False)
 register_method("opencv", _classical("opencv"))
 register_method("poselib", _classical("poselib"), available=_have_poselib)
 register_method("fused", _fused)
+register_method("geometric", _geometric)
+register_method("guided", _guided)
 
 
 # ----------------------------------------------------------------------------- estimator
@@ -485,6 +591,9 @@ class PoseEstimator:
                           "translation is undefined")
             warnings.append(degenerate)
         ctx = MethodContext(self, {})
+        needs_model = any(m in ("regression", "geometric", "guided", "fused")
+                          for m in self.method_names)
+        calibration = _calibration(self.model) if needs_model else {}
         for name in self.method_names:
             spec = METHODS[name]
             if degenerate is not None:
@@ -504,6 +613,10 @@ class PoseEstimator:
                     first = str(err).splitlines()[0] if str(err) else ""
                     res = MethodResult(name, "failed",
                                        warnings=[f"{name} raised {type(err).__name__}: {first}"])
+            scale = calibration.get(name)
+            if scale is not None and res.covariance is not None and name != "fused":
+                res.covariance = res.covariance * scale
+                res.info["calibration_scale"] = scale
             ctx.results[name] = res
         return self._recommend(ctx.results, warnings, matches)
 

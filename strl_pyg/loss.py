@@ -22,7 +22,7 @@ from torch import Tensor, nn
 from strl_pyg.geometry import Pose, quaternion_to_rotation, rotation_to_quaternion
 from strl_pyg.metrics import rotation_error_deg, translation_angle_error_deg
 
-__all__ = ["aleatoric_loss", "pose_targets", "PoseLoss"]
+__all__ = ["aleatoric_loss", "pose_targets", "PoseLoss", "GeometricLoss"]
 
 TRANSLATION_MODES = ("direction", "metric")
 
@@ -126,3 +126,94 @@ class PoseLoss(nn.Module):
     def __repr__(self) -> str:
         return (f"{self.__class__.__name__}(translation={self.translation!r}, "
                 f"rot_weight={self.rot_weight}, trans_weight={self.trans_weight})")
+
+
+class GeometricLoss(nn.Module):
+    r"""Loss of the geometric head (beyond the paper; :class:`~strl_pyg.model.GeometricOutput`).
+
+    * **classification**: every node's ground-truth label is "inlier" when its Sampson
+      distance under the true essential matrix is below ``threshold_px`` (pixels, converted
+      with each pair's focal length); binary cross-entropy on the inlier logits, positives and
+      negatives weighted to contribute equally in every pair;
+    * **essential**: the Sampson distance of the ground-truth inlier nodes under the *predicted*
+      essential matrix, in units of the threshold, capped at ``cap`` (robust to a wrong early
+      solve), averaged over the non-degenerate pairs that have a non-zero translation.
+
+    .. math::
+        \mathcal{L} = w_c \mathcal{L}_{\mathrm{BCE}} + w_e \frac{1}{|\mathcal{I}|}
+        \sum_{i \in \mathcal{I}} \min(d_i / \tau, c)
+
+    Args:
+        threshold_px (float): inlier threshold (default 2.0).
+        cls_weight (float): :math:`w_c` (default 1.0).
+        ess_weight (float): :math:`w_e` (default 0.5); ``0`` trains only the classifier.
+        cap (float): :math:`c` (default 5.0).
+
+    Shapes:
+        - **input:** a ``PoseOutput`` with ``geometric`` set, ``T_0to1`` :math:`(B, 4, 4)`
+        - **output:** a dict of scalars: ``loss``, ``loss_cls``, ``loss_ess``, ``inlier_acc``
+          (classification accuracy at 0.5), ``inlier_frac`` (fraction of true inliers),
+          ``geo_rot_err_deg``, ``geo_trans_err_deg`` (errors of the decomposed pose, means
+          over the ok pairs)
+    """
+
+    def __init__(self, threshold_px: float = 2.0, cls_weight: float = 1.0,
+                 ess_weight: float = 0.5, cap: float = 5.0) -> None:
+        super().__init__()
+        if not threshold_px > 0:
+            raise ValueError(f"Expected threshold_px > 0 (got {threshold_px!r})")
+        self.threshold_px = threshold_px
+        self.cls_weight = cls_weight
+        self.ess_weight = ess_weight
+        self.cap = cap
+
+    def forward(self, pred: Any, T_0to1: Any) -> dict[str, Tensor]:
+        from strl_pyg.essential import sampson_sq
+        from strl_pyg.geometry import essential_from_pose
+
+        geo = getattr(pred, "geometric", None)
+        if geo is None:
+            raise ValueError("Expected a PoseOutput of a model with geometric=True (got none)")
+        pose = T_0to1 if isinstance(T_0to1, Pose) else Pose.from_matrix(T_0to1)
+        B = geo.E.shape[0]
+        if pose.R.shape[0] != B:
+            raise ValueError(f"Expected {B} ground-truth poses (got {pose.R.shape[0]})")
+        b = geo.batch
+        x0, x1 = geo.coords[:, None, :2], geo.coords[:, None, 2:]  # [N, 1, 2]
+        t = pose.t.to(geo.coords)
+        has_t = t.norm(dim=-1) > 1e-9
+        E_gt = essential_from_pose(pose.R.to(geo.coords), t / t.norm(
+            dim=-1, keepdim=True).clamp_min(1e-12))
+        d_gt = sampson_sq(E_gt[b], x0, x1)[:, 0].sqrt()  # [N]
+        thr = self.threshold_px / geo.focal[b]
+        label = (d_gt < thr).to(geo.logits)
+        bce = nn.functional.binary_cross_entropy_with_logits(geo.logits, label,
+                                                             reduction="none")
+        pos = torch.zeros(B, device=bce.device, dtype=bce.dtype)
+        npos = pos.index_add(0, b, label)
+        nneg = pos.index_add(0, b, 1 - label)
+        lpos = pos.index_add(0, b, bce * label) / npos.clamp_min(1)
+        lneg = pos.index_add(0, b, bce * (1 - label)) / nneg.clamp_min(1)
+        has_both = (npos > 0).to(bce) + (nneg > 0).to(bce)
+        l_cls = ((lpos + lneg) / has_both.clamp_min(1)).mean()
+        valid = (geo.status == 0) & has_t
+        d_pred = sampson_sq(geo.E[b], x0, x1)[:, 0].clamp_min(1e-30).sqrt()
+        per = torch.clamp(d_pred / thr, max=self.cap) * label * valid[b].to(label)
+        denom = (label * valid[b].to(label)).sum()
+        l_ess = per.sum() / denom.clamp_min(1)
+        loss = self.cls_weight * l_cls + self.ess_weight * l_ess
+        with torch.no_grad():
+            acc = ((geo.logits > 0).to(label) == label).to(label).mean()
+            ok = valid & (geo.status == 0)
+            if bool(ok.any()):
+                r_err = rotation_error_deg(geo.R[ok].to(pose.R), pose.R[ok]).mean()
+                t_err = torch.nanmean(translation_angle_error_deg(geo.t[ok].to(t), t[ok]))
+            else:
+                r_err = t_err = torch.tensor(float("nan"))
+        return {"loss": loss, "loss_cls": l_cls.detach(), "loss_ess": l_ess.detach(),
+                "inlier_acc": acc, "inlier_frac": label.mean(), "geo_rot_err_deg": r_err,
+                "geo_trans_err_deg": t_err, "geo_ok": valid.to(label).mean()}
+
+    def __repr__(self) -> str:
+        return (f"{self.__class__.__name__}(threshold_px={self.threshold_px}, "
+                f"cls_weight={self.cls_weight}, ess_weight={self.ess_weight})")

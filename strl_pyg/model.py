@@ -34,7 +34,8 @@ from strl_pyg.nn import (
     WeightedFusion,
 )
 
-__all__ = ["StrLPoseConfig", "PoseOutput", "StrLPose", "ABLATIONS"]
+__all__ = ["StrLPoseConfig", "PoseOutput", "GeometricOutput", "StrLPose", "ABLATIONS",
+           "NO_INTRINSICS"]
 
 #: Rows of the paper's ablation table (Table 3) and the switches that reproduce them.
 ABLATIONS: dict[str, dict[str, Any]] = {
@@ -81,6 +82,12 @@ class StrLPoseConfig:
     image_channels: int = 3  # channels of image0/image1 for visual="cnn"
     translation: str = "direction"  # "direction" (unit vector, scale-free data) | "metric"
     dropout: float = 0.0  # attention-weight dropout
+    # Beyond the paper: the geometric head (per-node inlier logits -> weighted essential solve,
+    # strl_pyg.essential). The paper's regression head is always present; this adds a second
+    # output, trained jointly (strl_pyg.loss.GeometricLoss).
+    geometric: bool = False
+    geometric_iterations: int = 2  # IRLS rounds after the weighted eight-point solve
+    geometric_tau: float = 2e-3  # Cauchy scale of the IRLS kernel, normalised units
 
     def __post_init__(self) -> None:
         self.validate()
@@ -107,6 +114,13 @@ class StrLPoseConfig:
             )
         if not 0.0 <= self.dropout < 1.0:
             raise ValueError(f"Expected dropout in [0, 1) (got {self.dropout!r})")
+        if not isinstance(self.geometric, bool):
+            raise ValueError(f"Expected a bool 'geometric' (got {self.geometric!r})")
+        if not isinstance(self.geometric_iterations, int) or self.geometric_iterations < 0:
+            raise ValueError(f"Expected geometric_iterations >= 0 (got "
+                             f"{self.geometric_iterations!r})")
+        if not self.geometric_tau > 0:
+            raise ValueError(f"Expected geometric_tau > 0 (got {self.geometric_tau!r})")
 
     @classmethod
     def ablation(cls, name: str, **overrides: Any) -> StrLPoseConfig:
@@ -149,6 +163,7 @@ class PoseOutput:
     quaternion: Tensor
     translation: Tensor
     log_var: Tensor
+    geometric: GeometricOutput | None = None
 
     @property
     def R(self) -> Tensor:
@@ -165,6 +180,50 @@ class PoseOutput:
         return self.pose.matrix()
 
 
+#: ``GeometricOutput.status`` codes: the solve's own (``strl_pyg.essential.OK`` /
+#: ``DEGENERATE``) plus this one: the graph was normalised by image size, not by intrinsics, so
+#: the weighted solve would give a fundamental matrix and no metric pose.
+NO_INTRINSICS = 2
+
+
+@dataclass
+class GeometricOutput:
+    """Output of the geometric head (``StrLPoseConfig.geometric``), per node and per pair.
+
+    Node tensors are in the model's node order (``batch`` sorted; within a pair, points first,
+    then line endpoints); ``point_logits`` / ``endpoint_logits`` are the same logits in the
+    graph's own storage order of each node type (index ``i`` is ``data['point']`` row ``i``).
+
+    Attributes:
+        logits: ``[N]`` inlier logits (sigmoid = weight of the node in the solve).
+        batch: ``[N]`` pair index of every node.
+        coords: ``[N, 4]`` normalised ``(x0, y0, x1, y1)`` of every node.
+        point_logits, endpoint_logits: ``[N_point]``, ``[N_endpoint]`` (or ``None``).
+        E: ``[B, 3, 3]`` algebraic essential matrices of the weighted solve (unit norm).
+        status: ``[B]`` long: 0 ok, 1 degenerate (too few effective matches, rank-deficient),
+            :data:`NO_INTRINSICS`.
+        R, t: ``[B, 3, 3]``, ``[B, 3]`` pose decomposed from ``E`` (cheirality), float64,
+            not differentiable; identity / zero where ``status`` is not 0.
+        focal: ``[B]`` mean focal length in pixels of the pair (1 without intrinsics), used to
+            express pixel thresholds in normalised units.
+    """
+
+    logits: Tensor
+    batch: Tensor
+    coords: Tensor
+    point_logits: Tensor | None
+    endpoint_logits: Tensor | None
+    E: Tensor
+    status: Tensor
+    R: Tensor
+    t: Tensor
+    focal: Tensor
+
+    @property
+    def T_0to1(self) -> Tensor:
+        return Pose(self.R, self.t).matrix()
+
+
 # ----------------------------------------------------------------------------- input gathering
 @dataclass
 class _Inputs:
@@ -179,6 +238,8 @@ class _Inputs:
     self_edges: Tensor | None  # explicit [2, E]; None = implicit complete (dense path)
     cross_edges: Tensor | None
     line_edges: Tensor | None
+    inv: Tensor | None = None  # storage index -> model position (None: identity)
+    sizes: dict | None = None  # nodes per type, in order
 
 
 def _store_batch(store, n: int, device) -> Tensor:
@@ -311,6 +372,8 @@ def _gather(cfg: StrLPoseConfig, data: HeteroData) -> _Inputs:
         self_edges=complete(K.SELF_REL),
         cross_edges=complete(K.CROSS_REL) if cfg.visual_graph else None,
         line_edges=line_edges,
+        inv=inv,
+        sizes=sizes,
     )
 
 
@@ -368,15 +431,20 @@ class StrLPose(nn.Module):
         self.vis_self = nn.ModuleList([attn() for _ in range(L)]) if cfg.visual_graph else None
         self.vis_cross = nn.ModuleList([attn() for _ in range(L)]) if cfg.visual_graph else None
         self.fusion = WeightedFusion(C, C if cfg.visual else 0, 7, C, weighted=cfg.weighted)
+        cin = C + (C if cfg.visual else 0)
+        self.inlier_head = nn.Sequential(
+            nn.Linear(cin, C), nn.ReLU(), nn.Linear(C, C // 2), nn.ReLU(), nn.Linear(C // 2, 1)
+        ) if cfg.geometric else None
         self.reset_parameters()
 
     def reset_parameters(self) -> None:
         for child in self.children():
             if hasattr(child, "reset_parameters"):
                 child.reset_parameters()
-            elif isinstance(child, nn.ModuleList):
+            elif isinstance(child, (nn.ModuleList, nn.Sequential)):
                 for m in child:
-                    m.reset_parameters()
+                    if hasattr(m, "reset_parameters"):
+                        m.reset_parameters()
         with torch.no_grad():  # start at the identity rotation
             self.fusion.pose_mlp[-1].bias[0] += 1.0
 
@@ -399,13 +467,19 @@ class StrLPose(nn.Module):
             v = self.image_encoder.encode_nodes(*inp.images, *inp.kpts, batch)
 
         for layer in range(cfg.layers):
-            g = self.geo_self[layer](g, inp.self_edges, batch)
+            g = self.geo_self[layer](g, inp.self_edges, batch,
+                                     complete=inp.self_edges is None)
             if line_full is not None:
                 g = self.line_convs[layer](g, inp.line_edges, line_full)
             if self.vis_self is not None:
-                v = self.vis_self[layer](v, inp.self_edges, batch)
-                v = self.vis_cross[layer]((v, v), inp.cross_edges, batch, query=g)
+                v = self.vis_self[layer](v, inp.self_edges, batch,
+                                         complete=inp.self_edges is None)
+                v = self.vis_cross[layer]((v, v), inp.cross_edges, batch, query=g,
+                                          complete=inp.cross_edges is None)
 
+        geometric = None
+        if self.inlier_head is not None:
+            geometric = self._geometric(data, inp, g, v)
         raw, log_var = self.fusion(g, v, batch, inp.num_graphs)
         q = raw[:, :4]
         q = q / q.norm(dim=-1, keepdim=True).clamp_min(1e-8)
@@ -413,7 +487,45 @@ class StrLPose(nn.Module):
         t = raw[:, 4:]
         if cfg.translation == "direction":
             t = t / t.norm(dim=-1, keepdim=True).clamp_min(1e-8)
-        return PoseOutput(quaternion=q, translation=t, log_var=log_var)
+        return PoseOutput(quaternion=q, translation=t, log_var=log_var, geometric=geometric)
+
+    def _geometric(self, data: HeteroData, inp: _Inputs, g: Tensor,
+                   v: Tensor | None) -> GeometricOutput:
+        from torch_geometric.utils import to_dense_batch
+
+        from strl_pyg.essential import OK, decompose_essential, weighted_essential
+
+        cfg = self.config
+        h = g if v is None else torch.cat([g, v], dim=-1)
+        logits = self.inlier_head(h).squeeze(-1)
+        n, B = logits.shape[0], inp.num_graphs
+        batch = inp.batch if inp.batch is not None else logits.new_zeros(n, dtype=torch.long)
+        coords = inp.coords
+        xy, mask = to_dense_batch(coords, batch, batch_size=B)  # [B, Nmax, 4]
+        w, _ = to_dense_batch(torch.sigmoid(logits), batch, batch_size=B)
+        est = weighted_essential(xy[..., :2], xy[..., 2:], w, mask,
+                                 iterations=cfg.geometric_iterations, tau=cfg.geometric_tau)
+        status = est.status
+        has_K = K.K0 in data and K.K1 in data
+        if has_K:
+            K0 = data[K.K0].reshape(-1, 3, 3)
+            K1 = data[K.K1].reshape(-1, 3, 3)
+            focal = 0.25 * (K0[:, 0, 0] + K0[:, 1, 1] + K1[:, 0, 0] + K1[:, 1, 1])
+        else:
+            focal = logits.new_ones(B)
+            status = torch.full_like(status, NO_INTRINSICS)
+        R, t, _ = decompose_essential(est.E.detach(), xy[..., :2].detach(),
+                                      xy[..., 2:].detach(), est.weights.detach())
+        ok = (status == OK)[:, None]
+        R = torch.where(ok[..., None], R, torch.eye(3, dtype=R.dtype, device=R.device))
+        t = torch.where(ok, t, torch.zeros_like(t))
+        storage = logits if inp.inv is None else logits[inp.inv]
+        n_pt = inp.sizes.get(K.POINT, 0) if inp.sizes else 0
+        point_logits = storage[:n_pt] if K.POINT in (inp.sizes or {}) else None
+        endpoint_logits = storage[n_pt:] if K.ENDPOINT in (inp.sizes or {}) else None
+        return GeometricOutput(logits=logits, batch=batch, coords=coords,
+                               point_logits=point_logits, endpoint_logits=endpoint_logits,
+                               E=est.E, status=status, R=R, t=t, focal=focal.to(logits))
 
     # ------------------------------------------------------------------ checkpoints
     _FORMAT = "strl_pyg.StrLPose"

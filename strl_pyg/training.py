@@ -38,7 +38,7 @@ from strl_pyg.data import keys as K
 from strl_pyg.data.transforms import FixedSizeResample, RandomSwap
 from strl_pyg.geometry import Pose, rotation_to_quaternion
 from strl_pyg.io import UnsafeFileError, atomic_open, safe_torch_load
-from strl_pyg.loss import PoseLoss
+from strl_pyg.loss import GeometricLoss, PoseLoss
 from strl_pyg.metrics import pose_auc, relative_pose_error
 from strl_pyg.model import StrLPose
 from strl_pyg.train_config import DATASETS, TrainConfig, add_train_arguments  # noqa: F401
@@ -83,9 +83,10 @@ class _Resampled(Dataset):
     ``(index, step, position)``."""
 
     def __init__(self, base: Dataset, num_points: int, num_lines: int, seed: int,
-                 swap_prob: float = 0.0) -> None:
+                 swap_prob: float = 0.0, outlier_max: float = 0.0) -> None:
         self.base, self.num_points, self.num_lines, self.seed = base, num_points, num_lines, seed
         self.swap_prob = swap_prob
+        self.outlier_max = outlier_max
 
     def __len__(self) -> int:
         return len(self.base)
@@ -96,7 +97,31 @@ class _Resampled(Dataset):
         data = FixedSizeResample(self.num_points, self.num_lines, seed=seed)(self.base[index])
         if self.swap_prob > 0:
             data = RandomSwap(self.swap_prob, seed=seed + 1)(data)
+        if self.outlier_max > 0:
+            data = shuffle_point_matches(data, self.outlier_max, seed + 2)
         return data
+
+
+def shuffle_point_matches(data: HeteroData, max_fraction: float, seed: int) -> HeteroData:
+    """Training augmentation: a fraction ``U(0, max_fraction)`` of the point matches get the
+    image-1 side of another point match (``pos1``, ``kpts1``, ``patch1`` permuted together), so
+    they become realistic outliers (a real feature of image 1, consistent patch) whose label
+    the geometric loss recomputes from the true pose. Returns a shallow copy."""
+    gen = torch.Generator().manual_seed(int(seed) % (2**63))
+    store = data[K.POINT]
+    n = store[K.POS1].shape[0]
+    m = int(float(torch.rand(1, generator=gen)) * max_fraction * n)
+    if m < 2:
+        return data
+    out = data.clone()  # small per-pair tensors; keeps the cached graph untouched
+    idx = torch.randperm(n, generator=gen)[:m]
+    perm = idx[torch.roll(torch.arange(m), 1)]
+    for key in (K.POS1, K.KPTS1, K.PATCH1):
+        if key in store:
+            x = store[key].clone()
+            x[idx] = store[key][perm]
+            out[K.POINT][key] = x
+    return out
 
 
 class StepBatchSampler(Sampler):
@@ -141,6 +166,8 @@ def build_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
     """Training and validation datasets of pair graphs (without resampling)."""
     from strl_pyg.data import datasets as D
 
+    if cfg.dataset == "synthetic" and cfg.scene_mix is not None:
+        return _mixed_datasets(cfg)
     if cfg.dataset == "synthetic":
         from strl_pyg.synthetic import SceneConfig
 
@@ -173,6 +200,28 @@ def build_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
     for ds in (train, val):
         ds.build_cache(num_workers=max(1, cfg.num_workers))
     return train, val
+
+
+def _mixed_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
+    """Training / validation sets drawn from a named scene distribution
+    (:func:`strl_pyg.synthetic.scene_distribution`: one scene configuration per seed)."""
+    from strl_pyg.data import datasets as D
+    from strl_pyg.synthetic.distributions import DISTRIBUTIONS, scene_distribution
+
+    if cfg.scene_mix not in DISTRIBUTIONS:
+        raise ValueError(f"Expected scene_mix in {tuple(DISTRIBUTIONS)} (got {cfg.scene_mix!r})")
+    dist = scene_distribution(cfg.scene_mix)
+    keep = cfg.model_config().visual == "cnn"
+    kw = dict(matches="frontend", cache_dir=cfg.cache_dir) if cfg.matches == "frontend" else {}
+    sets = []
+    for n, base in ((cfg.train_pairs, cfg.seed * 10_000_000),
+                    (cfg.val_pairs, 1_000_000 + cfg.seed * 10_000_000)):
+        ds = D.SyntheticPairs(n, seed=base, scene_config=dist, patch_size=cfg.patch_size,
+                              keep_images=keep, **kw)
+        if kw:
+            ds.build_cache(num_workers=cfg.num_workers)
+        sets.append(ds)
+    return sets[0], sets[1]
 
 
 # ----------------------------------------------------------------------------- metrics
@@ -222,6 +271,7 @@ def evaluate_model(model: torch.nn.Module, loader, loss_fn: PoseLoss | None = No
     metrics of that constant predictor, prefixed ``trivial_``."""
     model.eval()
     rots, transs, t_rots, t_transs, losses = [], [], [], [], []
+    g_rots, g_transs = [], []
     for batch in tqdm(loader, desc="validate", disable=not progress, leave=False):
         batch = batch.to(device)
         T_gt = batch[K.T_0TO1]
@@ -231,6 +281,12 @@ def evaluate_model(model: torch.nn.Module, loader, loss_fn: PoseLoss | None = No
         r, t = _errors(out.quaternion, out.translation, T_gt)
         rots.append(r.cpu())
         transs.append(t.cpu())
+        if getattr(out, "geometric", None) is not None:
+            geo = out.geometric
+            r, t = relative_pose_error(Pose(geo.R, geo.t), T_gt.double())
+            bad = geo.status.cpu() != 0
+            g_rots.append(torch.where(bad, torch.full_like(r.cpu(), 180.0), r.cpu()))
+            g_transs.append(torch.where(bad, torch.full_like(t.cpu(), 180.0), t.cpu()))
         if trivial is not None:
             q0 = trivial[0].to(T_gt).expand(T_gt.shape[0], 4)
             t0 = trivial[1].to(T_gt).expand(T_gt.shape[0], 3)
@@ -242,6 +298,8 @@ def evaluate_model(model: torch.nn.Module, loader, loss_fn: PoseLoss | None = No
         res["loss"] = float(np.mean(losses))
     if trivial is not None:
         res.update(_summary(torch.cat(t_rots), torch.cat(t_transs), "trivial_"))
+    if g_rots:
+        res.update(_summary(torch.cat(g_rots), torch.cat(g_transs), "geo_"))
     return res
 
 
@@ -387,14 +445,14 @@ def _init_weights(model: StrLPose, path: str | os.PathLike) -> None:
     # A model that adds the geometric head may start from regression-only weights: the new
     # head's parameters are the only ones allowed to be missing.
     try:
-        state = StrLPose.load(path).state_dict()
-    except ValueError:
-        state = load_checkpoint(path)["model"]
-    try:
-        model.load_state_dict(state)
+        missing, unexpected = model.load_state_dict(state, strict=False)
     except RuntimeError as err:
         raise ValueError(f"Expected weights matching this run's model config in '{path}' "
                          f"(got {str(err).splitlines()[0]})") from err
+    missing = [k for k in missing if not k.startswith("inlier_head.")]
+    if missing or unexpected:
+        raise ValueError(f"Expected weights matching this run's model config in '{path}' "
+                         f"(got missing keys {missing[:5]}, unexpected keys {unexpected[:5]})")
 
 
 def _dist_info() -> tuple[int, int]:
@@ -437,6 +495,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     model = StrLPose(model_cfg).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     loss_fn = PoseLoss(translation=model_cfg.translation)
+    geo_fn = GeometricLoss(cfg.geo_threshold_px, cfg.geo_cls_weight,
+                           cfg.geo_ess_weight) if model_cfg.geometric else None
     start_step, history = 0, []
     trivial_buf: list[Tensor] = []
     if cfg.init_from and not resume:
@@ -467,7 +527,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     sampler = StepBatchSampler(len(train_ds), cfg.batch_size, start_step, cfg.steps, cfg.seed,
                                rank, world)
     loader = DataLoader(_Resampled(train_ds, cfg.num_points, cfg.num_lines, cfg.seed,
-                                   cfg.swap_prob),
+                                   cfg.swap_prob, cfg.outlier_augment),
                         batch_sampler=sampler, collate_fn=collate, num_workers=cfg.num_workers)
     val_keys = [(i, -1, i) for i in range(len(val_ds))]
     val_loader = DataLoader(_Resampled(val_ds, cfg.num_points, cfg.num_lines, cfg.seed + 1),
@@ -491,6 +551,12 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
             trivial_buf.append(_unaugmented_poses(batch).cpu())
         out = ddp_model(batch)
         logs = loss_fn(out, T_gt)
+        if geo_fn is not None:
+            geo_fn.ess_weight = cfg.geo_ess_weight if step >= cfg.geo_ess_start else 0.0
+            geo_logs = geo_fn(out, T_gt)
+            logs = {**logs, **{f"geo_{k}" if not k.startswith("geo_") else k: v
+                               for k, v in geo_logs.items()}}
+            logs["loss"] = logs["loss"] + geo_logs["loss"]
         optimizer.zero_grad(set_to_none=True)
         logs["loss"].backward()
         if cfg.grad_clip:
@@ -529,6 +595,11 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
                           f"{metrics['trans_err_deg']:.2f} deg "
                           f"(trivial {metrics['trivial_trans_err_deg']:.2f}), "
                           f"AUC@10 {metrics['auc10']:.3f}")
+                if "geo_rot_err_med" in metrics:
+                    bar.write(f"step {step}: geometric head median rot "
+                              f"{metrics['geo_rot_err_med']:.2f} deg, trans "
+                              f"{metrics['geo_trans_err_med']:.2f} deg, "
+                              f"AUC@10 {metrics['geo_auc10']:.3f}")
             if world > 1:
                 torch.distributed.barrier()
             result.update(metrics)

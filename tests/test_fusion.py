@@ -10,6 +10,7 @@ import torch
 
 from strl_pyg.baselines import BaselineResult, estimate_relative_pose
 from strl_pyg.fusion import (
+    GATE_CHI2,
     MIN_INLIERS,
     FusedPose,
     classical_covariance,
@@ -132,7 +133,7 @@ def test_tiny_network_variance_gives_the_network_pose(noisy_pair):
     pair, classical = noisy_pair
     gt = _gt(pair)
     net = Pose(so3_exp(torch.tensor([0.03, -0.01, 0.02], dtype=torch.float64)) @ gt.R, gt.t)
-    f = fuse_poses(net, torch.full((7,), -40.0), classical, pair.matches)
+    f = fuse_poses(net, torch.full((7,), -40.0), classical, pair.matches, gate_chi2=None)
     assert isinstance(f, FusedPose) and f.source == "fused"
     r, t = relative_pose_error(f.pose, net)
     assert float(r) < 1e-4 and float(t) < 1e-4
@@ -208,3 +209,29 @@ def test_degenerate_inputs_raise(noisy_pair):
         fuse_poses(net, torch.zeros(7), bad, pair.matches)
     with pytest.raises(ValueError, match="non-zero translation"):
         tangent_basis(torch.zeros(3))
+
+
+def test_gate_refuses_a_planted_wrong_network_pose(noisy_pair):
+    pair, classical = noisy_pair
+    gt = _gt(pair)
+    # 20 degrees off and reversed, but claiming ~1 degree of uncertainty
+    net = Pose(so3_exp(torch.tensor([0.35, 0.0, 0.0], dtype=torch.float64)) @ gt.R, -gt.t)
+    f = fuse_poses(net, torch.full((7,), -8.0), classical, pair.matches)
+    assert f.source == "classical"
+    assert f.info["gate"]["fused"] is False and f.info["gate"]["d2"] > GATE_CHI2
+    assert "disagree" in f.info["gate"]["reason"]
+    r, t = relative_pose_error(f.pose, classical.pose)
+    assert float(r) < 1e-9 and float(t) < 1e-9
+    # ungated, the same inputs do move the estimate towards the wrong pose
+    g = fuse_poses(net, torch.full((7,), -8.0), classical, pair.matches, gate_chi2=None)
+    assert g.source == "fused" and float(relative_pose_error(g.pose, classical.pose)[0]) > 0.1
+
+
+def test_gate_fuses_a_consistent_network_pose(noisy_pair):
+    pair, classical = noisy_pair
+    # the network agrees with the classical estimate within its stated uncertainty
+    net = Pose(so3_exp(torch.tensor([0.002, 0.0, 0.0], dtype=torch.float64))
+               @ classical.pose.R, classical.pose.t)
+    f = fuse_poses(net, torch.full((7,), -8.0), classical, pair.matches)
+    assert f.source == "fused" and f.info["gate"]["fused"] is True
+    assert f.info["gate"]["d2"] <= GATE_CHI2

@@ -18,7 +18,11 @@ from strl_pyg.synthetic.photometric import apply_photometric
 from strl_pyg.synthetic.render import View, project, render_view
 from strl_pyg.synthetic.scene import Scene, SceneConfig, build_scene
 
-__all__ = ["SyntheticPair", "generate_pair"]
+__all__ = ["SyntheticPair", "generate_pair", "SceneGenerationError"]
+
+
+class SceneGenerationError(RuntimeError):
+    """A seed whose scene has no usable view pair (the generator's retries ran out)."""
 
 #: A pair must keep at least this many ground-truth point matches, else the scene is
 #: regenerated from the next sub-seed (deterministically).
@@ -309,7 +313,8 @@ def generate_pair(seed: int, config: SceneConfig | None = None) -> SyntheticPair
     n0, n1, p_inl = _corrupt(p0, p1, cfg, rng, (h, w), F, lines=False)
     m0, m1, l_inl = _corrupt(l0, l1, cfg, rng, (h, w), F, lines=True)
     if len(n0) + len(m0) == 0:
-        raise RuntimeError(f"Scene of seed {seed} has no visible correspondences; try another")
+        raise SceneGenerationError(
+            f"Scene of seed {seed} has no visible correspondences; try another")
     matches = PairMatches(
         n0, n1, lines0=m0, lines1=m1, K0=K, K1=K, image0=image0, image1=image1,
         info={"seed": int(seed), "kind": cfg.kind, "attempt": attempt, "source": "synthetic",

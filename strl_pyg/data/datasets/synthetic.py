@@ -172,6 +172,13 @@ class SyntheticPairs(CachedPairDataset):
             _match_synthetic, scene_config=self.scene_config, frontend_config=self.frontend_config
         )
 
+    def _skip_errors(self) -> tuple[type[BaseException], ...]:
+        from strl_pyg.synthetic.pair import SceneGenerationError
+
+        # a seed whose scene cannot be generated is recorded as failed and left out, like a
+        # real pair without matches
+        return (*super()._skip_errors(), SceneGenerationError)
+
     def _payload(self, i: int) -> int:
         return self.seeds[i]
 

@@ -1,0 +1,385 @@
+"""Every pose method on the same front-end matches, one table per evaluation set (issue 10).
+
+Sets: held-out generated pairs of each evaluation distribution
+(:func:`strl_pyg.synthetic.eval_distribution`: driving, indoor, object, wide, outliers50,
+low_texture; seeds from 2,000,000, never trained on) and the real slices in ``shared/data``:
+KITTI 06 pairs (i, i+1) and (i, i+3), every consecutive Middlebury dino pair, the DeMoN pairs.
+Matches come from our front end (:func:`strl_pyg.frontend.match_images`; cached as ``.npz``
+under ``--cache``); every method of :class:`strl_pyg.inference.PoseEstimator` runs on the same
+matches, plus the mean-pose predictor (the mean of the training poses stored in the training
+checkpoint, ``--train-checkpoint``).
+
+Per set and method: median rotation and translation-direction errors (degrees), AUC@5/10/20 of
+``max(rot, trans)`` (failures count as infinite), failures, and for methods with a covariance
+the fraction of pairs whose 5-dof tangent error lies inside the 1-sigma and 2-sigma regions
+(chi-square with 5 dof at 68.3 % / 95.4 %).
+
+``--calibrate`` first fits, on a separate held-out split of the training distribution
+(``mixed_small``, seeds from 3,000,000), one covariance scale per method such that 95.4 % of
+its Mahalanobis distances fall inside the 2-sigma region, and writes them into the checkpoint
+(``metadata["calibration"]``); the evaluation then uses them.
+
+Usage::
+
+    python benchmarks/bench_pose.py --checkpoint runs/geo/model.pt --per-set 30 \\
+        --train-checkpoint runs/geo/last.pt --calibrate --out benchmarks/results_pose
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import banner  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "data"
+GENERATED = ("driving", "indoor", "object", "wide", "outliers50", "low_texture")
+CHI2_5 = {1: 5.8876, 2: 11.3141}  # chi-square (5 dof) quantiles of 68.27 % and 95.45 %
+
+
+# ----------------------------------------------------------------------------- pairs
+def _read(path):
+    import cv2
+
+    img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    if img is None:
+        raise FileNotFoundError(f"Expected an image at {path}")
+    return img
+
+
+def _cached(cache: Path, key: str, make):
+    from strl_pyg.data.matches import PairMatches
+
+    path = cache / f"{key.replace('/', '_')}.npz"
+    if path.is_file():
+        return PairMatches.load(path)
+    m = make()
+    cache.mkdir(parents=True, exist_ok=True)
+    m.save(path)
+    return m
+
+
+def generated_pairs(name: str, n: int, cache: Path, seed0: int = 2_000_000):
+    from strl_pyg.frontend import NoMatchesError, match_images
+    from strl_pyg.synthetic import generate_pair
+    from strl_pyg.synthetic.distributions import eval_distribution
+
+    dist = eval_distribution(name)
+    out = []
+    for seed in range(seed0, seed0 + n):
+        try:
+            p = generate_pair(seed, dist.config(seed))
+            m = _cached(cache, f"gen_{name}_{seed}", lambda p=p: match_images(
+                p.image0, p.image1, K0=p.K, K1=p.K))
+        except (NoMatchesError, RuntimeError) as err:
+            print(f"  {name} seed {seed}: skipped ({type(err).__name__})")
+            continue
+        out.append((f"{name}/{seed}", m, np.asarray(p.T_0to1, dtype=np.float64)))
+    return out
+
+
+def kitti_pairs(gap: int, cache: Path):
+    from strl_pyg.frontend import match_images
+    from strl_pyg.geometry import Pose
+
+    root = DATA / "kitti_odometry"
+    seq = root / "sequences" / "06"
+    if not seq.is_dir():
+        return []
+    from strl_pyg.cli import read_intrinsics
+
+    K = read_intrinsics(str(seq / "calib.txt"))
+    poses = np.loadtxt(root / "poses" / "06.txt").reshape(-1, 3, 4)
+    frames = sorted(int(p.stem) for p in (seq / "image_0").glob("*.png"))
+    out = []
+    for i in frames:
+        j = i + gap
+        if j not in frames:
+            continue
+        Ti = np.vstack([poses[i], [0, 0, 0, 1]])
+        Tj = np.vstack([poses[j], [0, 0, 0, 1]])
+        T = Pose.from_matrix(np.linalg.inv(np.linalg.inv(Ti) @ Tj)).matrix().numpy()
+        m = _cached(cache, f"kitti06_{i}_{j}", lambda i=i, j=j: match_images(
+            _read(seq / "image_0" / f"{i:06d}.png"), _read(seq / "image_0" / f"{j:06d}.png"),
+            K0=K, K1=K))
+        out.append((f"kitti06/{i}-{j}", m, T))
+    return out
+
+
+def dino_pairs(cache: Path):
+    from strl_pyg.data.datasets.middlebury import middlebury_pairs
+    from strl_pyg.frontend import NoMatchesError, match_images
+
+    root = DATA / "middlebury_dino"
+    if not root.is_dir():
+        return []
+    out = []
+    for a, b, T in middlebury_pairs(root):
+        try:
+            m = _cached(cache, f"dino_{a.path.stem}_{b.path.stem}", lambda a=a, b=b: match_images(
+                _read(a.path), _read(b.path), K0=a.K, K1=b.K))
+        except NoMatchesError:
+            print(f"  dino {a.name}-{b.name}: no matches")
+            out.append((f"dino/{a.path.stem}-{b.path.stem}", None, T))
+            continue
+        out.append((f"dino/{a.path.stem}-{b.path.stem}", m, T))
+    return out
+
+
+def demon_pairs(cache: Path):
+    from strl_pyg.frontend import match_images
+
+    out = []
+    for seq in sorted((DATA / "demon_deepsfm").glob("*/*/poses.txt")):
+        d = seq.parent
+        K = np.loadtxt(d / "cam.txt").reshape(3, 3)
+        P = np.loadtxt(seq).reshape(-1, 3, 4)  # world-to-camera
+        T0 = np.vstack([P[0], [0, 0, 0, 1]])
+        T1 = np.vstack([P[1], [0, 0, 0, 1]])
+        T = T1 @ np.linalg.inv(T0)
+        m = _cached(cache, f"demon_{d.name}", lambda d=d, K=K: match_images(
+            _read(d / "0000.jpg"), _read(d / "0001.jpg"), K0=K, K1=K))
+        out.append((f"demon/{d.name}", m, T))
+    return out
+
+
+# ----------------------------------------------------------------------------- scoring
+def tangent_error(T_est: np.ndarray, T_gt: np.ndarray) -> np.ndarray:
+    """5-dof error (rotation vector, translation direction on the sphere) of ``T_est`` in the
+    chart of :mod:`strl_pyg.fusion` around the estimate."""
+    from strl_pyg.fusion import pose_to_tangent, tangent_basis
+    from strl_pyg.geometry import Pose
+
+    est = Pose.from_matrix(torch.as_tensor(T_est, dtype=torch.float64))
+    gt = Pose.from_matrix(torch.as_tensor(T_gt, dtype=torch.float64))
+    t = est.t / est.t.norm()
+    return pose_to_tangent(gt, est.R, t, tangent_basis(t)).numpy()
+
+
+def errors(T_est, T_gt) -> tuple[float, float]:
+    from strl_pyg.metrics import relative_pose_error
+
+    r, t = relative_pose_error(np.asarray(T_est)[None], np.asarray(T_gt)[None])
+    return float(r[0]), float(t[0])
+
+
+def run_set(estimator, pairs, mean_T, progress=True):
+    rows = []
+    for pid, m, T in tqdm(pairs, desc="pairs", disable=not progress, leave=False):
+        row = {"pair": pid, "methods": {}}
+        if m is None:
+            rows.append(row)
+            continue
+        est = estimator.estimate(m)
+        recs = dict(est.methods)
+        recs["recommended"] = est.pose
+        for name, rec in recs.items():
+            if rec.status != "ok":
+                row["methods"][name] = {"status": rec.status}
+                continue
+            r, t = errors(rec.T_0to1, T)
+            d2 = None
+            if rec.covariance is not None and np.isfinite(rec.covariance).all():
+                e = tangent_error(rec.T_0to1, T)
+                d2 = float(e @ np.linalg.pinv(rec.covariance) @ e)
+            row["methods"][name] = {"status": "ok", "rot": r, "trans": t, "d2": d2,
+                                    "method": rec.method}
+        if mean_T is not None:
+            r, t = errors(mean_T, T)
+            row["methods"]["mean_pose"] = {"status": "ok", "rot": r, "trans": t, "d2": None}
+        rows.append(row)
+    return rows
+
+
+def summarise(rows, method: str) -> dict:
+    from strl_pyg.metrics import pose_auc
+
+    rot, trans, worst, d2, fails = [], [], [], [], 0
+    for row in rows:
+        r = row["methods"].get(method)
+        if r is None or r["status"] != "ok":
+            fails += 1
+            worst.append(math.inf)
+            continue
+        rot.append(r["rot"])
+        trans.append(r["trans"] if math.isfinite(r["trans"]) else 180.0)
+        worst.append(max(rot[-1], trans[-1]))
+        if r["d2"] is not None:
+            d2.append(r["d2"])
+    auc = pose_auc(np.asarray(worst), (5.0, 10.0, 20.0)) if worst else [float("nan")] * 3
+    out = {"n": len(rows), "fail": fails,
+           "rot_med": float(np.median(rot)) if rot else float("nan"),
+           "trans_med": float(np.median(trans)) if trans else float("nan"),
+           "auc5": float(auc[0]), "auc10": float(auc[1]), "auc20": float(auc[2])}
+    if d2:
+        d2 = np.asarray(d2)
+        out["cov1"] = float(np.mean(d2 <= CHI2_5[1]))
+        out["cov2"] = float(np.mean(d2 <= CHI2_5[2]))
+    return out
+
+
+def fit_calibration(estimator, pairs) -> dict[str, float]:
+    """Per-method variance scale ``k`` such that 95.45 % of ``d2 / k`` fall inside
+    ``CHI2_5[2]`` on the calibration pairs."""
+    rows = run_set(estimator, pairs, None)
+    scales = {}
+    for name in estimator.method_names:
+        d2 = [r["methods"][name]["d2"] for r in rows
+              if r["methods"].get(name, {}).get("d2") is not None]
+        if len(d2) >= 10 and name != "fused":
+            scales[name] = float(max(np.quantile(d2, 0.9545) / CHI2_5[2], 1e-6))
+    return scales
+
+
+def markdown(results: dict, methods: list[str]) -> str:
+    lines = []
+    for set_name, res in results.items():
+        n = next(iter(res.values()))["n"] if res else 0
+        lines += [f"\n### {set_name} ({n} pairs)\n",
+                  "| method | rot med (deg) | trans med (deg) | AUC@5 | AUC@10 | AUC@20 | "
+                  "fail | 1-sigma | 2-sigma |", "|---|---|---|---|---|---|---|---|---|"]
+        for m in methods:
+            if m not in res:
+                continue
+            s = res[m]
+            cov = (f"{100 * s['cov1']:.0f} % | {100 * s['cov2']:.0f} %" if "cov1" in s
+                   else "- | -")
+            lines.append(f"| {m} | {s['rot_med']:.3f} | {s['trans_med']:.2f} | "
+                         f"{100 * s['auc5']:.1f} | {100 * s['auc10']:.1f} | "
+                         f"{100 * s['auc20']:.1f} | {s['fail']} | {cov} |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(results: dict, methods: list[str], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sets = list(results)
+    fig, axes = plt.subplots(1, 2, figsize=(14, 5))
+    width = 0.8 / len(methods)
+    for k, key, title in ((0, "rot_med", "median rotation error"),
+                          (1, "trans_med", "median translation-direction error")):
+        ax = axes[k]
+        for i, m in enumerate(methods):
+            vals = [results[s].get(m, {}).get(key, np.nan) for s in sets]
+            ax.bar(np.arange(len(sets)) + i * width, vals, width, label=m)
+        ax.set_yscale("log")
+        ax.set_xticks(np.arange(len(sets)) + 0.4)
+        ax.set_xticklabels(sets, rotation=30, ha="right")
+        ax.set_ylabel("degrees (log scale)")
+        ax.set_title(title)
+    axes[0].legend(fontsize=8, ncol=2)
+    fig.suptitle("strl-pyg: every method on the same front-end matches (held-out sets)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--checkpoint", default=None, help="model.pt (default: the shipped model)")
+    ap.add_argument("--train-checkpoint", default=None,
+                    help="training checkpoint (last.pt) holding the training poses, for the "
+                         "mean-pose predictor")
+    ap.add_argument("--per-set", type=int, default=30, help="generated pairs per set")
+    ap.add_argument("--sets", default="all", help="comma-separated set names, or 'all'")
+    ap.add_argument("--calibrate", action="store_true",
+                    help="fit covariance scales first and write them into --checkpoint")
+    ap.add_argument("--calib-pairs", type=int, default=60)
+    ap.add_argument("--cache", default="outputs/bench_pose_cache")
+    ap.add_argument("--out", default="benchmarks/results_pose")
+    args = ap.parse_args(argv)
+    torch.set_num_threads(1)
+    print(banner())
+    from strl_pyg.inference import PoseEstimator
+    from strl_pyg.model import StrLPose
+
+    model = StrLPose.load(args.checkpoint) if args.checkpoint else StrLPose.from_pretrained()
+    model.eval()
+    cache = Path(args.cache)
+    if args.calibrate:
+        if not args.checkpoint:
+            raise SystemExit("error: --calibrate writes into --checkpoint; give one")
+        from strl_pyg.frontend import NoMatchesError, match_images
+        from strl_pyg.synthetic import generate_pair
+        from strl_pyg.synthetic.distributions import scene_distribution
+
+        dist = scene_distribution("mixed_small")
+        cal = []
+        for i in range(args.calib_pairs):
+            seed = 3_000_000 + i
+            try:
+                p = generate_pair(seed, dist.config(seed))
+                m = _cached(cache, f"calib_{seed}", lambda p=p: match_images(
+                    p.image0, p.image1, K0=p.K, K1=p.K))
+            except (NoMatchesError, RuntimeError):
+                continue
+            cal.append((f"calib/{seed}", m, np.asarray(p.T_0to1)))
+        scales = fit_calibration(PoseEstimator(model), cal)
+        print(f"calibration scales (variance multipliers) on {len(cal)} pairs: {scales}")
+        md = dict(model.metadata)
+        md["calibration"] = scales
+        model.save(args.checkpoint, metadata=md)
+        model = StrLPose.load(args.checkpoint).eval()
+    mean_T = None
+    if args.train_checkpoint:
+        from strl_pyg.geometry import Pose
+        from strl_pyg.training import load_checkpoint, mean_pose
+
+        st = load_checkpoint(args.train_checkpoint)
+        q, t = mean_pose(st["trivial_T"], model.config.translation)
+        mean_T = Pose.from_quaternion(q.double(), t.double()).matrix().numpy()
+    estimator = PoseEstimator(model)
+    builders = {f"generated/{g}": (lambda g=g: generated_pairs(g, args.per_set, cache))
+                for g in GENERATED}
+    builders.update({"KITTI 06 (i, i+1)": lambda: kitti_pairs(1, cache),
+                     "KITTI 06 (i, i+3)": lambda: kitti_pairs(3, cache),
+                     "Middlebury dino (consecutive)": lambda: dino_pairs(cache),
+                     "DeMoN": lambda: demon_pairs(cache)})
+    wanted = list(builders) if args.sets == "all" else [
+        s for s in builders if any(w.strip() in s for w in args.sets.split(","))]
+    results, raw = {}, {}
+    t0 = time.perf_counter()
+    for name in wanted:
+        pairs = builders[name]()
+        if not pairs:
+            print(f"{name}: no data here, skipped")
+            continue
+        rows = run_set(estimator, pairs, mean_T)
+        methods = sorted({m for r in rows for m in r["methods"]})
+        results[name] = {m: summarise(rows, m) for m in methods}
+        raw[name] = rows
+        s = results[name]
+        print(f"{name}: {len(pairs)} pairs; " + ", ".join(
+            f"{m} {s[m]['rot_med']:.2f}/{s[m]['trans_med']:.1f}" for m in methods), flush=True)
+    order = ["recommended", "poselib", "opencv", "guided", "geometric", "fused", "regression",
+             "mean_pose"]
+    methods = [m for m in order if any(m in r for r in results.values())]
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    md = markdown(results, methods)
+    header = (f"# Pose methods on the same front-end matches\n\n```\n{banner()}\n```\n\n"
+              f"checkpoint: {args.checkpoint or 'shipped'}; calibration: "
+              f"{model.metadata.get('calibration', {})}; {time.perf_counter() - t0:.0f} s\n")
+    Path(f"{out}.md").write_text(header + md)
+    Path(f"{out}.json").write_text(json.dumps({"summary": results, "pairs": raw}, indent=1))
+    plot(results, methods, Path(f"{out}.png"))
+    print(md)
+    print(f"-> {out}.md, {out}.json, {out}.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,173 @@
+"""Network-guided robust estimation: the geometric head's per-match weights steer a classical
+solver on the same matches (beyond the paper).
+
+:func:`guided_estimate` builds candidate hypotheses of ``T_0to1`` (``X1 = R X0 + t``):
+
+1. the classical estimator (OpenCV MAGSAC or PoseLib LO-RANSAC) on **all** point matches;
+2. the same estimator on the matches the network trusts most (the top ``keep`` fraction by
+   weight, at least ``min_keep``);
+3. for OpenCV, ``USAC_PROSAC`` on all matches ordered by the network's weight (PROSAC samples
+   the best-ranked matches first).
+
+Every hypothesis is scored on **all** matches by the same truncated (MSAC) Sampson cost, so the
+network can only propose, never overrule the data; the best one is refined by weighted
+Levenberg-Marquardt (:func:`strl_pyg.essential.refine_pose`) on its inliers, weighted by the
+network's weights, and the refinement is kept only if it lowers the MSAC cost. With uniform
+weights the candidates coincide with the classical estimate, so the guided result can only
+differ from it where the network's ranking found a better-scoring hypothesis.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import torch
+
+from strl_pyg.baselines import MIN_POINTS, BaselineResult, estimate_relative_pose
+from strl_pyg.data.matches import PairMatches
+from strl_pyg.essential import refine_pose
+from strl_pyg.geometry import Pose, normalize_points
+
+__all__ = ["msac_cost", "guided_estimate"]
+
+
+def _normalised(matches: PairMatches) -> tuple[torch.Tensor, torch.Tensor, float]:
+    x0 = normalize_points(matches.points0, matches.K0).double()
+    x1 = normalize_points(matches.points1, matches.K1).double()
+    K0, K1 = matches.K0, matches.K1
+    focal = float(np.mean([K0[0, 0], K0[1, 1], K1[0, 0], K1[1, 1]]))
+    return x0, x1, focal
+
+
+def _sampson(R: torch.Tensor, t: torch.Tensor, x0: torch.Tensor, x1: torch.Tensor):
+    from strl_pyg.essential import _signed_sampson
+
+    return _signed_sampson(R[None].double(), t[None].double(), x0[None], x1[None])[0].abs()
+
+
+def msac_cost(pose: Pose, x0: torch.Tensor, x1: torch.Tensor, threshold: float) -> float:
+    """Truncated quadratic cost ``sum min(r_i^2, thr^2)`` of ``pose`` on normalised matches
+    ``x0``, ``x1`` ``[N, 2]`` (``r`` the Sampson distance, ``threshold`` normalised)."""
+    r = _sampson(pose.R, pose.t / pose.t.norm().clamp_min(1e-300), x0, x1)
+    return float(torch.clamp(r.square(), max=threshold**2).sum())
+
+
+def guided_estimate(
+    matches: PairMatches,
+    weights: Any,
+    method: str = "poselib",
+    threshold_px: float = 1.0,
+    keep: float = 0.6,
+    min_keep: int = 24,
+    refine_iterations: int = 10,
+    seed: int = 0,
+    classical: BaselineResult | None = None,
+) -> BaselineResult:
+    """Robust ``T_0to1`` from the point matches, guided by per-match weights.
+
+    Args:
+        matches: :class:`~strl_pyg.data.PairMatches` with intrinsics (pixels).
+        weights: ``[Np]`` non-negative weights of the point matches (e.g. the sigmoid of the
+            geometric head's ``point_logits``), higher = more trusted.
+        method: classical estimator, ``"poselib"`` or ``"opencv"``.
+        threshold_px: inlier threshold in pixels (both the estimator's and the MSAC score's).
+        keep: fraction of the matches kept by weight for the second hypothesis.
+        min_keep: fewest matches kept.
+        refine_iterations: weighted refinement steps (0: none).
+        seed: RANSAC seed.
+        classical: the estimator's result on all matches, when already computed.
+
+    Returns:
+        :class:`~strl_pyg.baselines.BaselineResult` with ``method = "guided_<method>"``;
+        ``info["candidate"]`` names the hypothesis chosen (``"all"``, ``"top"``, ``"prosac"``)
+        and ``info["refined"]`` whether the refinement was kept.
+    """
+    if not isinstance(matches, PairMatches):
+        raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")
+    w = np.asarray(weights.detach().cpu() if isinstance(weights, torch.Tensor) else weights,
+                   dtype=np.float64).reshape(-1)
+    if w.shape != (matches.num_points,):
+        raise ValueError(f"Expected one weight per point match ({matches.num_points},) "
+                         f"(got {w.shape})")
+    if not np.isfinite(w).all() or (w < 0).any():
+        raise ValueError("Expected finite, non-negative weights (got NaN, inf or < 0)")
+    if not 0 < keep <= 1:
+        raise ValueError(f"Expected 0 < keep <= 1 (got {keep})")
+    start = time.perf_counter()
+    n = matches.num_points
+    if classical is None:
+        classical = estimate_relative_pose(matches, method, threshold_px, seed=seed)
+    candidates: list[tuple[str, BaselineResult]] = []
+    if classical.success:
+        candidates.append(("all", classical))
+    order = np.argsort(-w, kind="stable")
+    k = max(min(n, min_keep), int(round(keep * n)))
+    if MIN_POINTS <= k < n:
+        top = np.sort(order[:k])
+        sub = matches.select(point_index=top)
+        res = estimate_relative_pose(sub, method, threshold_px, seed=seed)
+        if res.success:
+            candidates.append(("top", res))
+    if method == "opencv" and n >= MIN_POINTS:
+        res = _opencv_prosac(matches, order, threshold_px, seed)
+        if res is not None:
+            candidates.append(("prosac", res))
+    x0, x1, focal = _normalised(matches)
+    thr = threshold_px / focal
+    if not candidates:
+        out = BaselineResult(Pose.identity(), np.zeros(n, dtype=bool),
+                             (time.perf_counter() - start) * 1e3, f"guided_{method}", False,
+                             {"candidate": None, "refined": False})
+        return out
+    scored = [(msac_cost(r.pose, x0, x1, thr), name, r) for name, r in candidates]
+    best_cost, name, best = min(scored, key=lambda c: c[0])
+    pose = best.pose.to(torch.float64)
+    refined = False
+    r = _sampson(pose.R, pose.t, x0, x1)
+    inl = (r < thr).numpy()
+    if refine_iterations > 0 and inl.sum() >= MIN_POINTS:
+        ww = torch.as_tensor(inl * np.maximum(w, 1e-3), dtype=torch.float64)
+        R2, t2 = refine_pose(pose.R[None], pose.t[None], x0[None], x1[None], ww[None],
+                             iterations=refine_iterations, tau=thr)
+        cand = Pose(R2[0], t2[0])
+        c2 = msac_cost(cand, x0, x1, thr)
+        if c2 < best_cost:
+            pose, best_cost, refined = cand, c2, True
+            inl = (_sampson(pose.R, pose.t, x0, x1) < thr).numpy()
+    elapsed = (time.perf_counter() - start) * 1e3
+    return BaselineResult(pose, inl.astype(bool), elapsed, f"guided_{method}", True,
+                          {"candidate": name, "refined": refined, "msac_cost": best_cost,
+                           "candidates": [c[1] for c in scored]})
+
+
+def _opencv_prosac(matches: PairMatches, order: np.ndarray, threshold_px: float,
+                   seed: int) -> BaselineResult | None:
+    import cv2
+
+    from strl_pyg.baselines import _unit_pose
+
+    cv2.setRNGSeed(int(seed))
+    K0 = np.ascontiguousarray(matches.K0, dtype=np.float64)
+    p0 = np.ascontiguousarray(matches.points0[order], dtype=np.float64)
+    x1 = normalize_points(matches.points1[order], matches.K1).numpy()
+    p1 = np.ascontiguousarray(x1 @ K0[:2, :2].T + K0[:2, 2])
+    try:
+        E, mask = cv2.findEssentialMat(p0, p1, K0, method=cv2.USAC_PROSAC, prob=0.9999,
+                                       threshold=float(threshold_px), maxIters=10000)
+    except cv2.error:  # USAC asserts on some degenerate samples: no model
+        return None
+    if E is None or E.shape[0] < 3 or mask is None:
+        return None
+    best = None
+    for i in range(E.shape[0] // 3):
+        count, R, t, m = cv2.recoverPose(E[3 * i: 3 * i + 3], p0, p1, K0, mask=mask.copy())
+        if best is None or count > best[0]:
+            best = (count, R, t, m)
+    count, R, t, m = best
+    if count == 0:
+        return None
+    inl = np.zeros(matches.num_points, dtype=bool)
+    inl[order] = m.reshape(-1) > 0
+    return BaselineResult(_unit_pose(R, t), inl, 0.0, "opencv_prosac", True, {})

@@ -1,0 +1,145 @@
+"""Network-guided robust estimation (strl_pyg.guided) and the geometric head of the model."""
+
+import numpy as np
+import pytest
+import torch
+
+from strl_pyg.baselines import estimate_relative_pose
+from strl_pyg.data import build_pair_graph
+from strl_pyg.data.transforms import FixedSizeResample
+from strl_pyg.frontend import epipolar_residuals
+from strl_pyg.guided import _normalised, guided_estimate, msac_cost
+from strl_pyg.loss import GeometricLoss
+from strl_pyg.metrics import relative_pose_error
+from strl_pyg.model import ABLATIONS, StrLPose, StrLPoseConfig
+from strl_pyg.synthetic import SceneConfig, generate_pair
+
+
+@pytest.fixture(scope="module")
+def outlier_pair():
+    p = generate_pair(2_000_100, SceneConfig(noise_px=1.0, outlier_fraction=0.5))
+    return p, estimate_relative_pose(p.matches, "opencv")
+
+
+@pytest.mark.parametrize("weights", ["uniform", "oracle", "adversarial"])
+def test_guided_never_scores_worse_than_the_classical_estimate(outlier_pair, weights):
+    p, base = outlier_pair
+    m = p.matches
+    inl = epipolar_residuals(m, p.T_0to1)[0] < 2.0
+    w = {"uniform": np.ones(m.num_points), "oracle": 0.05 + 0.9 * inl,
+         "adversarial": 0.05 + 0.9 * ~inl}[weights]
+    g = guided_estimate(m, w, "opencv", classical=base)
+    x0, x1, f = _normalised(m)
+    assert g.success and g.method == "guided_opencv"
+    assert msac_cost(g.pose, x0, x1, 1.0 / f) <= msac_cost(base.pose, x0, x1, 1.0 / f) + 1e-12
+    assert g.info["candidate"] in ("all", "top", "prosac")
+
+
+def test_guided_with_oracle_weights_is_accurate(outlier_pair):
+    p, base = outlier_pair
+    m = p.matches
+    inl = epipolar_residuals(m, p.T_0to1)[0] < 2.0
+    g = guided_estimate(m, 0.05 + 0.9 * inl, "opencv", classical=base)
+    r, t = relative_pose_error(g.pose.matrix()[None].numpy(), p.T_0to1[None])
+    assert float(r[0]) < 0.5 and float(t[0]) < 5.0
+
+
+def test_guided_rejects_bad_weights(outlier_pair):
+    p, _ = outlier_pair
+    n = p.matches.num_points
+    with pytest.raises(ValueError, match="one weight per point match"):
+        guided_estimate(p.matches, np.ones(n - 1))
+    with pytest.raises(ValueError, match="non-negative"):
+        guided_estimate(p.matches, np.full(n, np.nan))
+    with pytest.raises(ValueError, match="keep"):
+        guided_estimate(p.matches, np.ones(n), keep=0.0)
+
+
+def _graph(seed=3, **scene):
+    p = generate_pair(seed, SceneConfig(**scene))
+    return p, build_pair_graph(p.matches, T_0to1=p.T_0to1)
+
+
+def test_geometric_head_recovers_the_exact_pose_with_uniform_weights():
+    p, g = _graph()
+    cfg = StrLPoseConfig.ablation("full", hidden=16, layers=1, patch_features=1, geometric=True)
+    model = StrLPose(cfg).eval()
+    with torch.no_grad():  # constant logit: every node weighs the same
+        last = model.inlier_head[-1]
+        last.weight.zero_()
+        last.bias.fill_(3.0)
+        out = model(g)
+    geo = out.geometric
+    assert int(geo.status[0]) == 0
+    # points carry exact matches; line endpoints of generated lines are exact too
+    r, t = relative_pose_error(geo.T_0to1.numpy(), p.T_0to1[None])
+    assert float(r[0]) < 1e-3 and float(t[0]) < 1e-2
+    assert geo.point_logits.shape == (p.matches.num_points,)
+    assert geo.endpoint_logits.shape == (2 * p.matches.num_lines,)
+
+
+def test_geometric_head_storage_order_survives_batching():
+    gs = [FixedSizeResample(40 + 10 * i, 8, seed=i)(_graph(seed=i)[1]) for i in range(3)]
+    from torch_geometric.loader.dataloader import Collater
+
+    b = Collater(None)(gs)
+    cfg = StrLPoseConfig.ablation("full", hidden=16, layers=1, patch_features=1, geometric=True)
+    model = StrLPose(cfg).eval()
+    with torch.no_grad():
+        out_b = model(b).geometric
+        singles = [model(g).geometric for g in gs]
+    assert torch.allclose(out_b.point_logits, torch.cat([s.point_logits for s in singles]),
+                          atol=1e-5)
+    assert torch.allclose(out_b.R, torch.cat([s.R for s in singles]), atol=1e-6)
+
+
+def test_geometric_head_reports_too_few_matches_as_degenerate():
+    p, g = _graph()
+    g = FixedSizeResample(5, 1, seed=0)(g)  # 5 points + 2 endpoints < 8
+    cfg = StrLPoseConfig.ablation("baseline", hidden=16, layers=1, geometric=True)
+    out = StrLPose(cfg)(g)
+    assert int(out.geometric.status[0]) == 1
+    assert torch.isfinite(out.geometric.E).all() and torch.isfinite(out.quaternion).all()
+
+
+@pytest.mark.parametrize("row", list(ABLATIONS))
+def test_every_ablation_row_trains_with_and_without_the_geometric_head(row):
+    _, g = _graph(seed=5, noise_px=1.0, outlier_fraction=0.3)
+    g = FixedSizeResample(64, 16, seed=0)(g)
+    if row in ("R", "LP+R"):
+        p = generate_pair(5, SceneConfig(noise_px=1.0, outlier_fraction=0.3))
+        g = FixedSizeResample(64, 16, seed=0)(build_pair_graph(
+            p.matches, T_0to1=p.T_0to1, keep_images=True))
+    for geometric in (False, True):
+        extra = {"image_channels": 1} if row in ("R", "LP+R") else {}
+        cfg = StrLPoseConfig.ablation(row, hidden=16, layers=1, patch_features=1,
+                                      geometric=geometric, **extra)
+        model = StrLPose(cfg)
+        out = model(g)
+        assert (out.geometric is not None) == geometric
+        loss = out.quaternion.sum() + out.translation.sum()
+        if geometric:
+            loss = loss + GeometricLoss()(out, g["T_0to1"])["loss"]
+        loss.backward()
+        grads = [q.grad for q in model.parameters() if q.grad is not None]
+        assert grads and all(torch.isfinite(x).all() for x in grads)
+
+
+def test_regression_checkpoint_loads_without_the_geometric_head(tmp_path):
+    model = StrLPose(StrLPoseConfig.ablation("full", hidden=16, layers=1, patch_features=1))
+    path = model.save(tmp_path / "m.pt")
+    again = StrLPose.load(path)
+    assert again.inlier_head is None and again.config.geometric is False
+
+
+def test_geometric_loss_labels_follow_the_true_epipolar_error():
+    p, g = _graph(seed=7, noise_px=0.5, outlier_fraction=0.4)
+    cfg = StrLPoseConfig.ablation("baseline", hidden=16, layers=1, geometric=True)
+    model = StrLPose(cfg)
+    out = model(g)
+    logs = GeometricLoss(threshold_px=2.0)(out, g["T_0to1"])
+    # 40 % of the point and line matches were replaced by wrong ones
+    assert 0.4 < float(logs["inlier_frac"]) < 0.75
+    with pytest.raises(ValueError, match="geometric=True"):
+        GeometricLoss()(StrLPose(StrLPoseConfig.ablation("baseline", hidden=16, layers=1))(g),
+                        g["T_0to1"])
