@@ -8,11 +8,12 @@ x``), ``import strl_pyg``, and for comparison ``import torch`` and the first tou
 ``strl_pyg.StrLPose`` (which loads torch and PyG). Also checks that ``--help`` leaves torch
 unimported.
 
-Measured (2 shared CPU cores, Python 3.11, torch 2.13.0+cpu, 7 runs, other jobs running):
-``strl-pose --help`` 0.20 s median, argument error 0.20 s, ``import strl_pyg`` 0.06 s; before
-the lazy imports (issue 11) ``--help`` took 3.2 s and ``import strl_pyg`` 5.0 s (torch, PyG
-and kornia at import time). ``import torch`` alone: ~1.5 s, ``from strl_pyg import
-StrLPose``: ~3 s.
+Measured (AMD EPYC, 2 shared CPU cores, load average ~5.7 from other jobs, Python 3.11.7,
+torch 2.13.0+cpu, 7 runs): ``strl-pose --help`` 0.17 s median (console script 0.16 s), an
+argument error 0.18 s, ``import strl_pyg`` 0.04 s; ``import torch`` alone 1.6 s and ``from
+strl_pyg import StrLPose`` 3.8 s for reference. Before the torch-free parser and the lazy
+package imports (commit 93ac487, same machine, 6 runs): ``--help`` 3.4-4.1 s, ``import
+strl_pyg`` 3.7-4.1 s (torch, PyG and kornia at import time).
 """
 
 from __future__ import annotations

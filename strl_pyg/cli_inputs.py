@@ -17,7 +17,8 @@ __all__ = ["UsageError", "MAX_SIDE", "read_image_file", "read_intrinsics",
            "downscale_for_matching", "PairInputs", "read_pair"]
 
 #: Default longest image side for matching (``--max-side``); larger images are downscaled.
-#: A 6000x4000 pair at full resolution needs ~6 GB in the front end.
+#: A 6000x4000 pair at full resolution took 5.6 GB and 48 s in `strl-pose match`; 0.5 GB and
+#: 2.4 s at 1600 (2 CPU cores).
 MAX_SIDE = 1600
 
 
