@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from strl_pyg.checkpoints import DEFAULT_WEIGHTS, WEIGHTS_DIR, default_checkpoint  # noqa: F401
 from strl_pyg.cli_inputs import (  # noqa: F401  (re-exported: the readers' public home)
     MAX_SIDE,
     PairInputs,
@@ -41,19 +42,13 @@ from strl_pyg.cli_inputs import (  # noqa: F401  (re-exported: the readers' publ
     read_intrinsics,
     read_pair,
 )
+from strl_pyg.synthetic.config import LINE_SCENE_KINDS
 
 __all__ = ["main", "run_guarded", "check_train_files", "build_parser", "read_intrinsics",
            "read_image_file", "default_checkpoint", "predict_pair", "downscale_for_matching",
            "PairInputs", "MAX_SIDE"]
 
-WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
-DEFAULT_WEIGHTS = WEIGHTS_DIR / "strl_pose_synthetic.pt"
 DEMO_SEED = 2_000_017  # held out: training uses seeds < 2,000,000
-
-
-def default_checkpoint() -> Path:
-    """The shipped checkpoint (``STRL_POSE_WEIGHTS`` overrides it)."""
-    return Path(os.environ.get("STRL_POSE_WEIGHTS", DEFAULT_WEIGHTS))
 
 
 def load_model(path: str | os.PathLike | None):
@@ -383,7 +378,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True)
     p = sub.add_parser("demo", help="the main job on a generated pair (no downloads)")
     p.add_argument("--seed", type=_non_negative_int, default=DEMO_SEED)
-    p.add_argument("--kind", choices=("street", "indoor", "boxes"), default="street")
+    p.add_argument("--kind", choices=LINE_SCENE_KINDS, default="street")
     p.add_argument("--checkpoint", default=None, help="default: the shipped weights")
     p.add_argument("--out", default="outputs/demo", help="folder for the match drawing")
     p.add_argument("--json", action="store_true", help="also print the result as JSON")

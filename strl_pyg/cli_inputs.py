@@ -27,32 +27,14 @@ class UsageError(ValueError):
 
 
 def read_image_file(path: str | os.PathLike) -> np.ndarray:
-    """Reads an image file as uint8 ``(H, W)`` or ``(H, W, 3)`` RGB; clear errors otherwise."""
-    import cv2
+    """Reads an image file as uint8 ``(H, W)`` or ``(H, W, 3)`` RGB with the package's one
+    reader (:func:`strl_pyg.images.read_image_file`); its errors become :class:`UsageError`."""
+    from strl_pyg import images
 
-    path = Path(path)
-    if path.is_dir():
-        raise UsageError(f"Expected an image file at '{path}' (got a folder)")
-    if not path.is_file():
-        raise UsageError(f"Expected an image file at '{path}' (got no such file)")
-    if path.stat().st_size == 0:
-        raise UsageError(f"Expected a readable image at '{path}' (got an empty file)")
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None or img.size == 0:
-        raise UsageError(f"Expected a readable image at '{path}' (got a file OpenCV cannot decode)")
-    if img.dtype == np.uint16:
-        img = (img / 257).astype(np.uint8)
-    if img.dtype != np.uint8:  # float / int32 TIFF or EXR: not an 8- or 16-bit image
-        raise UsageError(f"Expected an 8- or 16-bit image at '{path}' (got dtype {img.dtype})")
-    if img.ndim == 3 and img.shape[2] == 4:
-        img = img[..., :3]
-    if img.ndim == 3 and img.shape[2] == 1:
-        img = img[..., 0]
-    if img.ndim == 3 and img.shape[2] == 2:  # grey + alpha
-        img = np.ascontiguousarray(img[..., 0])
-    if img.ndim == 3:
-        img = np.ascontiguousarray(img[..., ::-1])  # BGR -> RGB
-    return img
+    try:
+        return images.read_image_file(path)
+    except (OSError, ValueError) as err:
+        raise UsageError(str(err)) from None
 
 
 def _K_from_numbers(values: list[float], source: str) -> np.ndarray:

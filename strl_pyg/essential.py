@@ -35,6 +35,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from strl_pyg.geometry import sampson_error, signed_sampson, skew, so3_exp, tangent_basis
+
 __all__ = [
     "OK",
     "DEGENERATE",
@@ -90,14 +92,9 @@ def _batched(x0: Tensor, x1: Tensor, weights: Tensor, mask: Tensor | None):
 
 def sampson_sq(E: Tensor, x0: Tensor, x1: Tensor) -> Tensor:
     """Squared Sampson distances ``[B, N]`` of normalised matches ``x0``, ``x1`` ``[B, N, 2]``
-    under ``E`` ``[B, 3, 3]`` (``x1^T E x0 = 0``); invariant to the scale of ``E``."""
-    h0 = torch.cat([x0, torch.ones_like(x0[..., :1])], dim=-1)
-    h1 = torch.cat([x1, torch.ones_like(x1[..., :1])], dim=-1)
-    Ex0 = h0 @ E.transpose(-1, -2)  # [B, N, 3]
-    Etx1 = h1 @ E
-    num = (h1 * Ex0).sum(-1)
-    den = Ex0[..., 0] ** 2 + Ex0[..., 1] ** 2 + Etx1[..., 0] ** 2 + Etx1[..., 1] ** 2
-    return num**2 / den.clamp_min(1e-30)
+    under ``E`` ``[B, 3, 3]`` (``x1^T E x0 = 0``); invariant to the scale of ``E``. The same
+    as :func:`strl_pyg.geometry.sampson_error` (``eps = 1e-30``)."""
+    return sampson_error(E, x0, x1, eps=1e-30)
 
 
 def _conditioning(x: Tensor, w: Tensor) -> Tensor:
@@ -195,12 +192,6 @@ def weighted_essential(
     return EssentialEstimate(E.to(dtype), status, w.to(dtype), n_eff.to(dtype))
 
 
-def _skew(v: Tensor) -> Tensor:
-    z = torch.zeros_like(v[..., 0])
-    return torch.stack([z, -v[..., 2], v[..., 1], v[..., 2], z, -v[..., 0],
-                        -v[..., 1], v[..., 0], z], dim=-1).reshape(*v.shape[:-1], 3, 3)
-
-
 def _depths(R: Tensor, t: Tensor, x0: Tensor, x1: Tensor) -> tuple[Tensor, Tensor]:
     """Depths of the midpoint-free linear triangulation of each match in both cameras:
     solve ``z1 h1 = z0 R h0 + t`` in least squares for ``(z0, z1)``."""
@@ -263,38 +254,10 @@ def decompose_essential(E: Tensor, x0: Tensor, x1: Tensor,
     return best_R, best_t, best_score
 
 
-def _so3_exp(w: Tensor) -> Tensor:
-    theta2 = (w * w).sum(-1)
-    small = theta2 < 1e-12
-    t2 = torch.where(small, torch.ones_like(theta2), theta2)
-    theta = t2.sqrt()
-    a = torch.where(small, 1.0 - theta2 / 6.0, torch.sin(theta) / theta)
-    b = torch.where(small, 0.5 - theta2 / 24.0, (1.0 - torch.cos(theta)) / t2)
-    Wx = _skew(w)
-    eye = torch.eye(3, dtype=w.dtype, device=w.device).expand_as(Wx)
-    return eye + a[..., None, None] * Wx + b[..., None, None] * (Wx @ Wx)
-
-
-def _basis(t: Tensor) -> Tensor:
-    """``[B, 3, 2]`` orthonormal bases of the planes orthogonal to unit ``t`` ``[B, 3]``."""
-    helper = torch.zeros_like(t)
-    idx = t.abs().argmin(-1)
-    helper[torch.arange(t.shape[0]), idx] = 1.0
-    b1 = torch.linalg.cross(t, helper)
-    b1 = b1 / b1.norm(dim=-1, keepdim=True)
-    b2 = torch.linalg.cross(t, b1)
-    return torch.stack([b1, b2], dim=-1)
-
-
 def _signed_sampson(R: Tensor, t: Tensor, x0: Tensor, x1: Tensor) -> Tensor:
-    E = _skew(t) @ R
-    h0 = torch.cat([x0, torch.ones_like(x0[..., :1])], dim=-1)
-    h1 = torch.cat([x1, torch.ones_like(x1[..., :1])], dim=-1)
-    Ex0 = h0 @ E.transpose(-1, -2)
-    Etx1 = h1 @ E
-    num = (h1 * Ex0).sum(-1)
-    den = Ex0[..., 0] ** 2 + Ex0[..., 1] ** 2 + Etx1[..., 0] ** 2 + Etx1[..., 1] ** 2
-    return num / (den + 1e-300).sqrt()
+    """Signed Sampson residuals ``[B, N]`` of ``E = [t]_x R``
+    (:func:`strl_pyg.geometry.signed_sampson`)."""
+    return signed_sampson(skew(t) @ R, x0, x1)
 
 
 @torch.no_grad()
@@ -329,13 +292,13 @@ def refine_pose(R: Tensor, t: Tensor, x0: Tensor, x1: Tensor, weights: Tensor,
 
     for _ in range(iterations):
         c0, r, ww = cost(R, t)
-        B = _basis(t)
+        B = tangent_basis(t)
         # numerical Jacobian (5 columns) in float64: cheap for N of a few thousand
         cols = []
         for k in range(5):
             dx = torch.zeros(R.shape[0], 5, dtype=R.dtype, device=R.device)
             dx[:, k] = eps
-            Rk = _so3_exp(dx[:, :3]) @ R
+            Rk = so3_exp(dx[:, :3]) @ R
             tk = t + (B @ dx[:, 3:, None])[..., 0]
             tk = tk / tk.norm(dim=-1, keepdim=True)
             cols.append((_signed_sampson(Rk, tk, x0, x1) - r) / eps)
@@ -346,7 +309,7 @@ def refine_pose(R: Tensor, t: Tensor, x0: Tensor, x1: Tensor, weights: Tensor,
         Hd = H + lam[:, None, None] * (torch.diagonal(H, dim1=-2, dim2=-1)[..., None] * eye
                                        + 1e-12 * eye)
         step = -torch.linalg.solve(Hd, g)[..., 0]
-        Rn = _so3_exp(step[:, :3]) @ R
+        Rn = so3_exp(step[:, :3]) @ R
         tn = t + (B @ step[:, 3:, None])[..., 0]
         tn = tn / tn.norm(dim=-1, keepdim=True)
         c1, _, _ = cost(Rn, tn)

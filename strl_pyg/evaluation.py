@@ -11,7 +11,7 @@ Per pair (:class:`EvalPair`: matches, ground-truth ``T_0to1``, subset, id) every
   pair's graph does not depend on the order or the other pairs), or not resampled with
   ``resample=None``;
 * ``"opencv"``, ``"poselib"``: :func:`~strl_pyg.baselines.estimate_relative_pose`;
-* ``"fused_opencv"``, ``"fused_poselib"``: :func:`~strl_pyg.fusion.fuse_poses` of the
+* ``"fused_opencv"``, ``"fused_poselib"``: :func:`~strl_pyg.pose_fusion.fuse_poses` of the
   network with that baseline.
 
 Errors are the rotation angle and the translation-direction angle in degrees (DeMoN's, sign not
@@ -44,7 +44,6 @@ from tqdm.auto import tqdm
 
 from strl_pyg.baselines import MIN_POINTS, estimate_relative_pose
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.fusion import fuse_poses
 from strl_pyg.geometry import Pose
 from strl_pyg.inference import forward_pose, prepare_graph, prepare_matches
 from strl_pyg.metrics import (
@@ -54,6 +53,8 @@ from strl_pyg.metrics import (
     pose_auc,
     relative_pose_error,
 )
+from strl_pyg.pose_fusion import fuse_poses
+from strl_pyg.synthetic.config import LINE_SCENE_KINDS, SCENE_KINDS
 
 __all__ = [
     "METHODS",
@@ -126,7 +127,7 @@ class EvalPair:
 def synthetic_eval_pairs(
     num_pairs: int,
     seed: int = 2_000_000,
-    kinds: Sequence[str] = ("street", "indoor", "boxes"),
+    kinds: Sequence[str] = LINE_SCENE_KINDS,
     matches: str = "ground_truth",
     scene: dict[str, Any] | None = None,
     frontend_config: Any = None,
@@ -553,7 +554,7 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=prog, description=(
         "Evaluates a Str-L Pose checkpoint against the classical baselines and the fused pose."),
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    from strl_pyg.cli import default_checkpoint
+    from strl_pyg.checkpoints import default_checkpoint
 
     p.add_argument("--checkpoint", default=str(default_checkpoint()),
                    help="StrLPose checkpoint (StrLPose.save); default: the shipped weights")
@@ -567,7 +568,7 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=1, help="front-end matching processes")
     p.add_argument("--num-pairs", type=int, default=30, help="synthetic: number of pairs")
     p.add_argument("--seed", type=int, default=2_000_000, help="synthetic: first held-out seed")
-    p.add_argument("--kinds", nargs="+", default=["street", "indoor", "boxes"])
+    p.add_argument("--kinds", nargs="+", default=list(LINE_SCENE_KINDS), choices=SCENE_KINDS)
     p.add_argument("--matches", choices=("ground_truth", "frontend"), default="ground_truth",
                    help="synthetic: generator matches or front-end matches")
     p.add_argument("--noise-px", type=float, default=0.0, help="synthetic match noise")

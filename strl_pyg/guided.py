@@ -25,10 +25,10 @@ from typing import Any
 import numpy as np
 import torch
 
-from strl_pyg.baselines import MIN_POINTS, BaselineResult, estimate_relative_pose
+from strl_pyg.baselines import MIN_POINTS, BaselineResult, _unit_pose, estimate_relative_pose
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.essential import refine_pose
-from strl_pyg.geometry import Pose, normalize_points
+from strl_pyg.geometry import Pose, normalize_points, signed_sampson, skew
 
 __all__ = ["msac_cost", "guided_estimate"]
 
@@ -42,9 +42,8 @@ def _normalised(matches: PairMatches) -> tuple[torch.Tensor, torch.Tensor, float
 
 
 def _sampson(R: torch.Tensor, t: torch.Tensor, x0: torch.Tensor, x1: torch.Tensor):
-    from strl_pyg.essential import _signed_sampson
-
-    return _signed_sampson(R[None].double(), t[None].double(), x0[None], x1[None])[0].abs()
+    """Absolute Sampson distances ``[N]`` of ``E = [t]_x R`` on normalised ``x0``, ``x1``."""
+    return signed_sampson(skew(t.double()) @ R.double(), x0, x1).abs()
 
 
 def msac_cost(pose: Pose, x0: torch.Tensor, x1: torch.Tensor, threshold: float) -> float:
@@ -145,8 +144,6 @@ def guided_estimate(
 def _opencv_prosac(matches: PairMatches, order: np.ndarray, threshold_px: float,
                    seed: int) -> BaselineResult | None:
     import cv2
-
-    from strl_pyg.baselines import _unit_pose
 
     cv2.setRNGSeed(int(seed))
     K0 = np.ascontiguousarray(matches.K0, dtype=np.float64)

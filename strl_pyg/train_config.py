@@ -2,8 +2,8 @@
 
 :class:`TrainConfig` decides a run (``strl_pyg.training`` re-exports it); the flags of
 ``examples/train.py`` and ``strl-pose train`` come from :func:`add_train_arguments`. This
-module imports only the standard library, so ``strl-pose --help`` and argument errors return
-before torch is loaded.
+module imports only the standard library and numpy (the scene kinds), so ``strl-pose --help``
+and argument errors return before torch is loaded.
 """
 
 from __future__ import annotations
@@ -11,6 +11,8 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass, field, fields
 from typing import Any
+
+from strl_pyg.synthetic.config import LINE_SCENE_KINDS  # numpy only
 
 __all__ = [
     "DATASETS",
@@ -39,7 +41,7 @@ class TrainConfig:
     data_root: str | None = None  # dataset root (kitti: the odometry root; demon: DeepSfM root)
     cache_dir: str = "outputs/match_cache"  # front-end match cache of real datasets
     scene: dict[str, Any] = field(default_factory=dict)  # SceneConfig fields (synthetic)
-    scene_kinds: list[str] = field(default_factory=lambda: ["street", "indoor", "boxes"])
+    scene_kinds: list[str] = field(default_factory=lambda: list(LINE_SCENE_KINDS))
     # synthetic: a named mixture of scene configurations (strl_pyg.training.SCENE_MIXES), which
     # replaces `scene` / `scene_kinds`; pairs are split evenly over its configurations
     scene_mix: str | None = None

@@ -7,13 +7,13 @@ from torch.autograd import gradcheck
 from strl_pyg.essential import (
     DEGENERATE,
     OK,
-    _so3_exp,
     decompose_essential,
     refine_pose,
     sampson_sq,
     weighted_essential,
 )
 from strl_pyg.geometry import essential_from_pose
+from strl_pyg.geometry import so3_exp as _so3_exp
 from strl_pyg.metrics import rotation_error_deg, translation_angle_error_deg
 
 

@@ -1,4 +1,4 @@
-"""Tests of strl_pyg.fusion on generated pairs with known poses."""
+"""Tests of strl_pyg.pose_fusion on generated pairs with known poses."""
 
 from __future__ import annotations
 
@@ -9,7 +9,9 @@ import pytest
 import torch
 
 from strl_pyg.baselines import BaselineResult, estimate_relative_pose
-from strl_pyg.fusion import (
+from strl_pyg.geometry import Pose, essential_from_pose, normalize_points, sampson_error
+from strl_pyg.metrics import relative_pose_error
+from strl_pyg.pose_fusion import (
     GATE_CHI2,
     MIN_INLIERS,
     FusedPose,
@@ -27,8 +29,6 @@ from strl_pyg.fusion import (
     tangent_to_pose,
     truncated_sigma,
 )
-from strl_pyg.geometry import Pose, essential_from_pose, normalize_points, sampson_error
-from strl_pyg.metrics import relative_pose_error
 from strl_pyg.synthetic import SceneConfig, generate_pair
 
 

@@ -10,7 +10,7 @@ import pytest
 from strl_pyg.frontend import epipolar_residuals
 from strl_pyg.geometry import relative_pose_from_c2w
 from strl_pyg.synthetic import SCENE_KINDS, SceneConfig, generate_pair
-from strl_pyg.synthetic.metrics import line_transfer_error, point_transfer_error
+from strl_pyg.synthetic.match_quality import line_transfer_error, point_transfer_error
 
 
 @pytest.fixture(scope="module", params=SCENE_KINDS)

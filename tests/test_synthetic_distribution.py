@@ -30,7 +30,7 @@ from strl_pyg.synthetic import (
     sample_scene_config,
     scene_distribution,
 )
-from strl_pyg.synthetic.metrics import point_transfer_error
+from strl_pyg.synthetic.match_quality import point_transfer_error
 
 SMALL = (120, 160)
 

@@ -24,7 +24,7 @@ import torch.nn.functional as F
 from torch import Tensor
 from torch_geometric.data import HeteroData
 
-from strl_pyg.data import keys as K
+from strl_pyg.data import keys as keys_
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.data.pair_graph import (
     ImplicitEdgesError,
@@ -35,6 +35,7 @@ from strl_pyg.data.pair_graph import (
     implicit_edge_types,
     materialize_complete_edges,
 )
+from strl_pyg.geometry import normalize_points
 from strl_pyg.io import atomic_open
 
 __all__ = [
@@ -75,9 +76,9 @@ def normalize_coords(
     Returns:
         Normalised coordinates ``(*, 2)``, same dtype as ``xy``.
     """
-    if K_mat is not None:
-        K_mat = K_mat.to(xy)
-        return (xy - K_mat[:2, 2]) @ torch.linalg.inv(K_mat[:2, :2]).T
+    if K_mat is not None:  # one implementation of K^-1: strl_pyg.geometry.normalize_points
+        flat = xy.reshape(-1, 2)
+        return normalize_points(flat, K_mat.to(xy.device)).to(xy.dtype).reshape(xy.shape)
     h, w = image_size
     centre = xy.new_tensor([(w - 1) / 2.0, (h - 1) / 2.0])
     return (xy - centre) / (max(h, w) / 2.0)
@@ -133,7 +134,7 @@ def line_edge_index(num_lines: int) -> Tensor:
     return torch.stack([src, src ^ 1])
 
 
-def _as_pose(T_0to1: Any) -> Tensor:
+def _checked_pose_matrix(T_0to1: Any) -> Tensor:
     if hasattr(T_0to1, "matrix") and callable(T_0to1.matrix):  # strl_pyg.geometry.Pose
         T_0to1 = T_0to1.matrix()
     if hasattr(T_0to1, "detach"):
@@ -211,7 +212,7 @@ def build_pair_graph(
         )
     if keep_images and not matches.has_images:
         raise ValueError("Expected images in the matches for keep_images=True (got none)")
-    pose = None if T_0to1 is None else _as_pose(T_0to1)
+    pose = None if T_0to1 is None else _checked_pose_matrix(T_0to1)
 
     use_K = matches.has_intrinsics and normalization != "image_size"
     Ks = (
@@ -229,48 +230,48 @@ def build_pair_graph(
     nl = matches.num_lines
     lines = [torch.from_numpy(matches.lines0).float(), torch.from_numpy(matches.lines1).float()]
     coords = {
-        K.POINT: [
+        keys_.POINT: [
             torch.from_numpy(matches.points0).float(),
             torch.from_numpy(matches.points1).float(),
         ],
-        K.ENDPOINT: [ln.reshape(-1, 2) for ln in lines],
+        keys_.ENDPOINT: [ln.reshape(-1, 2) for ln in lines],
     }
     data = PairGraph()
     for node_type, (xy0, xy1) in coords.items():
         store = data[node_type]
         store.num_nodes = xy0.shape[0]
-        store[K.KPTS0], store[K.KPTS1] = xy0, xy1
-        for i, (xy, key) in enumerate(((xy0, K.POS0), (xy1, K.POS1))):
+        store[keys_.KPTS0], store[keys_.KPTS1] = xy0, xy1
+        for i, (xy, key) in enumerate(((xy0, keys_.POS0), (xy1, keys_.POS1))):
             store[key] = normalize_coords(xy, sizes[i], Ks[i] if use_K else None)
         if images is not None:
-            store[K.PATCH0] = sample_patches(images[0], xy0, patch_size)
-            store[K.PATCH1] = sample_patches(images[1], xy1, patch_size)
+            store[keys_.PATCH0] = sample_patches(images[0], xy0, patch_size)
+            store[keys_.PATCH1] = sample_patches(images[1], xy1, patch_size)
     if matches.point_scores is not None:
-        data[K.POINT][K.SCORE] = torch.from_numpy(matches.point_scores).float()
+        data[keys_.POINT][keys_.SCORE] = torch.from_numpy(matches.point_scores).float()
     if matches.line_scores is not None:
-        data[K.ENDPOINT][K.SCORE] = (
+        data[keys_.ENDPOINT][keys_.SCORE] = (
             torch.from_numpy(matches.line_scores).float().repeat_interleave(2)
         )
 
-    ep = data[K.ENDPOINT]
+    ep = data[keys_.ENDPOINT]
     other = torch.arange(2 * nl) ^ 1
-    p0, p1 = ep[K.POS0], ep[K.POS1]
-    ep[K.LINE_FEAT] = torch.cat([p0, p0[other] - p0, p1, p1[other] - p1], dim=-1)
-    data[K.LINE_EDGE].edge_index = line_edge_index(nl)
+    p0, p1 = ep[keys_.POS0], ep[keys_.POS1]
+    ep[keys_.LINE_FEAT] = torch.cat([p0, p0[other] - p0, p1, p1[other] - p1], dim=-1)
+    data[keys_.LINE_EDGE].edge_index = line_edge_index(nl)
 
-    for et in K.COMPLETE_EDGE_TYPES:
-        data[et][K.DENSE] = torch.ones(1, dtype=torch.bool)
+    for et in keys_.COMPLETE_EDGE_TYPES:
+        data[et][keys_.DENSE] = torch.ones(1, dtype=torch.bool)
     if complete_edges == "explicit":
         materialize_complete_edges(data)
 
-    data[K.IMAGE_SIZE0] = torch.tensor([sizes[0]], dtype=torch.long)
-    data[K.IMAGE_SIZE1] = torch.tensor([sizes[1]], dtype=torch.long)
+    data[keys_.IMAGE_SIZE0] = torch.tensor([sizes[0]], dtype=torch.long)
+    data[keys_.IMAGE_SIZE1] = torch.tensor([sizes[1]], dtype=torch.long)
     if matches.has_intrinsics:
-        data[K.K0], data[K.K1] = Ks[0].unsqueeze(0), Ks[1].unsqueeze(0)
+        data[keys_.K0], data[keys_.K1] = Ks[0].unsqueeze(0), Ks[1].unsqueeze(0)
     if pose is not None:
-        data[K.T_0TO1] = pose.unsqueeze(0)
+        data[keys_.T_0TO1] = pose.unsqueeze(0)
     if keep_images:
-        data[K.IMAGE0], data[K.IMAGE1] = images[0].unsqueeze(0), images[1].unsqueeze(0)
+        data[keys_.IMAGE0], data[keys_.IMAGE1] = images[0].unsqueeze(0), images[1].unsqueeze(0)
     return data
 
 
@@ -294,6 +295,6 @@ def load_graph(path: str | os.PathLike) -> PairGraph:
         raise ValueError(
             f"Expected a graph file written by save_graph at '{path}' (got {err})"
         ) from err
-    if not isinstance(raw, dict) or K.POINT not in raw:
+    if not isinstance(raw, dict) or keys_.POINT not in raw:
         raise ValueError(f"Expected a pair-graph dict in '{path}' (got {type(raw).__name__})")
     return PairGraph.from_dict(raw)

@@ -28,14 +28,16 @@ graph is complete on the kept nodes, which is what the marker says).
 from __future__ import annotations
 
 import copy
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 from torch import Tensor
 from torch_geometric.data import Batch, HeteroData
 
-from strl_pyg.data import keys as K
-from strl_pyg.nn.attention import CompleteEdges
+from strl_pyg.data import keys as keys_
+
+if TYPE_CHECKING:  # the marker belongs to the layers, one level above the data
+    from strl_pyg.nn.attention import CompleteEdges
 
 __all__ = [
     "PairGraph",
@@ -106,12 +108,12 @@ def _num_graphs(data: HeteroData) -> int:
 def implicit_edge_types(data: HeteroData) -> list[tuple[str, str, str]]:
     """The edge types that carry a ``dense`` marker and no ``edge_index``."""
     return [et for et in data.edge_types
-            if K.DENSE in data[et] and K.EDGE_INDEX not in data[et]]
+            if keys_.DENSE in data[et] and keys_.EDGE_INDEX not in data[et]]
 
 
 def has_implicit_complete_edges(data: HeteroData) -> bool:
     """True when the complete edge types carry ``dense`` markers instead of edge indices."""
-    return all(K.DENSE in data[et] for et in K.COMPLETE_EDGE_TYPES if et in data.edge_types)
+    return all(keys_.DENSE in data[et] for et in keys_.COMPLETE_EDGE_TYPES if et in data.edge_types)
 
 
 def materialize_complete_edges(data: HeteroData) -> HeteroData:
@@ -122,13 +124,13 @@ def materialize_complete_edges(data: HeteroData) -> HeteroData:
     that tests compare the dense path against.
     """
     num_graphs = _num_graphs(data)
-    for et in K.COMPLETE_EDGE_TYPES:
+    for et in keys_.COMPLETE_EDGE_TYPES:
         src, _, dst = et
         data[et].edge_index = complete_edge_index(
             _batch_of(data, src), _batch_of(data, dst), num_graphs
         )
-        if K.DENSE in data[et]:
-            del data[et][K.DENSE]
+        if keys_.DENSE in data[et]:
+            del data[et][keys_.DENSE]
     return data
 
 
@@ -141,6 +143,8 @@ def edge_index_dict(data: HeteroData) -> dict[tuple[str, str, str], Tensor | Com
     Every edge type of ``data`` is present; explicit types map to their ``edge_index``. Layers
     that take only tensors need :func:`materialize_complete_edges` instead.
     """
+    from strl_pyg.nn.attention import CompleteEdges  # the layers' input type (upper layer)
+
     implicit = set(implicit_edge_types(data))
     out: dict[tuple[str, str, str], Tensor | CompleteEdges] = {}
     for et in data.edge_types:
@@ -149,10 +153,10 @@ def edge_index_dict(data: HeteroData) -> dict[tuple[str, str, str], Tensor | Com
             batched = isinstance(data, Batch)
             out[et] = CompleteEdges(_batch_of(data, src), _batch_of(data, dst)) if batched \
                 else CompleteEdges()
-        elif K.EDGE_INDEX in data[et]:
+        elif keys_.EDGE_INDEX in data[et]:
             out[et] = data[et].edge_index
         else:
-            raise ValueError(f"Expected '{K.EDGE_INDEX}' or '{K.DENSE}' on edge type {et} "
+            raise ValueError(f"Expected '{keys_.EDGE_INDEX}' or '{keys_.DENSE}' on edge type {et} "
                              "(got neither)")
     return out
 
@@ -182,7 +186,7 @@ class PairGraph(HeteroData):
     ``HeteroData`` converts with ``PairGraph.from_dict(data.to_dict())``."""
 
     def collect(self, key: str, allow_empty: bool = False) -> dict[Any, Any]:
-        if key == K.EDGE_INDEX:
+        if key == keys_.EDGE_INDEX:
             _refuse(self, "edge_index / edge_index_dict")
         return super().collect(key, allow_empty)
 
@@ -225,21 +229,21 @@ class PairGraph(HeteroData):
         ``dense`` (a bool per graph) and ``edge_index``."""
         status = super().validate(raise_on_error)
         n = _num_graphs(self)
-        for et in K.COMPLETE_EDGE_TYPES:
+        for et in keys_.COMPLETE_EDGE_TYPES:
             if et not in self.edge_types:
                 continue
             store = self[et]
-            has_dense, has_ei = K.DENSE in store, K.EDGE_INDEX in store
+            has_dense, has_ei = keys_.DENSE in store, keys_.EDGE_INDEX in store
             problem = None
             if has_dense == has_ei:
                 got = "both" if has_dense else "neither"
-                problem = (f"Expected edge type {et} to carry either '{K.DENSE}' or "
-                           f"'{K.EDGE_INDEX}' (got {got})")
+                problem = (f"Expected edge type {et} to carry either '{keys_.DENSE}' or "
+                           f"'{keys_.EDGE_INDEX}' (got {got})")
             elif has_dense:
-                d = store[K.DENSE]
+                d = store[keys_.DENSE]
                 if not isinstance(d, Tensor) or d.dtype != torch.bool or d.shape != (n,):
                     got = f"{d.dtype} {tuple(d.shape)}" if isinstance(d, Tensor) else type(d)
-                    problem = (f"Expected '{K.DENSE}' of edge type {et} as one bool per graph, "
+                    problem = (f"Expected '{keys_.DENSE}' of edge type {et} as one bool per graph, "
                                f"shape ({n},) (got {got})")
             if problem is not None:
                 if raise_on_error:

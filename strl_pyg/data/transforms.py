@@ -9,7 +9,7 @@ from torch import Tensor
 from torch_geometric.data import Batch, HeteroData
 from torch_geometric.transforms import BaseTransform
 
-from strl_pyg.data import keys as K
+from strl_pyg.data import keys as keys_
 from strl_pyg.data.graph import (
     has_implicit_complete_edges,
     line_edge_index,
@@ -75,18 +75,18 @@ class FixedSizeResample(BaseTransform):
             raise TypeError("Expected a single pair graph (got a batch): resample before batching")
         explicit = not has_implicit_complete_edges(data)
         data = copy.copy(data)  # attributes are reassigned below, never modified in place
-        pi = resample_indices(data[K.POINT].num_nodes, self.num_points, self.generator)
-        nl = data[K.ENDPOINT].num_nodes // 2
+        pi = resample_indices(data[keys_.POINT].num_nodes, self.num_points, self.generator)
+        nl = data[keys_.ENDPOINT].num_nodes // 2
         li = resample_indices(nl, self.num_lines, self.generator)
         ei = torch.stack([2 * li, 2 * li + 1], dim=1).reshape(-1)
-        for node_type, idx in ((K.POINT, pi), (K.ENDPOINT, ei)):
+        for node_type, idx in ((keys_.POINT, pi), (keys_.ENDPOINT, ei)):
             store = data[node_type]
             n = store.num_nodes
             for key, value in list(store.items()):
                 if isinstance(value, Tensor) and value.dim() > 0 and value.size(0) == n:
                     store[key] = value[idx]
             store.num_nodes = idx.numel()
-        data[K.LINE_EDGE].edge_index = line_edge_index(li.numel())
+        data[keys_.LINE_EDGE].edge_index = line_edge_index(li.numel())
         if explicit:
             materialize_complete_edges(data)
         return data
@@ -105,8 +105,10 @@ class MaterializeCompleteEdges(BaseTransform):
         return materialize_complete_edges(data)
 
 
-_SWAPPED_NODE_KEYS = ((K.KPTS0, K.KPTS1), (K.POS0, K.POS1), (K.PATCH0, K.PATCH1))
-_SWAPPED_GRAPH_KEYS = ((K.IMAGE_SIZE0, K.IMAGE_SIZE1), (K.K0, K.K1), (K.IMAGE0, K.IMAGE1))
+_SWAPPED_NODE_KEYS = ((keys_.KPTS0, keys_.KPTS1), (keys_.POS0, keys_.POS1),
+                      (keys_.PATCH0, keys_.PATCH1))
+_SWAPPED_GRAPH_KEYS = ((keys_.IMAGE_SIZE0, keys_.IMAGE_SIZE1), (keys_.K0, keys_.K1),
+                       (keys_.IMAGE0, keys_.IMAGE1))
 
 
 def swap_images(data: HeteroData) -> HeteroData:
@@ -118,26 +120,26 @@ def swap_images(data: HeteroData) -> HeteroData:
     swapping twice restores it).
     """
     data = copy.copy(data)  # attributes are reassigned below, never modified in place
-    for node_type in K.NODE_TYPES:
+    for node_type in keys_.NODE_TYPES:
         store = data[node_type]
         for a, b in _SWAPPED_NODE_KEYS:
             if a in store:
                 store[a], store[b] = store[b], store[a]
-    lf = data[K.ENDPOINT][K.LINE_FEAT]
-    data[K.ENDPOINT][K.LINE_FEAT] = torch.cat([lf[:, 4:], lf[:, :4]], dim=1)
+    lf = data[keys_.ENDPOINT][keys_.LINE_FEAT]
+    data[keys_.ENDPOINT][keys_.LINE_FEAT] = torch.cat([lf[:, 4:], lf[:, :4]], dim=1)
     for a, b in _SWAPPED_GRAPH_KEYS:
         if a in data:
             data[a], data[b] = data[b], data[a]
     n = data.num_graphs if isinstance(data, Batch) else 1
-    prev = data[K.SWAPPED] if K.SWAPPED in data else torch.zeros(n, dtype=torch.bool)
-    data[K.SWAPPED] = ~prev
-    if K.T_0TO1 in data:
-        T = data[K.T_0TO1]
+    prev = data[keys_.SWAPPED] if keys_.SWAPPED in data else torch.zeros(n, dtype=torch.bool)
+    data[keys_.SWAPPED] = ~prev
+    if keys_.T_0TO1 in data:
+        T = data[keys_.T_0TO1]
         R_t = T[..., :3, :3].transpose(-1, -2)
         inv = T.clone()
         inv[..., :3, :3] = R_t
         inv[..., :3, 3] = -(R_t @ T[..., :3, 3:4]).squeeze(-1)
-        data[K.T_0TO1] = inv
+        data[keys_.T_0TO1] = inv
     return data
 
 
@@ -161,9 +163,9 @@ class RandomSwap(BaseTransform):
     def forward(self, data: HeteroData) -> HeteroData:
         if float(torch.rand(1, generator=self.generator)) < self.p:
             return swap_images(data)
-        if K.SWAPPED not in data:  # every graph carries the flag, so batches collate
+        if keys_.SWAPPED not in data:  # every graph carries the flag, so batches collate
             data = copy.copy(data)
-            data[K.SWAPPED] = torch.zeros(1, dtype=torch.bool)
+            data[keys_.SWAPPED] = torch.zeros(1, dtype=torch.bool)
         return data
 
     def __repr__(self) -> str:

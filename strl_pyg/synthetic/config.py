@@ -10,9 +10,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SceneConfig", "SCENE_KINDS", "MOTIONS", "DEFAULT_MOTION"]
+__all__ = ["SceneConfig", "SCENE_KINDS", "LINE_SCENE_KINDS", "MOTIONS", "DEFAULT_MOTION"]
 
+#: Every scene kind.
 SCENE_KINDS = ("street", "indoor", "boxes", "object")
+#: The kinds built of long straight structure (all but the single textured object): the
+#: default mix of training on one kind each, of the evaluation tables and of the front-end
+#: benchmark.
+LINE_SCENE_KINDS = SCENE_KINDS[:3]
 
 #: Camera motions (see :mod:`strl_pyg.synthetic.motion` for their ranges).
 MOTIONS = ("forward", "lateral", "orbit", "handheld", "rotation", "wide")

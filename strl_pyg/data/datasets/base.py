@@ -29,6 +29,7 @@ from strl_pyg.data.datasets.cache import (
 from strl_pyg.data.graph import build_pair_graph
 from strl_pyg.data.keys import PAIR_ID, SUBSET
 from strl_pyg.data.matches import PairMatches
+from strl_pyg.images import decode_image
 
 __all__ = [
     "PAIR_ID",
@@ -81,15 +82,10 @@ class PairRecord:
     T_0to1: np.ndarray
 
 
-def _decode(buf: np.ndarray, name: str) -> np.ndarray:
-    img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED) if buf.size else None
-    if img is None:
-        raise ValueError(f"Expected a decodable image at '{name}' (got undecodable bytes)")
-    return img
-
-
 def read_image(source: ImageSource | str | os.PathLike, grayscale: bool = False) -> np.ndarray:
-    """Reads an image as uint8 ``(H, W)`` (grey files, or ``grayscale``) or ``(H, W, 3)`` RGB.
+    """Reads an image as uint8 ``(H, W)`` (grey files, or ``grayscale``) or ``(H, W, 3)`` RGB,
+    from a file or an HDF5 group, with the package's one decoder
+    (:func:`strl_pyg.images.decode_image`: 16-bit scaled to 8, alpha dropped).
 
     Missing files, missing HDF5 groups and undecodable data raise errors naming the file.
     """
@@ -99,18 +95,8 @@ def read_image(source: ImageSource | str | os.PathLike, grayscale: bool = False)
     if not path.is_file():
         raise FileNotFoundError(f"Expected an image file at '{path}' (got no such file)")
     if source.key is None:
-        img = _decode(np.fromfile(path, dtype=np.uint8), str(path))
-    else:
-        img = _decode(_read_h5_bytes(path, source.key), str(source))
-    if img.dtype != np.uint8:
-        raise ValueError(f"Expected an 8-bit image at '{source}' (got dtype {img.dtype})")
-    if img.ndim == 3 and img.shape[2] == 4:
-        img = img[..., :3]
-    if img.ndim == 3 and img.shape[2] == 1:
-        img = img[..., 0]
-    if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY if grayscale else cv2.COLOR_BGR2RGB)
-    return np.ascontiguousarray(img)
+        return decode_image(np.fromfile(path, dtype=np.uint8), str(path), grayscale)
+    return decode_image(_read_h5_bytes(path, source.key), str(source), grayscale)
 
 
 def _read_h5_bytes(path: Path, key: str) -> np.ndarray:

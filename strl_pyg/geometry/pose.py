@@ -1,38 +1,16 @@
-"""Rigid two-view geometry as pure functions on batched torch tensors.
+"""Tensor boundary, rotations and :class:`Pose` (conventions: :mod:`strl_pyg.geometry`).
 
-Conventions (fixed for the whole project):
-
-* Image suffixes ``0`` (reference) and ``1`` (target). ``T_0to1`` is the 4x4 pose that maps a
-  point of camera 0 into camera 1: ``X1 = R X0 + t``.
-* ``T_w_c`` is **camera-to-world** (KITTI ``poses/NN.txt``); ``T_c_w`` is **world-to-camera**
-  (DeMoN ``poses.txt``). Names say which one a function expects.
-* Quaternions are ``(w, x, y, z)`` as kornia uses; :func:`rotation_to_quaternion` returns the
-  canonical sign ``w >= 0``.
-* Pixels follow OpenCV: the centre of the top-left pixel is ``(0, 0)``. Normalised camera
-  coordinates are ``K^-1 [u, v, 1]^T`` without the trailing 1.
-* The essential matrix is ``E = [t]_x R`` so that ``x1^T E x0 = 0`` for normalised
-  homogeneous ``x0``, ``x1``; the fundamental matrix ``F = K1^-T E K0^-1`` satisfies the same
-  relation in pixels.
-
-Every public function accepts torch tensors with leading batch dimensions ``*`` and also numpy
-arrays or nested lists (converted at the boundary: float numpy keeps its precision, anything
-else becomes float64). Results are torch tensors unless documented otherwise.
+kornia (quaternion conversions) is imported on first use, so importing this module needs only
+numpy and torch.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 import torch
-from kornia.geometry.conversions import (
-    quaternion_to_rotation_matrix as _kornia_q2r,
-)
-from kornia.geometry.conversions import (
-    rotation_matrix_to_quaternion as _kornia_r2q,
-)
 
 __all__ = [
     "as_tensor",
@@ -40,16 +18,18 @@ __all__ = [
     "quaternion_to_rotation",
     "rotation_angle_deg",
     "Pose",
+    "as_pose",
     "relative_pose_from_c2w",
     "relative_pose_from_w2c",
-    "skew",
-    "essential_from_pose",
-    "fundamental_from_essential",
-    "normalize_points",
-    "project_points",
-    "sampson_error",
-    "symmetric_epipolar_error",
 ]
+
+
+def _kornia_conversions():
+    """kornia's quaternion conversions, imported on first use (kornia loads slowly and is
+    not needed to import the geometry, the data containers or the layers)."""
+    from kornia.geometry import conversions
+
+    return conversions.rotation_matrix_to_quaternion, conversions.quaternion_to_rotation_matrix
 
 
 # ----------------------------------------------------------------------------- boundary helpers
@@ -100,7 +80,8 @@ def rotation_to_quaternion(R: Any) -> torch.Tensor:
     """
     R = as_tensor(R, "R")
     _check_tail(R, (3, 3), "R")
-    q = _kornia_r2q(R.contiguous(), eps=torch.finfo(R.dtype).eps)
+    r2q, _ = _kornia_conversions()
+    q = r2q(R.contiguous(), eps=torch.finfo(R.dtype).eps)
     return torch.where(q[..., :1] < 0, -q, q)
 
 
@@ -118,7 +99,8 @@ def quaternion_to_rotation(q: Any) -> torch.Tensor:
     norm = q.norm(dim=-1, keepdim=True)
     if q.numel() and bool((norm < 1e-12).any()):
         raise ValueError("Expected quaternions of non-zero norm (got a zero quaternion)")
-    return _kornia_q2r(q / norm)
+    _, q2r = _kornia_conversions()
+    return q2r(q / norm)
 
 
 def rotation_angle_deg(R: Any) -> torch.Tensor:
@@ -309,8 +291,13 @@ class Pose:
         return self.matrix().detach().cpu().numpy()
 
 
-def _as_pose(T: Any, name: str) -> Pose:
+def as_pose(T: Any, name: str = "T") -> Pose:
+    """``T`` as a :class:`Pose`: a Pose is returned as is, matrices ``(*, 4, 4)`` /
+    ``(*, 3, 4)`` are converted; anything else raises ``ValueError`` naming ``name``."""
     return T if isinstance(T, Pose) else _named_from_matrix(T, name)
+
+
+_as_pose = as_pose  # the former private name
 
 
 def _named_from_matrix(T: Any, name: str) -> Pose:
@@ -346,163 +333,3 @@ def relative_pose_from_w2c(T_c0_w: Any, T_c1_w: Any) -> Pose:
         :class:`Pose` ``T_0to1`` of the broadcast batch shape.
     """
     return _as_pose(T_c1_w, "T_c1_w") @ _as_pose(T_c0_w, "T_c0_w").inv()
-
-
-# ----------------------------------------------------------------------------- epipolar
-def skew(v: Any) -> torch.Tensor:
-    """Cross-product matrices ``[v]_x`` with ``[v]_x w = v x w``: ``(*, 3) -> (*, 3, 3)``."""
-    v = as_tensor(v, "v")
-    _check_tail(v, (3,), "v")
-    x, y, z = v.unbind(-1)
-    o = torch.zeros_like(x)
-    return torch.stack([o, -z, y, z, o, -x, -y, x, o], dim=-1).reshape(*v.shape[:-1], 3, 3)
-
-
-def essential_from_pose(R: Any, t: Any = None) -> torch.Tensor:
-    """Essential matrices ``E = [t]_x R`` of ``T_0to1``; ``x1^T E x0 = 0`` (normalised coords).
-
-    Args:
-        R: rotations ``(*, 3, 3)``, or a :class:`Pose` ``T_0to1`` (then ``t`` is omitted).
-        t: translations ``(*, 3)`` (any scale; ``E`` scales with it).
-
-    Returns:
-        essential matrices, shape ``(*, 3, 3)``.
-    """
-    if isinstance(R, Pose):
-        if t is not None:
-            raise ValueError("Expected no 't' when a Pose is given (got both)")
-        R, t = R.R, R.t
-    elif t is None:
-        raise ValueError("Expected 't' with a rotation matrix 'R' (got None)")
-    pose = Pose(R, t)
-    return skew(pose.t) @ pose.R
-
-
-def _inv_K(K: torch.Tensor) -> torch.Tensor:
-    return torch.linalg.inv(K)
-
-
-def fundamental_from_essential(E: Any, K0: Any, K1: Any) -> torch.Tensor:
-    """``F = K1^-T E K0^-1``, so that ``p1^T F p0 = 0`` for homogeneous pixels ``p0``, ``p1``.
-
-    Args:
-        E: essential matrices ``(*, 3, 3)``.
-        K0, K1: intrinsics of image 0 and 1 ``(*, 3, 3)`` (pixels).
-
-    Returns:
-        fundamental matrices, shape ``(*, 3, 3)``.
-    """
-    E, K0, K1 = (as_tensor(a, n) for a, n in ((E, "E"), (K0, "K0"), (K1, "K1")))
-    for a, n in ((E, "E"), (K0, "K0"), (K1, "K1")):
-        _check_tail(a, (3, 3), n)
-    E, K0, K1 = _common(E, K0, K1)
-    return _inv_K(K1).transpose(-1, -2) @ E @ _inv_K(K0)
-
-
-def normalize_points(x: Any, K: Any) -> torch.Tensor:
-    """Pixels to normalised camera coordinates: the first two entries of ``K^-1 [u, v, 1]``.
-
-    Args:
-        x: pixel coordinates (OpenCV convention), shape ``(*, N, 2)``.
-        K: intrinsics, shape ``(*, 3, 3)`` with last row ``[0, 0, 1]`` (skew allowed).
-
-    Returns:
-        normalised coordinates, shape ``(*, N, 2)``.
-    """
-    x, K = as_tensor(x, "x"), as_tensor(K, "K")
-    _check_tail(x, (2,), "x")
-    _check_tail(K, (3, 3), "K")
-    if x.dim() < 2:
-        raise ValueError(f"Expected 'x' of shape (*, N, 2) (got {tuple(x.shape)})")
-    x, K = _common(x, K)
-    fx, s, cx = K[..., 0, 0, None], K[..., 0, 1, None], K[..., 0, 2, None]
-    fy, cy = K[..., 1, 1, None], K[..., 1, 2, None]
-    y = (x[..., 1] - cy) / fy
-    return torch.stack([(x[..., 0] - cx - s * y) / fx, y], dim=-1)
-
-
-def project_points(X: Any, K: Any) -> torch.Tensor:
-    """Pinhole projection of camera-frame points to pixels: ``(*, N, 3) -> (*, N, 2)``.
-
-    Args:
-        X: 3D points in the camera frame (``z > 0`` in front), shape ``(*, N, 3)``.
-        K: intrinsics, shape ``(*, 3, 3)``.
-    """
-    X, K = as_tensor(X, "X"), as_tensor(K, "K")
-    _check_tail(X, (3,), "X")
-    _check_tail(K, (3, 3), "K")
-    X, K = _common(X, K)
-    p = X @ K.transpose(-1, -2)
-    return p[..., :2] / p[..., 2:3]
-
-
-def _epipolar_terms(M: Any, x0: Any, x1: Any):
-    M, x0, x1 = as_tensor(M, "E_or_F"), as_tensor(x0, "x0"), as_tensor(x1, "x1")
-    _check_tail(M, (3, 3), "E_or_F")
-    _check_tail(x0, (2,), "x0")
-    _check_tail(x1, (2,), "x1")
-    if x0.dim() < 2 or x0.shape[-2] != x1.shape[-2]:
-        raise ValueError(
-            "Expected 'x0' and 'x1' of shape (*, N, 2) with the same N "
-            f"(got {tuple(x0.shape)} and {tuple(x1.shape)})"
-        )
-    M, x0, x1 = _common(M, x0, x1)
-    h0 = torch.cat([x0, torch.ones_like(x0[..., :1])], dim=-1)
-    h1 = torch.cat([x1, torch.ones_like(x1[..., :1])], dim=-1)
-    Mx0 = h0 @ M.transpose(-1, -2)  # rows: M h0, the epipolar lines in image 1
-    Mtx1 = h1 @ M  # rows: M^T h1, the epipolar lines in image 0
-    r = (h1 * Mx0).sum(-1)
-    return r, Mx0, Mtx1
-
-
-def sampson_error(
-    E_or_F: Any, x0: Any, x1: Any, squared: bool = True, eps: float = 1e-15
-) -> torch.Tensor:
-    """First-order geometric (Sampson) error of matches under ``x1^T M x0 = 0``.
-
-    .. math::
-        d^2 = \\frac{(x_1^T M x_0)^2}{(M x_0)_1^2 + (M x_0)_2^2 + (M^T x_1)_1^2 + (M^T x_1)_2^2}
-
-    Units follow the input: pixels with a fundamental matrix ``F`` and pixel coordinates, or
-    normalised units with an essential matrix ``E`` and normalised coordinates
-    (:func:`normalize_points`). ``squared`` (default ``True``, as kornia) returns ``d^2``,
-    otherwise ``d``.
-
-    Args:
-        E_or_F: ``(*, 3, 3)``.
-        x0, x1: matched coordinates in image 0 and 1, shape ``(*, N, 2)``.
-
-    Returns:
-        errors, shape ``(*, N)``.
-    """
-    r, Mx0, Mtx1 = _epipolar_terms(E_or_F, x0, x1)
-    den = Mx0[..., 0] ** 2 + Mx0[..., 1] ** 2 + Mtx1[..., 0] ** 2 + Mtx1[..., 1] ** 2
-    d2 = r**2 / (den + eps)
-    return d2 if squared else torch.sqrt(d2 + eps) - math.sqrt(eps)
-
-
-def symmetric_epipolar_error(
-    E_or_F: Any, x0: Any, x1: Any, squared: bool = True, eps: float = 1e-15
-) -> torch.Tensor:
-    """Sum of squared distances of each point to the epipolar line of its match.
-
-    .. math::
-        d^2 = (x_1^T M x_0)^2 \\left(\\frac{1}{(M x_0)_1^2 + (M x_0)_2^2}
-              + \\frac{1}{(M^T x_1)_1^2 + (M^T x_1)_2^2}\\right)
-
-    Same unit rules as :func:`sampson_error` (pixels with ``F``, normalised with ``E``).
-
-    Args:
-        E_or_F: ``(*, 3, 3)``.
-        x0, x1: matched coordinates in image 0 and 1, shape ``(*, N, 2)``.
-        squared: return ``d^2`` (default) or ``d``.
-
-    Returns:
-        errors, shape ``(*, N)``.
-    """
-    r, Mx0, Mtx1 = _epipolar_terms(E_or_F, x0, x1)
-    d2 = r**2 * (
-        1.0 / (Mx0[..., 0] ** 2 + Mx0[..., 1] ** 2 + eps)
-        + 1.0 / (Mtx1[..., 0] ** 2 + Mtx1[..., 1] ** 2 + eps)
-    )
-    return d2 if squared else torch.sqrt(d2 + eps) - math.sqrt(eps)

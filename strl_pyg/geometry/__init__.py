@@ -1,0 +1,85 @@
+"""Rigid two-view geometry as pure functions on batched torch tensors.
+
+Conventions (fixed for the whole project):
+
+* Image suffixes ``0`` (reference) and ``1`` (target). ``T_0to1`` is the 4x4 pose that maps a
+  point of camera 0 into camera 1: ``X1 = R X0 + t``.
+* ``T_w_c`` is **camera-to-world** (KITTI ``poses/NN.txt``); ``T_c_w`` is **world-to-camera**
+  (DeMoN ``poses.txt``). Names say which one a function expects.
+* Quaternions are ``(w, x, y, z)`` as kornia uses; :func:`rotation_to_quaternion` returns the
+  canonical sign ``w >= 0``.
+* Pixels follow OpenCV: the centre of the top-left pixel is ``(0, 0)``. Normalised camera
+  coordinates are ``K^-1 [u, v, 1]^T`` without the trailing 1.
+* The essential matrix is ``E = [t]_x R`` so that ``x1^T E x0 = 0`` for normalised
+  homogeneous ``x0``, ``x1``; the fundamental matrix ``F = K1^-T E K0^-1`` satisfies the same
+  relation in pixels.
+
+Every public function accepts torch tensors with leading batch dimensions ``*`` and also numpy
+arrays or nested lists (converted at the boundary: float numpy keeps its precision, anything
+else becomes float64). Results are torch tensors unless documented otherwise.
+
+Modules: :mod:`~strl_pyg.geometry.pose` (tensor boundary, rotations, :class:`Pose`),
+:mod:`~strl_pyg.geometry.manifold` (``[w]_x``, SO(3) and sphere maps, tangent bases) and
+:mod:`~strl_pyg.geometry.epipolar` (``E``, ``F``, normalisation, projection, Sampson errors);
+every name is importable from ``strl_pyg.geometry``. Needs numpy and torch only (kornia is
+imported on the first quaternion conversion).
+"""
+
+from __future__ import annotations
+
+from strl_pyg.geometry.epipolar import (
+    essential_from_pose,
+    fundamental_from_essential,
+    normalize_points,
+    project_points,
+    sampson_error,
+    signed_sampson,
+    symmetric_epipolar_error,
+)
+from strl_pyg.geometry.manifold import (
+    skew,
+    so3_exp,
+    so3_log,
+    sphere_exp,
+    sphere_log,
+    tangent_basis,
+)
+from strl_pyg.geometry.pose import (
+    Pose,
+    as_pose,
+    as_tensor,
+    quaternion_to_rotation,
+    relative_pose_from_c2w,
+    relative_pose_from_w2c,
+    rotation_angle_deg,
+    rotation_to_quaternion,
+)
+
+__all__ = [
+    "as_tensor",
+    "rotation_to_quaternion",
+    "quaternion_to_rotation",
+    "rotation_angle_deg",
+    "Pose",
+    "as_pose",
+    "relative_pose_from_c2w",
+    "relative_pose_from_w2c",
+    "skew",
+    "so3_exp",
+    "so3_log",
+    "tangent_basis",
+    "sphere_exp",
+    "sphere_log",
+    "essential_from_pose",
+    "fundamental_from_essential",
+    "normalize_points",
+    "project_points",
+    "signed_sampson",
+    "sampson_error",
+    "symmetric_epipolar_error",
+]
+
+# private helpers that other modules of the package use
+from strl_pyg.geometry.pose import _as_pose as _as_pose  # noqa: E402
+from strl_pyg.geometry.pose import _check_tail as _check_tail  # noqa: E402
+from strl_pyg.geometry.pose import _common as _common  # noqa: E402
