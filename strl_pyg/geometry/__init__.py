@@ -27,57 +27,14 @@ imported on the first quaternion conversion).
 
 from __future__ import annotations
 
-from strl_pyg.geometry.epipolar import (
-    essential_from_pose,
-    fundamental_from_essential,
-    normalize_points,
-    project_points,
-    sampson_error,
-    signed_sampson,
-    symmetric_epipolar_error,
-)
-from strl_pyg.geometry.manifold import (
-    skew,
-    so3_exp,
-    so3_log,
-    sphere_exp,
-    sphere_log,
-    tangent_basis,
-)
-from strl_pyg.geometry.pose import (
-    Pose,
-    as_pose,
-    as_tensor,
-    quaternion_to_rotation,
-    relative_pose_from_c2w,
-    relative_pose_from_w2c,
-    rotation_angle_deg,
-    rotation_to_quaternion,
-)
+from strl_pyg.geometry import epipolar as _epipolar
+from strl_pyg.geometry import manifold as _manifold
+from strl_pyg.geometry import pose as _pose
+from strl_pyg.geometry.epipolar import *  # noqa: F403
+from strl_pyg.geometry.manifold import *  # noqa: F403
+from strl_pyg.geometry.pose import *  # noqa: F403
 
-__all__ = [
-    "as_tensor",
-    "rotation_to_quaternion",
-    "quaternion_to_rotation",
-    "rotation_angle_deg",
-    "Pose",
-    "as_pose",
-    "relative_pose_from_c2w",
-    "relative_pose_from_w2c",
-    "skew",
-    "so3_exp",
-    "so3_log",
-    "tangent_basis",
-    "sphere_exp",
-    "sphere_log",
-    "essential_from_pose",
-    "fundamental_from_essential",
-    "normalize_points",
-    "project_points",
-    "signed_sampson",
-    "sampson_error",
-    "symmetric_epipolar_error",
-]
+__all__ = [*_pose.__all__, *_manifold.__all__, *_epipolar.__all__]
 
 # private helpers that other modules of the package use
 from strl_pyg.geometry.pose import _as_pose as _as_pose  # noqa: E402
