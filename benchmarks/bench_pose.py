@@ -84,8 +84,28 @@ def generated_pairs(name: str, n: int, cache: Path, seed0: int = 2_000_000):
         except (NoMatchesError, RuntimeError) as err:
             print(f"  {name} seed {seed}: skipped ({type(err).__name__})")
             continue
+        if name == "outliers50":
+            m = plant_outliers(m, 0.5, seed)
         out.append((f"{name}/{seed}", m, np.asarray(p.T_0to1, dtype=np.float64)))
     return out
+
+
+def plant_outliers(m, fraction: float, seed: int):
+    """Front-end matches with ``fraction`` of the point matches made wrong: their image-1
+    points are permuted among themselves (each becomes another real feature of image 1), so
+    the pair really has that share of outliers. The generator's own ``outlier_fraction`` only
+    corrupts ground-truth matches, not front-end ones."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(seed)
+    n = m.num_points
+    k = int(round(fraction * n))
+    if k < 2:
+        return m
+    idx = rng.choice(n, k, replace=False)
+    p1 = m.points1.copy()
+    p1[idx] = m.points1[np.roll(idx, 1)]
+    return replace(m, points1=p1, info={**m.info, "planted_outliers": k})
 
 
 def kitti_pairs(gap: int, cache: Path):
@@ -157,7 +177,8 @@ def demon_pairs(cache: Path):
 def tangent_error(T_est: np.ndarray, T_gt: np.ndarray) -> np.ndarray:
     """5-dof error (rotation vector, translation direction on the sphere) of ``T_est`` in the
     chart of :mod:`strl_pyg.fusion` around the estimate."""
-    from strl_pyg.fusion import pose_to_tangent, tangent_basis
+    from strl_pyg.geometry import tangent_basis
+    from strl_pyg.pose_fusion import pose_to_tangent
     from strl_pyg.geometry import Pose
 
     est = Pose.from_matrix(torch.as_tensor(T_est, dtype=torch.float64))
@@ -228,9 +249,10 @@ def summarise(rows, method: str) -> dict:
     return out
 
 
-def fit_calibration(estimator, pairs) -> dict[str, float]:
-    """Per-method variance scale ``k`` such that 95.45 % of ``d2 / k`` fall inside
-    ``CHI2_5[2]`` on the calibration pairs."""
+def fit_calibration(estimator, pairs) -> tuple[dict[str, float], list[str], dict]:
+    """On the calibration pairs: per-method variance scale ``k`` such that 95.45 % of
+    ``d2 / k`` fall inside ``CHI2_5[2]``, and the methods ordered by AUC@10 (then by median
+    error), which becomes the checkpoint's recommended order."""
     rows = run_set(estimator, pairs, None)
     scales = {}
     for name in estimator.method_names:
@@ -238,7 +260,10 @@ def fit_calibration(estimator, pairs) -> dict[str, float]:
               if r["methods"].get(name, {}).get("d2") is not None]
         if len(d2) >= 10 and name != "fused":
             scales[name] = float(max(np.quantile(d2, 0.9545) / CHI2_5[2], 1e-6))
-    return scales
+    stats = {m: summarise(rows, m) for m in estimator.method_names}
+    order = sorted(stats, key=lambda m: (-stats[m]["auc10"],
+                                         max(stats[m]["rot_med"], stats[m]["trans_med"])))
+    return scales, order, stats
 
 
 def markdown(results: dict, methods: list[str]) -> str:
@@ -327,10 +352,13 @@ def main(argv=None) -> int:
             except (NoMatchesError, RuntimeError):
                 continue
             cal.append((f"calib/{seed}", m, np.asarray(p.T_0to1)))
-        scales = fit_calibration(PoseEstimator(model), cal)
+        scales, order, stats = fit_calibration(PoseEstimator(model), cal)
         print(f"calibration scales (variance multipliers) on {len(cal)} pairs: {scales}")
+        print(f"recommended order (AUC@10 on the calibration pairs): {order}")
+        print(markdown({"calibration split (mixed_small, seeds 3,000,000+)": stats}, order))
         md = dict(model.metadata)
         md["calibration"] = scales
+        md["recommended_order"] = order
         model.save(args.checkpoint, metadata=md)
         model = StrLPose.load(args.checkpoint).eval()
     mean_T = None

@@ -12,9 +12,9 @@ RANSAC returned no model; never replaced by an identity pose). A pose exists onl
 ``"ok"``.
 
 Uncertainty: ``covariance`` ``[5, 5]`` in the tangent parameters of
-:mod:`strl_pyg.fusion` around the method's own pose (rotation increment ``w`` in rad,
+:mod:`strl_pyg.pose_fusion` around the method's own pose (rotation increment ``w`` in rad,
 ``R = exp([w]_x) R_hat``; translation direction ``d`` in rad on the unit sphere, basis
-:func:`~strl_pyg.fusion.tangent_basis` of ``t_hat``), and ``sigma``: its summary
+:func:`~strl_pyg.geometry.tangent_basis` of ``t_hat``), and ``sigma``: its summary
 ``{"rotation_deg": sqrt(tr Cov_w), "translation_deg": sqrt(tr Cov_d)}`` (RMS angles, degrees).
 The network's comes from its predicted log-variances, the classical ones from the Sampson
 residuals of their inliers (first order: optimistic for RANSAC estimates), the fused one from
@@ -45,7 +45,7 @@ from strl_pyg.baselines import MIN_POINTS, estimate_relative_pose
 from strl_pyg.data.matches import PairMatches
 
 __all__ = [
-    "STATUSES", "RECOMMENDED_ORDER", "MIN_POINTS", "ZERO_PARALLAX_PX", "ZERO_PARALLAX_FRACTION",
+    "STATUSES", "RECOMMENDED_ORDER", "recommended_order", "MIN_POINTS", "ZERO_PARALLAX_PX", "ZERO_PARALLAX_FRACTION",
     "FOCAL_RANGE", "METHODS", "MethodSpec", "MethodResult", "MethodContext", "PoseEstimate",
     "PoseEstimator", "register_method", "prepare_matches", "prepare_graph", "forward_pose",
     "input_warnings", "zero_parallax",
@@ -351,8 +351,8 @@ def zero_parallax(matches: PairMatches) -> bool:
 
 # ----------------------------------------------------------------------------- methods
 def _regression(matches: PairMatches, ctx: MethodContext) -> MethodResult:
-    from strl_pyg.fusion import network_covariance, tangent_basis
     from strl_pyg.geometry import Pose
+    from strl_pyg.pose_fusion import network_covariance, tangent_basis
 
     est, model = ctx.estimator, ctx.model
     start = time.perf_counter()
@@ -373,7 +373,7 @@ def _regression(matches: PairMatches, ctx: MethodContext) -> MethodResult:
 
 def _classical(name: str) -> MethodFn:
     def fn(matches: PairMatches, ctx: MethodContext) -> MethodResult:
-        from strl_pyg.fusion import classical_covariance
+        from strl_pyg.pose_fusion import classical_covariance
 
         thr = ctx.estimator.threshold_px
         res = estimate_relative_pose(matches, name, thr, seed=ctx.estimator.seed)
@@ -415,9 +415,9 @@ def _no_head(name: str, ctx: MethodContext) -> MethodResult | None:
 
 def _with_covariance(name: str, pose_T: np.ndarray, matches: PairMatches, thr: float,
                      **kw: Any) -> MethodResult:
-    from strl_pyg.fusion import classical_covariance
     from strl_pyg.geometry import Pose
     from strl_pyg.guided import _normalised, _sampson
+    from strl_pyg.pose_fusion import classical_covariance
 
     pose = Pose.from_matrix(torch.as_tensor(pose_T, dtype=torch.float64))
     x0, x1, focal = _normalised(matches)
@@ -481,7 +481,7 @@ def _guided(matches: PairMatches, ctx: MethodContext) -> MethodResult:
 
 
 def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:
-    from strl_pyg.fusion import fuse_poses
+    from strl_pyg.pose_fusion import fuse_poses
 
     net = ctx.results.get("regression")
     cls = next((ctx.results[c] for c in ("poselib", "opencv")
@@ -505,6 +505,18 @@ def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     return MethodResult("fused", "ok", f.pose.matrix().numpy(), f.covariance.numpy(),
                         warnings, time_ms=ms, num_inliers=f.info["num_inliers"], info=info,
                         raw=f)
+
+
+def recommended_order(model: torch.nn.Module | None) -> tuple[str, ...]:
+    """The order in which methods fill the recommended pose: the checkpoint's
+    ``metadata["recommended_order"]`` (measured on held-out data when the checkpoint was
+    calibrated, see ``benchmarks/bench_pose.py --calibrate``), else :data:`RECOMMENDED_ORDER`.
+    Methods that are not installed are skipped when the estimate is made."""
+    md = getattr(model, "metadata", None) if model is not None else None
+    order = md.get("recommended_order") if isinstance(md, dict) else None
+    if isinstance(order, (list, tuple)) and order and all(isinstance(m, str) for m in order):
+        return tuple(order)
+    return RECOMMENDED_ORDER
 
 
 def _calibration(model: torch.nn.Module | None) -> dict[str, float]:
@@ -643,7 +655,8 @@ class PoseEstimator:
 
     def _recommend(self, results: dict[str, MethodResult], warnings: list[str],
                    matches: PairMatches) -> PoseEstimate:
-        order = [m for m in RECOMMENDED_ORDER if m in results]
+        chosen = recommended_order(self._model)
+        order = [m for m in chosen if m in results]
         notes = []
         for m in order:
             r = results[m]
@@ -655,7 +668,7 @@ class PoseEstimator:
             if reasons:
                 notes.append(f"{m} {r.status}: {'; '.join(reasons)}")
         if not order:
-            notes.append(f"none of RECOMMENDED_ORDER {RECOMMENDED_ORDER} was run")
+            notes.append(f"none of the recommended methods {chosen} was run")
         status = "degenerate" if any(results[m].status == "degenerate" for m in order) \
             else "failed"
         pose = MethodResult(None, status, warnings=_unique(warnings + notes))
