@@ -1,380 +1,90 @@
 """The Str-L Pose network: encoders, dual graph (GCG + GGVG), weighted fusion, pose head.
 
-Reads top to bottom: configuration, output container, input gathering (validation, node
-ordering, edges), the model.
-
-Node layout inside the model: the nodes of the active node types (points, plus line endpoints
-when ``use_lines``) are concatenated and stably sorted by graph id once, so that every layer
-sees graph-contiguous nodes; the geometric and the visual stream share this node set (node
-``i`` of the GGVG is the same match as node ``i`` of the GCG).
+Reads top to bottom: legacy checkpoint keys, the model (modules in the order of Figure 1 of
+the paper), checkpoints. The configuration and output containers live in
+:mod:`strl_pyg.model_config`, input gathering (validation, node ordering, edges, the dense
+block layout) in :mod:`strl_pyg.model_inputs`; both are importable from here.
 """
 
 from __future__ import annotations
 
 import math
 import os
-from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import torch
 from torch import Tensor, nn
-from torch_geometric.data import Batch, HeteroData
+from torch_geometric.data import HeteroData
 
 from strl_pyg.data import keys as K
-from strl_pyg.geometry import Pose, quaternion_to_rotation
 from strl_pyg.io import atomic_open, safe_torch_load
+from strl_pyg.model_config import (
+    ABLATIONS,
+    NO_INTRINSICS,
+    TRANSLATION_MODES,
+    VISUAL_MODES,
+    GeometricOutput,
+    PoseOutput,
+    StrLPoseConfig,
+)
+from strl_pyg.model_inputs import ModelInputs, gather_inputs
 from strl_pyg.nn import (
-    AttentionConv,
+    CompleteEdges,
+    DenseLayout,
+    DualGraphLayer,
     ImageEncoder,
-    LineEndpointConv,
+    InlierHead,
     LineSegmentEncoder,
     PixelEncoder,
+    PoseHead,
     SpatialCoordinateEncoder,
     WeightedFusion,
 )
 
 __all__ = ["StrLPoseConfig", "PoseOutput", "GeometricOutput", "StrLPose", "ABLATIONS",
-           "NO_INTRINSICS"]
-
-#: Rows of the paper's ablation table (Table 3) and the switches that reproduce them.
-ABLATIONS: dict[str, dict[str, Any]] = {
-    "baseline": dict(use_lines=False, line_mp=False, visual=None, visual_graph=False,
-                     weighted=False),
-    "L": dict(use_lines=True, line_mp=False, visual=None, visual_graph=False, weighted=False),
-    "LP": dict(use_lines=True, line_mp=True, visual=None, visual_graph=False, weighted=False),
-    "R": dict(use_lines=False, line_mp=False, visual="cnn", visual_graph=False, weighted=False),
-    "V": dict(use_lines=False, line_mp=False, visual="pixel", visual_graph=True,
-              weighted=False),
-    "LP+R": dict(use_lines=True, line_mp=True, visual="cnn", visual_graph=False,
-                 weighted=False),
-    "LP+V": dict(use_lines=True, line_mp=True, visual="pixel", visual_graph=True,
-                 weighted=False),
-    "V+W": dict(use_lines=False, line_mp=False, visual="pixel", visual_graph=True,
-                weighted=True),
-    "full": dict(use_lines=True, line_mp=True, visual="pixel", visual_graph=True,
-                 weighted=True),
-}
-
-VISUAL_MODES = (None, "pixel", "cnn")
-TRANSLATION_MODES = ("direction", "metric")
+           "NO_INTRINSICS", "VISUAL_MODES", "TRANSLATION_MODES", "upgrade_key"]
 
 
-@dataclass
-class StrLPoseConfig:
-    """Configuration of :class:`StrLPose`. The defaults are the full model (``"full"``).
-
-    The paper leaves width, depth and heads open; the defaults follow its closest relative,
-    UA-Fusion (Zhuang & Chandraker, CVPR 2021): width 128, four attention layers, four heads.
-    """
-
-    hidden: int = 128  # node feature width C of both streams
-    layers: int = 4  # dual-graph layers; each is GCG self-attn (+ line MP) (+ GGVG self + cross)
-    heads: int = 4  # attention heads; must divide `hidden`
-    mlp_ratio: int = 2  # hidden width of every residual update MLP, as a multiple of `hidden`
-    line_channels: int = 64  # width of the LSE line-segment feature f0_L
-    use_lines: bool = True  # "+L": line endpoints become nodes (SCE-encoded like points)
-    line_mp: bool = True  # "+LP": line-endpoint message passing with LSE features
-    visual: str | None = "pixel"  # None | "pixel" (PE on patch0/1, "+V") | "cnn" (image0/1, "+R")
-    visual_graph: bool = True  # GGVG layers (visual self-attn + geometry-guided cross-attn)
-    weighted: bool = True  # "+W": sigmoid-gated pooling in the fusion head (else mean pooling)
-    patch_features: int = 3  # per-image features of patch0/patch1 (C * p * p; RGB, p = 1)
-    image_channels: int = 3  # channels of image0/image1 for visual="cnn"
-    translation: str = "direction"  # "direction" (unit vector, scale-free data) | "metric"
-    dropout: float = 0.0  # attention-weight dropout
-    # Beyond the paper: the geometric head (per-node inlier logits -> weighted essential solve,
-    # strl_pyg.essential). The paper's regression head is always present; this adds a second
-    # output, trained jointly (strl_pyg.loss.GeometricLoss).
-    geometric: bool = False
-    geometric_iterations: int = 2  # IRLS rounds after the weighted eight-point solve
-    geometric_tau: float = 2e-3  # Cauchy scale of the IRLS kernel, normalised units
-
-    def __post_init__(self) -> None:
-        self.validate()
-
-    def validate(self) -> None:
-        for name in ("hidden", "layers", "heads", "mlp_ratio", "line_channels",
-                     "patch_features", "image_channels"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise ValueError(f"Expected a positive integer '{name}' (got {value!r})")
-        if self.hidden % self.heads:
-            raise ValueError(
-                f"Expected heads to divide hidden (got hidden={self.hidden}, heads={self.heads})"
-            )
-        if self.visual not in VISUAL_MODES:
-            raise ValueError(f"Expected visual in {VISUAL_MODES} (got {self.visual!r})")
-        if self.visual_graph and self.visual is None:
-            raise ValueError("Expected a visual encoder for visual_graph=True (got visual=None)")
-        if self.line_mp and not self.use_lines:
-            raise ValueError("Expected use_lines=True for line_mp=True (got use_lines=False)")
-        if self.translation not in TRANSLATION_MODES:
-            raise ValueError(
-                f"Expected translation in {TRANSLATION_MODES} (got {self.translation!r})"
-            )
-        if not 0.0 <= self.dropout < 1.0:
-            raise ValueError(f"Expected dropout in [0, 1) (got {self.dropout!r})")
-        if not isinstance(self.geometric, bool):
-            raise ValueError(f"Expected a bool 'geometric' (got {self.geometric!r})")
-        if not isinstance(self.geometric_iterations, int) or self.geometric_iterations < 0:
-            raise ValueError(f"Expected geometric_iterations >= 0 (got "
-                             f"{self.geometric_iterations!r})")
-        if not self.geometric_tau > 0:
-            raise ValueError(f"Expected geometric_tau > 0 (got {self.geometric_tau!r})")
-
-    @classmethod
-    def ablation(cls, name: str, **overrides: Any) -> StrLPoseConfig:
-        """The configuration of one row of the paper's ablation table.
-
-        Args:
-            name: one of ``"baseline"``, ``"L"``, ``"LP"``, ``"R"``, ``"V"``, ``"LP+R"``,
-                ``"LP+V"``, ``"V+W"``, ``"full"``.
-            **overrides: other fields (width, depth, translation mode, ...).
-        """
-        if name not in ABLATIONS:
-            raise ValueError(f"Expected an ablation in {tuple(ABLATIONS)} (got {name!r})")
-        return cls(**{**ABLATIONS[name], **overrides})
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> StrLPoseConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"Expected StrLPoseConfig fields (got unknown keys {unknown})")
-        return cls(**d)
+# ----------------------------------------------------------------------------- legacy keys
+#: Version-1 module names (parallel ``ModuleList``\ s and the head inside the fusion) ->
+#: today's. Checkpoints of both versions store the old names; they load unchanged.
+_LEGACY_LAYER_KEYS = {"geo_self": "geo_self", "line_convs": "line_conv",
+                      "vis_self": "vis_self", "vis_cross": "vis_cross"}
+_LEGACY_PREFIXES = {"fusion.pose_mlp.": "pose_head.pose_mlp.",
+                    "fusion.var_mlp.": "pose_head.var_mlp."}
 
 
-@dataclass
-class PoseOutput:
-    """Predicted relative pose ``T_0to1`` (maps camera-0 points into camera 1,
-    ``X1 = R X0 + t``) of ``B`` pairs.
-
-    Attributes:
-        quaternion: unit quaternions ``(w, x, y, z)`` with ``w >= 0``, ``[B, 4]``.
-        translation: ``[B, 3]``; a unit direction when the model's ``translation`` is
-            ``"direction"``, metric otherwise.
-        log_var: predicted log-variance ``log sigma^2`` of the 7 pose components (quaternion
-            first), ``[B, 7]``; ``exp(-log_var)`` is the inverse variance of the paper.
-    """
-
-    quaternion: Tensor
-    translation: Tensor
-    log_var: Tensor
-    geometric: GeometricOutput | None = None
-
-    @property
-    def R(self) -> Tensor:
-        """Rotation matrices ``[B, 3, 3]``."""
-        return quaternion_to_rotation(self.quaternion)
-
-    @property
-    def pose(self) -> Pose:
-        return Pose(self.R, self.translation)
-
-    @property
-    def T_0to1(self) -> Tensor:
-        """Homogeneous ``[B, 4, 4]`` matrices."""
-        return self.pose.matrix()
+def upgrade_key(key: str) -> str:
+    """Today's name of a state-dict key of :class:`StrLPose` (``key`` itself when current):
+    ``geo_self.{i}.*`` -> ``layers.{i}.geo_self.*``, ``line_convs.{i}.*`` ->
+    ``layers.{i}.line_conv.*``, ``vis_self.{i}.*`` / ``vis_cross.{i}.*`` ->
+    ``layers.{i}.vis_self.*`` / ``layers.{i}.vis_cross.*``, ``fusion.pose_mlp.*`` /
+    ``fusion.var_mlp.*`` -> ``pose_head.pose_mlp.*`` / ``pose_head.var_mlp.*``."""
+    head, _, rest = key.partition(".")
+    if head in _LEGACY_LAYER_KEYS:
+        i, _, tail = rest.partition(".")
+        if i.isdigit() and tail:
+            return f"layers.{i}.{_LEGACY_LAYER_KEYS[head]}.{tail}"
+    for old, new in _LEGACY_PREFIXES.items():
+        if key.startswith(old):
+            return new + key[len(old):]
+    return key
 
 
-#: ``GeometricOutput.status`` codes: the solve's own (``strl_pyg.essential.OK`` /
-#: ``DEGENERATE``) plus this one: the graph was normalised by image size, not by intrinsics, so
-#: the weighted solve would give a fundamental matrix and no metric pose.
-NO_INTRINSICS = 2
-
-
-@dataclass
-class GeometricOutput:
-    """Output of the geometric head (``StrLPoseConfig.geometric``), per node and per pair.
-
-    Node tensors are in the model's node order (``batch`` sorted; within a pair, points first,
-    then line endpoints); ``point_logits`` / ``endpoint_logits`` are the same logits in the
-    graph's own storage order of each node type (index ``i`` is ``data['point']`` row ``i``).
-
-    Attributes:
-        logits: ``[N]`` inlier logits (sigmoid = weight of the node in the solve).
-        batch: ``[N]`` pair index of every node.
-        coords: ``[N, 4]`` normalised ``(x0, y0, x1, y1)`` of every node.
-        point_logits, endpoint_logits: ``[N_point]``, ``[N_endpoint]`` (or ``None``).
-        E: ``[B, 3, 3]`` algebraic essential matrices of the weighted solve (unit norm).
-        status: ``[B]`` long: 0 ok, 1 degenerate (too few effective matches, rank-deficient),
-            :data:`NO_INTRINSICS`.
-        R, t: ``[B, 3, 3]``, ``[B, 3]`` pose decomposed from ``E`` (cheirality), float64,
-            not differentiable; identity / zero where ``status`` is not 0.
-        focal: ``[B]`` mean focal length in pixels of the pair (1 without intrinsics), used to
-            express pixel thresholds in normalised units.
-    """
-
-    logits: Tensor
-    batch: Tensor
-    coords: Tensor
-    point_logits: Tensor | None
-    endpoint_logits: Tensor | None
-    E: Tensor
-    status: Tensor
-    R: Tensor
-    t: Tensor
-    focal: Tensor
-
-    @property
-    def T_0to1(self) -> Tensor:
-        return Pose(self.R, self.t).matrix()
-
-
-# ----------------------------------------------------------------------------- input gathering
-@dataclass
-class _Inputs:
-    num_graphs: int
-    batch: Tensor | None  # [N] graph ids (sorted); None for a single graph
-    coords: Tensor  # [N, 4] (pos0 || pos1)
-    line_feat: Tensor | None  # [N_endpoints, 8]
-    endpoint_idx: Tensor | None  # [N_endpoints] positions of the endpoints among the N nodes
-    visual: Tensor | None  # [N, 2P] patches, or None
-    kpts: tuple[Tensor, Tensor] | None  # pixels in image 0 / 1, for visual="cnn"
-    images: tuple[Tensor, Tensor] | None
-    self_edges: Tensor | None  # explicit [2, E]; None = implicit complete (dense path)
-    cross_edges: Tensor | None
-    line_edges: Tensor | None
-    inv: Tensor | None = None  # storage index -> model position (None: identity)
-    sizes: dict | None = None  # nodes per type, in order
-
-
-def _store_batch(store, n: int, device) -> Tensor:
-    batch = getattr(store, "batch", None)
-    return batch if batch is not None else torch.zeros(n, dtype=torch.long, device=device)
-
-
-def _require(store, key: str, node_type: str, cols: int, why: str) -> Tensor:
-    if key not in store:
-        raise ValueError(f"Expected '{key}' on '{node_type}' nodes {why} (got none)")
-    x = store[key]
-    if not isinstance(x, Tensor) or x.dim() != 2 or x.shape[1] != cols:
-        shape = tuple(x.shape) if isinstance(x, Tensor) else type(x).__name__
-        raise ValueError(f"Expected '{node_type}.{key}' of shape [N, {cols}] (got {shape})")
-    return x
-
-
-def _gather(cfg: StrLPoseConfig, data: HeteroData) -> _Inputs:
-    if not isinstance(data, HeteroData):
-        raise TypeError(f"Expected a HeteroData pair graph or batch (got {type(data).__name__})")
-    types = [K.POINT, K.ENDPOINT] if cfg.use_lines else [K.POINT]
-    types = [t for t in types if t in data.node_types]
-    if not types:
-        raise ValueError(f"Expected node types {K.NODE_TYPES} in the graph (got {data.node_types})")
-    num_graphs = data.num_graphs if isinstance(data, Batch) else 1
-
-    coords, batches, visual, kpts0, kpts1, sizes = [], [], [], [], [], {}
-    for t in types:
-        store = data[t]
-        p0 = _require(store, K.POS0, t, 2, "(normalised coordinates)")
-        p1 = _require(store, K.POS1, t, 2, "(normalised coordinates)")
-        if p0.shape[0] != p1.shape[0]:
-            raise ValueError(f"Expected as many '{K.POS1}' as '{K.POS0}' rows on '{t}' nodes "
-                             f"(got {p1.shape[0]} and {p0.shape[0]})")
-        n = p0.shape[0]
-        sizes[t] = n
-        coords.append(torch.cat([p0, p1], dim=-1))
-        batches.append(_store_batch(store, n, p0.device))
-        if cfg.visual == "pixel":
-            why = "(visual='pixel' needs pixels sampled at the nodes: build the graph from " \
-                  "matches with images)"
-            visual.append(torch.cat([
-                _require(store, K.PATCH0, t, cfg.patch_features, why),
-                _require(store, K.PATCH1, t, cfg.patch_features, why)], dim=-1))
-        elif cfg.visual == "cnn":
-            kpts0.append(_require(store, K.KPTS0, t, 2, "(pixel coordinates)"))
-            kpts1.append(_require(store, K.KPTS1, t, 2, "(pixel coordinates)"))
-
-    n_total = sum(sizes.values())
-    offsets = {}
-    acc = 0
-    for t in types:
-        offsets[t] = acc
-        acc += sizes[t]
-    batch = torch.cat(batches)
-    if num_graphs > 1 and n_total:
-        perm = torch.argsort(batch, stable=True)
-        inv = torch.empty_like(perm)
-        inv[perm] = torch.arange(n_total, device=perm.device)
-    else:
-        perm = inv = None
-
-    def order(x: Tensor) -> Tensor:
-        return x if perm is None else x[perm]
-
-    def remap(ei: Tensor) -> Tensor:
-        return ei if inv is None else inv[ei]
-
-    line_feat = endpoint_idx = None
-    has_lines = K.ENDPOINT in types and sizes[K.ENDPOINT] > 0
-    if cfg.line_mp and K.ENDPOINT in types:
-        ep = data[K.ENDPOINT]
-        line_feat = _require(ep, K.LINE_FEAT, K.ENDPOINT, 8, "(line_mp=True)")
-        if line_feat.shape[0] != sizes[K.ENDPOINT]:
-            raise ValueError(f"Expected one '{K.LINE_FEAT}' row per endpoint "
-                             f"(got {line_feat.shape[0]} and {sizes[K.ENDPOINT]})")
-        idx = torch.arange(sizes[K.ENDPOINT], device=batch.device) + offsets[K.ENDPOINT]
-        endpoint_idx = remap(idx)
-
-    line_edges = None
-    if cfg.line_mp and has_lines:
-        if K.LINE_EDGE not in data.edge_types or K.EDGE_INDEX not in data[K.LINE_EDGE]:
-            raise ValueError(f"Expected '{K.EDGE_INDEX}' on edge type {K.LINE_EDGE} "
-                             "(line_mp=True) (got none)")
-        line_edges = remap(data[K.LINE_EDGE].edge_index + offsets[K.ENDPOINT])
-
-    def complete(rel: str) -> Tensor | None:
-        ets = [(s, rel, d) for s in types for d in types]
-        present = [et for et in ets if et in data.edge_types]
-        explicit = [et for et in present if K.EDGE_INDEX in data[et]]
-        if not explicit:
-            return None
-        if len(explicit) != len(present):
-            raise ValueError(
-                f"Expected the '{rel}' edge types all implicit ('{K.DENSE}') or all explicit "
-                f"('{K.EDGE_INDEX}') (got explicit {explicit} and implicit "
-                f"{[et for et in present if et not in explicit]})"
-            )
-        parts = []
-        for s, _, d in explicit:
-            ei = data[(s, rel, d)].edge_index
-            parts.append(torch.stack([ei[0] + offsets[s], ei[1] + offsets[d]]))
-        return remap(torch.cat(parts, dim=1))
-
-    images = kpts = None
-    if cfg.visual == "cnn":
-        for key in (K.IMAGE0, K.IMAGE1):
-            img = data[key] if key in data else None
-            ok = isinstance(img, Tensor) and img.dim() == 4 and img.shape[0] == num_graphs \
-                and img.shape[1] == cfg.image_channels
-            if not ok:
-                got = tuple(img.shape) if isinstance(img, Tensor) else "none"
-                raise ValueError(
-                    f"Expected graph attribute '{key}' of shape [{num_graphs}, "
-                    f"{cfg.image_channels}, H, W] for visual='cnn' (build the graph with "
-                    f"keep_images=True) (got {got})"
-                )
-        images = (data[K.IMAGE0].float(), data[K.IMAGE1].float())
-        kpts = (order(torch.cat(kpts0)), order(torch.cat(kpts1)))
-
-    return _Inputs(
-        num_graphs=num_graphs,
-        batch=order(batch) if num_graphs > 1 else None,
-        coords=order(torch.cat(coords)),
-        line_feat=line_feat,
-        endpoint_idx=endpoint_idx,
-        visual=order(torch.cat(visual)) if visual else None,
-        kpts=kpts,
-        images=images,
-        self_edges=complete(K.SELF_REL),
-        cross_edges=complete(K.CROSS_REL) if cfg.visual_graph else None,
-        line_edges=line_edges,
-        inv=inv,
-        sizes=sizes,
-    )
+def _upgrade_legacy_keys(module, state_dict, prefix, local_metadata, strict, missing_keys,
+                         unexpected_keys, error_msgs) -> None:
+    """``load_state_dict`` pre-hook of :class:`StrLPose`: renames version-1 keys in place
+    (``state_dict`` is the loader's own copy)."""
+    for key in [k for k in state_dict if k.startswith(prefix)]:
+        new = prefix + upgrade_key(key[len(prefix):])
+        if new == key:
+            continue
+        if new in state_dict:
+            error_msgs.append(f"Expected either the old key {key!r} or the new key {new!r} "
+                              "(got both)")
+            continue
+        state_dict[new] = state_dict.pop(key)
 
 
 # ----------------------------------------------------------------------------- the model
@@ -383,11 +93,15 @@ class StrLPose(nn.Module):
     segments (Zhang et al., "Str-L Pose: Integrating Point and Structured Line for Relative Pose
     Estimation in Dual-Graph").
 
-    Per layer :math:`l`: GCG self-attention over all nodes of a pair; line-endpoint message
-    passing (``line_mp``); GGVG self-attention (``visual_graph``); Geometry-Guided
-    cross-attention whose queries are this layer's GCG features and whose keys and values are
-    the GGVG features. Then :class:`~strl_pyg.nn.WeightedFusion` pools both streams per pair
-    and regresses the pose and its log-variance.
+    Figure 1 of the paper, left to right: encoders (``sce``, ``lse``, ``pe`` or
+    ``image_encoder``); ``layers``, one :class:`~strl_pyg.nn.DualGraphLayer` per layer
+    :math:`l` (GCG self-attention over all nodes of a pair, line-endpoint message passing
+    with ``line_mp``, GGVG self-attention and Geometry-Guided cross-attention with
+    ``visual_graph``: queries from this layer's GCG features, keys and values from the GGVG
+    features); ``fusion`` (:class:`~strl_pyg.nn.WeightedFusion`, gated pooling of both
+    streams per pair); ``pose_head`` (:class:`~strl_pyg.nn.PoseHead`, pose and log-variance);
+    with ``geometric``, ``inlier_head`` (:class:`~strl_pyg.nn.InlierHead`) and the weighted
+    essential solve.
 
     Complete edge types are computed on the dense path when the graph marks them implicit
     (``dense``, the default of :func:`~strl_pyg.data.build_pair_graph`), and by sparse message
@@ -413,45 +127,55 @@ class StrLPose(nn.Module):
         cfg = self.config = config if config is not None else StrLPoseConfig()
         cfg.validate()
         C = cfg.hidden
+        # Feature encoders (Figure 1, left)
         self.sce = SpatialCoordinateEncoder(C)
         self.lse = LineSegmentEncoder(cfg.line_channels) if cfg.line_mp else None
         self.pe = PixelEncoder(cfg.patch_features, C) if cfg.visual == "pixel" else None
         self.image_encoder = ImageEncoder(cfg.image_channels, C) if cfg.visual == "cnn" else None
-
-        def attn() -> AttentionConv:
-            return AttentionConv(C, heads=cfg.heads, mlp_ratio=cfg.mlp_ratio,
-                                 dropout=cfg.dropout)
-
-        L = cfg.layers
-        self.geo_self = nn.ModuleList([attn() for _ in range(L)])
-        self.line_convs = (
-            nn.ModuleList([LineEndpointConv(C, cfg.line_channels, cfg.mlp_ratio)
-                           for _ in range(L)]) if cfg.line_mp else None
-        )
-        self.vis_self = nn.ModuleList([attn() for _ in range(L)]) if cfg.visual_graph else None
-        self.vis_cross = nn.ModuleList([attn() for _ in range(L)]) if cfg.visual_graph else None
-        self.fusion = WeightedFusion(C, C if cfg.visual else 0, 7, C, weighted=cfg.weighted)
-        cin = C + (C if cfg.visual else 0)
-        self.inlier_head = nn.Sequential(
-            nn.Linear(cin, C), nn.ReLU(), nn.Linear(C, C // 2), nn.ReLU(), nn.Linear(C // 2, 1)
-        ) if cfg.geometric else None
+        # Dual graph (middle): GCG + GGVG, layer by layer
+        self.layers = nn.ModuleList([
+            DualGraphLayer(C, heads=cfg.heads, mlp_ratio=cfg.mlp_ratio, dropout=cfg.dropout,
+                           line_channels=cfg.line_channels if cfg.line_mp else None,
+                           visual=cfg.visual_graph)
+            for _ in range(cfg.layers)
+        ])
+        # Feature Weighted Fusion (right): gated pooling, then the pose/uncertainty head
+        self.fusion = WeightedFusion(C, C if cfg.visual else 0, weighted=cfg.weighted)
+        self.pose_head = PoseHead(self.fusion.out_channels, C, translation=cfg.translation)
+        # Beyond the paper: per-node inlier logits for the weighted essential solve
+        self.inlier_head = (InlierHead(self.fusion.out_channels, C) if cfg.geometric
+                            else None)
+        self.register_load_state_dict_pre_hook(_upgrade_legacy_keys)
         self.reset_parameters()
 
     def reset_parameters(self) -> None:
-        for child in self.children():
-            if hasattr(child, "reset_parameters"):
-                child.reset_parameters()
-            elif isinstance(child, (nn.ModuleList, nn.Sequential)):
-                for m in child:
-                    if hasattr(m, "reset_parameters"):
-                        m.reset_parameters()
-        with torch.no_grad():  # start at the identity rotation
-            self.fusion.pose_mlp[-1].bias[0] += 1.0
+        """Re-initialises every parameter. The modules are reset in the order of the
+        version-1 layout (encoders, all GCG self-attentions, all line convolutions, all GGVG
+        self-attentions, all cross-attentions, fusion gates, pose head, inlier head), so a seed
+        gives the same initial weights as models of that layout did."""
+        parts: list[nn.Module | None] = [self.sce, self.lse, self.pe, self.image_encoder]
+        for name in ("geo_self", "line_conv", "vis_self", "vis_cross"):
+            parts += [getattr(layer, name) for layer in self.layers]
+        parts += [self.fusion, self.pose_head, self.inlier_head]
+        for m in parts:
+            if m is not None:
+                m.reset_parameters()
 
     def forward(self, data: HeteroData) -> PoseOutput:
+        """Validates and gathers the graph (:func:`~strl_pyg.model_inputs.gather_inputs`), reads
+        the padded block size of complete attention from the host (the one synchronisation;
+        none for a single graph, or for explicit edges without the geometric head and the
+        image encoder), then runs without touching the host."""
         cfg = self.config
-        inp = _gather(cfg, data)
-        batch = inp.batch
+        inp = gather_inputs(cfg, data)
+        dense = (inp.self_edges is None or (cfg.visual_graph and inp.cross_edges is None)
+                 or cfg.visual == "cnn" or cfg.geometric)  # what needs padded blocks
+        layout = None
+        if inp.block is None:  # one graph: no padding
+            layout = DenseLayout.single(inp.coords.shape[0])
+        elif dense:  # read here, in forward's own frame: one graph break under torch.compile
+            counts, index = inp.block
+            layout = DenseLayout.from_counts(inp.batch, index, counts, int(counts.max()))
         g = self.sce(inp.coords)
 
         line_full = None
@@ -464,45 +188,37 @@ class StrLPose(nn.Module):
         if self.pe is not None:
             v = self.pe(inp.visual)
         elif self.image_encoder is not None:
-            v = self.image_encoder.encode_nodes(*inp.images, *inp.kpts, batch)
+            v = self.image_encoder.encode_nodes(*inp.images, *inp.kpts, None, layout)
 
-        for layer in range(cfg.layers):
-            g = self.geo_self[layer](g, inp.self_edges, batch,
-                                     complete=inp.self_edges is None)
-            if line_full is not None:
-                g = self.line_convs[layer](g, inp.line_edges, line_full)
-            if self.vis_self is not None:
-                v = self.vis_self[layer](v, inp.self_edges, batch,
-                                         complete=inp.self_edges is None)
-                v = self.vis_cross[layer]((v, v), inp.cross_edges, batch, query=g,
-                                          complete=inp.cross_edges is None)
+        complete = CompleteEdges()
+        self_edges = complete if inp.self_edges is None else inp.self_edges
+        cross_edges = complete if inp.cross_edges is None else inp.cross_edges
+        for layer in self.layers:
+            g, v = layer(g, v, self_edges=self_edges, cross_edges=cross_edges,
+                         line_edges=inp.line_edges if line_full is not None else None,
+                         line_feat=line_full, layout=layout)
 
         geometric = None
         if self.inlier_head is not None:
-            geometric = self._geometric(data, inp, g, v)
-        raw, log_var = self.fusion(g, v, batch, inp.num_graphs)
-        q = raw[:, :4]
-        q = q / q.norm(dim=-1, keepdim=True).clamp_min(1e-8)
-        q = torch.where(q[:, :1] < 0, -q, q)
-        t = raw[:, 4:]
-        if cfg.translation == "direction":
-            t = t / t.norm(dim=-1, keepdim=True).clamp_min(1e-8)
+            geometric = self._geometric(data, inp, layout, g, v)
+        z = self.fusion(g, v, inp.batch, inp.num_graphs)
+        q, t, log_var = self.pose_head(z)
         return PoseOutput(quaternion=q, translation=t, log_var=log_var, geometric=geometric)
 
-    def _geometric(self, data: HeteroData, inp: _Inputs, g: Tensor,
+    def _geometric(self, data: HeteroData, inp: ModelInputs, layout: DenseLayout, g: Tensor,
                    v: Tensor | None) -> GeometricOutput:
-        from torch_geometric.utils import to_dense_batch
-
         from strl_pyg.essential import OK, decompose_essential, weighted_essential
 
         cfg = self.config
         h = g if v is None else torch.cat([g, v], dim=-1)
-        logits = self.inlier_head(h).squeeze(-1)
+        logits = self.inlier_head(h)
         n, B = logits.shape[0], inp.num_graphs
         batch = inp.batch if inp.batch is not None else logits.new_zeros(n, dtype=torch.long)
         coords = inp.coords
-        xy, mask = to_dense_batch(coords, batch, batch_size=B)  # [B, Nmax, 4]
-        w, _ = to_dense_batch(torch.sigmoid(logits), batch, batch_size=B)
+        xy = layout.to_dense(coords)  # [B, Nmax, 4], nodes in model order
+        w = layout.to_dense(torch.sigmoid(logits))
+        mask = layout.mask if layout.mask is not None else \
+            torch.ones(1, n, dtype=torch.bool, device=logits.device)
         est = weighted_essential(xy[..., :2], xy[..., 2:], w, mask,
                                  iterations=cfg.geometric_iterations, tau=cfg.geometric_tau)
         status = est.status
@@ -618,7 +334,8 @@ class StrLPose(nn.Module):
     @classmethod
     def load(cls, path: str | os.PathLike, map_location: Any = "cpu") -> StrLPose:
         """Rebuilds a model saved with :meth:`save`; raises ``ValueError`` on a corrupt,
-        foreign or mismatched checkpoint."""
+        foreign or mismatched checkpoint. Checkpoints of the version-1 module layout load
+        unchanged (:func:`upgrade_key`, applied by every ``load_state_dict`` of the model)."""
         path = Path(path)
         # weights_only=True: a file that would run code is refused (io.UnsafeFileError)
         payload = safe_torch_load(path, "StrLPose checkpoint", map_location)
@@ -638,6 +355,46 @@ class StrLPose(nn.Module):
         if payload.get("metadata") is not None:
             model.metadata = payload["metadata"]
         return model
+
+    def upgrade_optimizer_state(self, optimizer_state: dict[str, Any],
+                                model_state: dict[str, Any]) -> dict[str, Any]:
+        """Re-indexes an optimizer state saved next to ``model_state`` for this model's
+        parameter order.
+
+        An optimizer indexes its state by parameter position; the version-1 module layout
+        listed the parameters in another order (all GCG self-attentions, then all line
+        convolutions, ...), so the state of a version-1 training checkpoint must be permuted
+        before ``optimizer.load_state_dict`` (else Adam moments land on other parameters).
+        A state saved with today's layout is returned unchanged.
+
+        Args:
+            optimizer_state: ``optimizer.state_dict()`` of an optimizer over
+                ``model.parameters()`` (one parameter group).
+            model_state: the model state dict saved with it (its key order is the
+                parameter order of that model).
+        """
+        keys = list(model_state)
+        if all(upgrade_key(k) == k for k in keys):
+            return optimizer_state
+        names = [n for n, _ in self.named_parameters()]
+        known = set(names)
+        old_order = [upgrade_key(k) for k in keys if upgrade_key(k) in known]
+        if sorted(old_order) != sorted(names):
+            raise ValueError(f"Expected a model state with this model's {len(names)} "
+                             f"parameters (got {len(old_order)} of them)")
+        groups = optimizer_state.get("param_groups")
+        if not (isinstance(groups, list) and len(groups) == 1
+                and list(groups[0].get("params", [])) == list(range(len(names)))):
+            raise ValueError("Expected the state of an optimizer over model.parameters() in "
+                             f"one parameter group of {len(names)} (got "
+                             f"{len(groups) if isinstance(groups, list) else groups!r} groups)")
+        position = {n: j for j, n in enumerate(names)}
+        new_index = [position[n] for n in old_order]  # old position -> new position
+        group = {**groups[0], "params": list(range(len(names)))}
+        if "param_names" in group:
+            group["param_names"] = names
+        state = {new_index[int(i)]: v for i, v in optimizer_state.get("state", {}).items()}
+        return {**optimizer_state, "state": state, "param_groups": [group]}
 
     @classmethod
     def from_pretrained(cls, name: str = "synthetic", map_location: Any = "cpu") -> StrLPose:

@@ -7,6 +7,7 @@ import math
 import pytest
 import torch
 
+from strl_pyg.nn import DenseLayout
 from strl_pyg.nn.attention import AttentionConv, CompleteEdges
 
 
@@ -199,3 +200,100 @@ def test_complete_edges_marker_carries_the_graph_ids():
     with pytest.raises(TypeError, match="1-D long tensor"):
         CompleteEdges(b_src.float())
     assert repr(CompleteEdges(b_src, b_dst)) == "CompleteEdges(batch_src=[5], batch_dst=[6])"
+
+
+# -------------------------------------------------------------------------- prebuilt layouts
+def outputs_and_grads(conv, x_src, x_dst, query, call):
+    """``call(conv, inp, query)`` on fresh leaf copies; its output and every gradient."""
+    conv.zero_grad()
+    xs = x_src.detach().clone().requires_grad_()
+    xd = xs if x_dst is x_src else x_dst.detach().clone().requires_grad_()
+    qq = None if query is None else query.detach().clone().requires_grad_()
+    out = call(conv, xs if xd is xs else (xs, xd), qq)
+    (out * torch.linspace(-1, 1, out.numel(), dtype=out.dtype).view_as(out)).sum().backward()
+    grads = [xs.grad] + ([xd.grad] if xd is not xs else []) + ([qq.grad] if qq is not None else [])
+    return out.detach(), grads + [p.grad.clone() for p in conv.parameters()]
+
+
+@pytest.mark.parametrize("bipartite", [False, True])
+def test_a_prebuilt_layout_agrees_with_graph_ids_and_explicit_edges(bipartite):
+    """The fast path (a DenseLayout built once) against the graph-id path and message passing
+    over explicit edges, outputs and gradients; unsorted, uneven graphs, one without nodes."""
+    torch.manual_seed(7)
+    conv = AttentionConv(16, heads=4).double()
+    b_dst = torch.repeat_interleave(torch.tensor([0, 1, 3, 4]), torch.tensor([5, 1, 7, 2]))
+    b_dst = b_dst[torch.randperm(b_dst.numel())]  # graph 2 has no nodes
+    b_src = b_dst[torch.randperm(b_dst.numel())][:-3] if bipartite else b_dst
+    x_dst = torch.randn(b_dst.numel(), 16, dtype=torch.float64)
+    x_src = torch.randn(b_src.numel(), 16, dtype=torch.float64) if bipartite else x_dst
+    query = torch.randn_like(x_dst)
+    lay = (DenseLayout.from_batch(b_src, b_src.numel(), 5),
+           DenseLayout.from_batch(b_dst, b_dst.numel(), 5))
+    ei = complete_edges(b_src, b_dst)
+    calls = [
+        lambda c, x, q: c(x, CompleteEdges(), query=q, layout=lay if bipartite else lay[1]),
+        lambda c, x, q: c(x, CompleteEdges(b_src, b_dst), query=q),
+        lambda c, x, q: c(x, ei, query=q),
+    ]
+    ref = outputs_and_grads(conv, x_src, x_dst, query, calls[-1])
+    for call in calls[:-1]:
+        assert_paths_agree((outputs_and_grads(conv, x_src, x_dst, query, call), ref), 1e-10)
+
+
+def test_dense_layout_blocks_and_errors():
+    batch = torch.tensor([2, 0, 2, 2, 0])
+    lay = DenseLayout.from_batch(batch, 5)
+    assert (lay.num_graphs, lay.max_nodes) == (3, 3)
+    assert lay.index.tolist() == [0, 0, 1, 2, 1]  # rank inside the graph, storage order
+    assert lay.mask.tolist() == [[True, True, False], [False] * 3, [True] * 3]
+    x = torch.arange(10.0).view(5, 2)
+    dense = lay.to_dense(x)
+    assert dense[2].tolist() == [[0, 1], [4, 5], [6, 7]] and dense[1].abs().sum() == 0
+    assert torch.equal(lay.from_dense(dense), x)
+    assert torch.equal(DenseLayout.single(5).to_dense(x)[0], x)
+    assert DenseLayout.from_batch(batch[:0], 0, 2).max_nodes == 0
+    assert repr(lay) == "DenseLayout(num_nodes=5, num_graphs=3, max_nodes=3)"
+    with pytest.raises(ValueError, match=r"Expected graph ids in \[0, 2\)"):
+        DenseLayout.from_batch(batch, 5, 2)
+    with pytest.raises(ValueError, match="graph ids in"):
+        DenseLayout.from_batch(batch - 1, 5)
+    with pytest.raises(TypeError, match="1-D long tensor"):
+        DenseLayout.from_batch(batch.float(), 5)
+    with pytest.raises(ValueError, match="one graph id per node"):
+        DenseLayout.from_batch(batch, 4)
+    with pytest.raises(ValueError, match="Expected 5 node rows"):
+        lay.to_dense(x[:4])
+
+
+def test_layout_misuse_is_a_one_line_error():
+    conv = AttentionConv(16, heads=2)
+    x, batch = torch.randn(5, 16), torch.tensor([0, 0, 1, 1, 1])
+    lay = DenseLayout.from_batch(batch, 5)
+    with pytest.raises(ValueError, match="either a layout or graph ids"):
+        conv(x, None, batch, complete=True, layout=lay)
+    with pytest.raises(ValueError, match="either a layout or graph ids"):
+        conv(x, CompleteEdges(batch), layout=lay)
+    with pytest.raises(ValueError, match="only with complete attention"):
+        conv(x, complete_edges(batch, batch), layout=lay)
+    with pytest.raises(ValueError, match="target layout of 5 nodes"):
+        conv(x, None, complete=True, layout=(lay, DenseLayout.from_batch(batch[:4], 4)))
+    with pytest.raises(ValueError, match="as many graphs"):
+        conv(x, None, complete=True, layout=(lay, DenseLayout.from_batch(batch, 5, 3)))
+    with pytest.raises(TypeError, match="Expected a DenseLayout"):
+        conv(x, None, complete=True, layout=batch)
+
+
+def test_the_layout_path_does_not_break_a_compiled_graph():
+    """No host synchronisation inside the layer once the layout is built: dynamo traces the
+    dense path of an uneven batch as one graph (the graph-id path breaks it)."""
+    torch.manual_seed(8)
+    conv = AttentionConv(16, heads=2).eval()
+    batch = torch.tensor([1, 0, 0, 1, 1, 2, 0])
+    x, g = torch.randn(7, 16), torch.randn(7, 16)
+    lay = DenseLayout.from_batch(batch, 7)
+    torch._dynamo.reset()
+    with torch.no_grad():
+        fast = torch._dynamo.explain(conv)((x, x), None, query=g, complete=True, layout=lay)
+        slow = torch._dynamo.explain(conv)((x, x), None, batch, query=g, complete=True)
+    assert fast.graph_break_count == 0 and fast.graph_count == 1
+    assert slow.graph_break_count >= 1

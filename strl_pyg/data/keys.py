@@ -31,7 +31,10 @@ NODE_TYPES = (POINT, ENDPOINT)
 # Edge relations.
 SELF_REL = "self"  # intra-graph self-attention: every node of a pair to every node of it
 LINE_REL = "line"  # the two endpoints of one matched line segment
-CROSS_REL = "cross"  # inter-graph: geometric stream (source) guides visual stream (target)
+# Inter-graph Geometry-Guided cross-attention, edge j -> i within a pair: the query is the GCG
+# (geometric) feature of target i, keys and values are the GGVG (visual) features of source j,
+# and the visual feature of i is updated (strl_pyg.nn.DualGraphLayer, step 4).
+CROSS_REL = "cross"
 
 LINE_EDGE = (ENDPOINT, LINE_REL, ENDPOINT)
 SELF_EDGE_TYPES = tuple((s, SELF_REL, d) for s in NODE_TYPES for d in NODE_TYPES)

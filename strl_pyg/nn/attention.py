@@ -8,9 +8,12 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 from torch_geometric.nn import MessagePassing
-from torch_geometric.utils import softmax, to_dense_batch
+from torch_geometric.utils import softmax
 
-__all__ = ["AttentionConv", "CompleteEdges", "mlp", "reset_mlp"]
+from strl_pyg.nn.layout import DenseLayout
+from strl_pyg.nn.mlp import as_pair, mlp, reset_mlp
+
+__all__ = ["AttentionConv", "CompleteEdges"]
 
 PairTensor = tuple[Tensor, Tensor]
 
@@ -61,7 +64,7 @@ def _complete_batches(
     marker: CompleteEdges, batch, n_src: int, n_dst: int
 ) -> tuple[Tensor | None, Tensor | None]:
     """Graph ids of the source and target nodes: the marker's, else the ``batch`` argument's."""
-    b_src, b_dst = _pair(batch)
+    b_src, b_dst = as_pair(batch)
     if marker.batch_src is not None:
         for mine, given in ((marker.batch_src, b_src), (marker.batch_dst, b_dst)):
             if given is not None and not torch.equal(mine, given.to(mine.device)):
@@ -71,25 +74,39 @@ def _complete_batches(
     return _graph_ids("source", b_src, n_src), _graph_ids("target", b_dst, n_dst)
 
 
-def mlp(channels: list[int]) -> nn.Sequential:
-    """``Linear -> LayerNorm -> GELU`` blocks between ``channels``, a plain ``Linear`` last."""
-    layers: list[nn.Module] = []
-    for i in range(len(channels) - 1):
-        layers.append(nn.Linear(channels[i], channels[i + 1]))
-        if i < len(channels) - 2:
-            layers += [nn.LayerNorm(channels[i + 1]), nn.GELU()]
-    return nn.Sequential(*layers)
-
-
-def reset_mlp(module: nn.Module) -> None:
-    """Re-initialises every child of ``module`` that has ``reset_parameters``."""
-    for child in module.modules():
-        if child is not module and hasattr(child, "reset_parameters"):
-            child.reset_parameters()
-
-
-def _pair(x):
-    return x if isinstance(x, (tuple, list)) else (x, x)
+def _complete_layouts(
+    marker: CompleteEdges, batch, layout, n_src: int, n_dst: int
+) -> tuple[DenseLayout, DenseLayout]:
+    """The source and target layouts: the caller's (checked by shape only, no host
+    synchronisation), else built from the graph ids (validated on the host)."""
+    if layout is not None:
+        if marker.batch_src is not None or any(b is not None for b in as_pair(batch)):
+            raise ValueError("Expected either a layout or graph ids (batch, CompleteEdges "
+                             "ids) for complete attention (got both)")
+        ls, ld = as_pair(layout)
+        for name, lay, n in (("source", ls, n_src), ("target", ld, n_dst)):
+            if not isinstance(lay, DenseLayout):
+                raise TypeError(f"Expected a DenseLayout for the {name} nodes (got "
+                                f"{type(lay).__name__})")
+            if lay.num_nodes != n:
+                raise ValueError(f"Expected a {name} layout of {n} nodes (got "
+                                 f"{lay.num_nodes})")
+        if ls.num_graphs != ld.num_graphs:
+            raise ValueError(f"Expected source and target layouts of as many graphs (got "
+                             f"{ls.num_graphs} and {ld.num_graphs})")
+        return ls, ld
+    b_src, b_dst = _complete_batches(marker, batch, n_src, n_dst)
+    if b_src is None and b_dst is None:
+        return DenseLayout.single(n_src), DenseLayout.single(n_dst)
+    ref = b_src if b_src is not None else b_dst
+    if b_src is None:  # no ids on one side: all its nodes belong to graph 0
+        b_src = ref.new_zeros(n_src)
+    if b_dst is None:
+        b_dst = ref.new_zeros(n_dst)
+    ids = torch.cat([b_src, b_dst])
+    num_graphs = int(ids.max()) + 1 if ids.numel() else 1
+    return (DenseLayout.from_batch(b_src, n_src, num_graphs),
+            DenseLayout.from_batch(b_dst, n_dst, num_graphs))
 
 
 class AttentionConv(MessagePassing):
@@ -124,7 +141,10 @@ class AttentionConv(MessagePassing):
       and target nodes that share a graph id (the marker's, else ``batch``; no ids at all:
       one graph); computed block-wise with
       :func:`torch.nn.functional.scaled_dot_product_attention` on padded per-graph blocks and a
-      boolean key mask. No :math:`O(N^2)` edge list is built.
+      boolean key mask. No :math:`O(N^2)` edge list is built. The block layout comes from
+      a :class:`~strl_pyg.nn.DenseLayout` passed as ``layout`` (built once per forward by the
+      caller: no host synchronisation in the layer, as :class:`~strl_pyg.model.StrLPose`
+      does), else from the graph ids on every call (validated on the host).
 
     A missing ``edge_index`` (``None`` without ``complete=True``) is an error, never complete
     attention: under :func:`~torch_geometric.nn.to_hetero` an edge type without
@@ -164,7 +184,7 @@ class AttentionConv(MessagePassing):
     ) -> None:
         kwargs.setdefault("aggr", "add")
         super().__init__(node_dim=0, **kwargs)
-        src_channels, dst_channels = _pair(channels)
+        src_channels, dst_channels = as_pair(channels)
         if dst_channels % heads != 0:
             raise ValueError(
                 f"Expected heads to divide the target channels (got {heads} heads for "
@@ -197,12 +217,16 @@ class AttentionConv(MessagePassing):
         query: Tensor | None = None,
         *,
         complete: bool = False,
+        layout: DenseLayout | tuple[DenseLayout, DenseLayout] | None = None,
     ) -> Tensor:
         """Args: ``x`` node features (or a ``(source, target)`` pair); ``edge_index``
         ``[2, E]`` or a :class:`CompleteEdges` marker; ``batch`` graph ids for complete
         attention (a tensor, or a ``(source, target)`` pair); ``query`` the query features of
         the target nodes (default: the target features); ``complete=True``: complete attention
-        within each graph of ``batch``, with ``edge_index=None``."""
+        within each graph of ``batch``, with ``edge_index=None``; ``layout``: for complete
+        attention, a :class:`~strl_pyg.nn.DenseLayout` of the nodes (or a ``(source,
+        target)`` pair) built once by the caller, in place of graph ids: the layer then never
+        synchronises with the host (graph ids are read on the host on every call)."""
         if complete:
             if edge_index is not None:
                 raise ValueError("Expected edge_index=None with complete=True (got an "
@@ -215,7 +239,10 @@ class AttentionConv(MessagePassing):
                 "graph with implicit complete edges pass strl_pyg.data.edge_index_dict(data) "
                 "or call materialize_complete_edges(data))"
             )
-        x_src, x_dst = _pair(x)
+        if layout is not None and not isinstance(edge_index, CompleteEdges):
+            raise ValueError("Expected a layout only with complete attention (got explicit "
+                             "edge_index)")
+        x_src, x_dst = as_pair(x)
         g = x_dst if query is None else query
         if g.shape[0] != x_dst.shape[0]:
             raise ValueError(
@@ -228,8 +255,7 @@ class AttentionConv(MessagePassing):
         size = (x_src.shape[0], x_dst.shape[0])
 
         if isinstance(edge_index, CompleteEdges):
-            b_src, b_dst = _complete_batches(edge_index, batch, *size)
-            msg = self._dense(q, k, v, b_src, b_dst)
+            msg = self._dense(q, k, v, *_complete_layouts(edge_index, batch, layout, *size))
         else:
             alpha = self.edge_updater(edge_index, q=q, k=k, size=size)
             msg = self.propagate(edge_index, v=v, alpha=alpha, size=size)
@@ -247,53 +273,35 @@ class AttentionConv(MessagePassing):
         return alpha.unsqueeze(-1) * v_j
 
     # ------------------------------------------------------------------ dense fast path
-    def _dense(
-        self, q: Tensor, k: Tensor, v: Tensor, b_src: Tensor | None, b_dst: Tensor | None
-    ) -> Tensor:
+    def _dense(self, q: Tensor, k: Tensor, v: Tensor, ls: DenseLayout,
+               ld: DenseLayout) -> Tensor:
+        """Complete attention in padded per-graph blocks; no host synchronisation (the block
+        sizes are Python ints of the layouts)."""
         n_src, n_dst = k.shape[0], q.shape[0]
         if n_src == 0 or n_dst == 0:  # nothing to attend to: every message is zero
             return q.new_zeros(q.shape) + 0.0 * (k.sum() + v.sum())
-        if b_src is None:
-            b_src = q.new_zeros(n_src, dtype=torch.long)
-        if b_dst is None:
-            b_dst = q.new_zeros(n_dst, dtype=torch.long)
-        num_graphs = int(torch.maximum(b_src.max(), b_dst.max())) + 1
         drop = self.dropout if self.training else 0.0
-        if num_graphs == 1:  # no padding, no mask
+        if ls.num_graphs == 1:  # one graph: no padding, no mask
             out = F.scaled_dot_product_attention(
                 q.transpose(0, 1), k.transpose(0, 1), v.transpose(0, 1), dropout_p=drop
             )
             return out.transpose(0, 1)
 
-        # to_dense_batch needs graph-sorted nodes; a stable sort keeps node order per graph.
-        perm_src = perm_dst = None
-        if bool((b_src[1:] < b_src[:-1]).any()):
-            perm_src = torch.argsort(b_src, stable=True)
-            b_src, k, v = b_src[perm_src], k[perm_src], v[perm_src]
-        if bool((b_dst[1:] < b_dst[:-1]).any()):
-            perm_dst = torch.argsort(b_dst, stable=True)
-            b_dst, q = b_dst[perm_dst], q[perm_dst]
-
         H, D = self.heads, self.head_dim
-        kv = torch.cat([k.reshape(n_src, H * D), v.reshape(n_src, H * D)], dim=-1)
-        kv, mask_src = to_dense_batch(kv, b_src, batch_size=num_graphs)
-        qd, mask_dst = to_dense_batch(q.reshape(n_dst, H * D), b_dst, batch_size=num_graphs)
-        L_src, L_dst = kv.shape[1], qd.shape[1]
-        kv = kv.view(num_graphs, L_src, 2, H, D)
+        kv = ls.to_dense(torch.cat([k.reshape(n_src, H * D), v.reshape(n_src, H * D)], -1))
+        B, L_src = kv.shape[0], kv.shape[1]
+        kv = kv.view(B, L_src, 2, H, D)
         kd = kv[:, :, 0].transpose(1, 2)
         vd = kv[:, :, 1].transpose(1, 2)
-        qd = qd.view(num_graphs, L_dst, H, D).transpose(1, 2)
+        qd = ld.to_dense(q).transpose(1, 2)  # [B, H, L_dst, D]
         # A graph without source nodes would give an all-masked softmax row (NaN): let it
         # attend to its padding and zero its messages afterwards instead.
-        has_src = mask_src.any(dim=1)
-        key_mask = mask_src | ~has_src[:, None]
-        attn_mask = key_mask[:, None, None, :]
-        out = F.scaled_dot_product_attention(qd, kd, vd, attn_mask=attn_mask, dropout_p=drop)
+        has_src = ls.counts > 0
+        key_mask = ls.mask | ~has_src[:, None]
+        out = F.scaled_dot_product_attention(qd, kd, vd, attn_mask=key_mask[:, None, None, :],
+                                             dropout_p=drop)
         out = out * has_src.to(out.dtype)[:, None, None, None]
-        out = out.transpose(1, 2)[mask_dst]  # [n_dst (sorted), H, D]
-        if perm_dst is not None:
-            out = out.new_empty(out.shape).index_copy(0, perm_dst, out)
-        return out
+        return ld.from_dense(out.transpose(1, 2))  # [n_dst, H, D], storage order
 
     def __repr__(self) -> str:
         return (

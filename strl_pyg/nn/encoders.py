@@ -5,9 +5,9 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
-from torch_geometric.utils import to_dense_batch
 
-from strl_pyg.nn.attention import mlp, reset_mlp
+from strl_pyg.nn.layout import DenseLayout
+from strl_pyg.nn.mlp import mlp, reset_mlp
 
 __all__ = [
     "SpatialCoordinateEncoder",
@@ -93,7 +93,7 @@ class PixelEncoder(_MLPEncoder):
 
 
 def sample_at_pixels(fmap: Tensor, kpts: Tensor, batch: Tensor | None,
-                     image_size: tuple[int, int]) -> Tensor:
+                     image_size: tuple[int, int], layout: DenseLayout | None = None) -> Tensor:
     r"""Bilinearly samples per-graph feature maps at node pixel coordinates.
 
     Pixel convention: OpenCV's, the centre of the top-left pixel of the *image* is ``(0, 0)``;
@@ -104,6 +104,8 @@ def sample_at_pixels(fmap: Tensor, kpts: Tensor, batch: Tensor | None,
         kpts: pixel coordinates ``(x, y)`` in the image, shape :math:`(N, 2)`.
         batch: graph id of each node, shape :math:`(N)`, sorted, or :obj:`None` (one graph).
         image_size: ``(H, W)`` of the image the coordinates refer to.
+        layout: the :class:`~strl_pyg.nn.DenseLayout` of the nodes, in place of ``batch``
+            (no host synchronisation); ``None``: built from ``batch``.
 
     Returns:
         sampled features, shape :math:`(N, C)`; zeros padding outside the image.
@@ -114,12 +116,17 @@ def sample_at_pixels(fmap: Tensor, kpts: Tensor, batch: Tensor | None,
     H, W = image_size
     scale = kpts.new_tensor([2.0 / W, 2.0 / H])
     grid = (kpts + 0.5) * scale - 1.0  # align_corners=False maps pixel centres this way
-    if batch is None:
-        batch = kpts.new_zeros(kpts.shape[0], dtype=torch.long)
-    dense, mask = to_dense_batch(grid, batch, batch_size=B)
+    if layout is None:
+        if batch is None:
+            batch = kpts.new_zeros(kpts.shape[0], dtype=torch.long)
+        layout = DenseLayout.from_batch(batch, kpts.shape[0], B)
+    if layout.num_graphs != B:
+        raise ValueError(f"Expected one feature map per graph (got {B} maps for "
+                         f"{layout.num_graphs} graphs)")
+    dense = layout.to_dense(grid)
     out = F.grid_sample(fmap, dense.unsqueeze(1).to(fmap.dtype), mode="bilinear",
                         padding_mode="zeros", align_corners=False)  # [B, C, 1, L]
-    return out.squeeze(2).transpose(1, 2)[mask]
+    return layout.from_dense(out.squeeze(2).transpose(1, 2))
 
 
 class ImageEncoder(nn.Module):
@@ -171,11 +178,12 @@ class ImageEncoder(nn.Module):
         return self.cnn(image)
 
     def encode_nodes(self, image0: Tensor, image1: Tensor, kpts0: Tensor, kpts1: Tensor,
-                     batch: Tensor | None) -> Tensor:
+                     batch: Tensor | None, layout: DenseLayout | None = None) -> Tensor:
         """Node features :math:`(N, C)` from images :math:`(B, c, H, W)` and the nodes' pixel
-        coordinates :math:`(N, 2)` in image 0 and image 1."""
-        f0 = sample_at_pixels(self(image0), kpts0, batch, tuple(image0.shape[-2:]))
-        f1 = sample_at_pixels(self(image1), kpts1, batch, tuple(image1.shape[-2:]))
+        coordinates :math:`(N, 2)` in image 0 and image 1 (``layout``: see
+        :func:`sample_at_pixels`)."""
+        f0 = sample_at_pixels(self(image0), kpts0, batch, tuple(image0.shape[-2:]), layout)
+        f1 = sample_at_pixels(self(image1), kpts1, batch, tuple(image1.shape[-2:]), layout)
         return self.embed(torch.cat([f0, f1], dim=-1))
 
     def __repr__(self) -> str:

@@ -6,7 +6,7 @@ import torch
 from torch import Tensor
 from torch_geometric.nn import MessagePassing
 
-from strl_pyg.nn.attention import _pair, mlp, reset_mlp
+from strl_pyg.nn.mlp import as_pair, mlp, reset_mlp
 
 __all__ = ["LineEndpointConv"]
 
@@ -49,7 +49,7 @@ class LineEndpointConv(MessagePassing):
     ) -> None:
         kwargs.setdefault("aggr", "mean")
         super().__init__(**kwargs)
-        src_channels, dst_channels = _pair(channels)
+        src_channels, dst_channels = as_pair(channels)
         self.channels = channels
         self.line_channels = line_channels
         self.mlp_ratio = mlp_ratio
@@ -64,7 +64,7 @@ class LineEndpointConv(MessagePassing):
 
     def forward(self, x: Tensor | tuple[Tensor, Tensor], edge_index: Tensor,
                 line_feat: Tensor) -> Tensor:
-        x_src, x_dst = _pair(x)
+        x_src, x_dst = as_pair(x)
         if line_feat.shape[0] != x_src.shape[0]:
             raise ValueError(
                 "Expected one line feature per source node "
