@@ -80,6 +80,17 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.dataset not in DATASETS:
             raise ValueError(f"Expected dataset in {DATASETS} (got {self.dataset!r})")
+        if self.matches not in ("ground_truth", "frontend"):
+            raise ValueError(f"Expected matches in ('ground_truth', 'frontend') "
+                             f"(got {self.matches!r})")
+        if not 0.0 <= self.outlier_augment < 1.0:
+            raise ValueError(f"Expected outlier_augment in [0, 1) (got {self.outlier_augment!r})")
+        if self.scene_mix is not None:
+            from strl_pyg.synthetic.distributions import DISTRIBUTIONS
+
+            if self.scene_mix not in DISTRIBUTIONS:
+                raise ValueError(f"Expected scene_mix in {tuple(DISTRIBUTIONS)} "
+                                 f"(got {self.scene_mix!r})")
         for name in ("batch_size", "steps", "val_every", "train_pairs", "val_pairs", "kitti_k"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
@@ -128,6 +139,17 @@ def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
                     help="SceneConfig field of generated scenes, e.g. --scene noise_px=0.5")
     ap.add_argument("--scene-kinds", default=",".join(d.scene_kinds),
                     help="generated scene kinds, comma-separated")
+    ap.add_argument("--scene-mix", default=None,
+                    help="generated scenes drawn per seed from this distribution (e.g. "
+                         "mixed_small, mixed; see strl_pyg.synthetic.distributions); replaces "
+                         "--scene/--scene-kinds")
+    ap.add_argument("--matches", choices=("ground_truth", "frontend"), default=d.matches,
+                    help="generated scenes: the generator's matches or front-end matches on "
+                         "the rendered images (cached in --cache-dir)")
+    ap.add_argument("--outlier-augment", type=float, default=d.outlier_augment,
+                    help="up to this fraction of point matches shuffled into outliers")
+    ap.add_argument("--geo-ess-start", type=int, default=d.geo_ess_start,
+                    help="geometric head (--set geometric=true): step the epipolar loss starts")
     ap.add_argument("--train-pairs", type=int, default=d.train_pairs)
     ap.add_argument("--val-pairs", type=int, default=d.val_pairs)
     ap.add_argument("--kitti-k", type=int, default=d.kitti_k, help="frame gap of KITTI pairs")

@@ -272,7 +272,9 @@ def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
             num_points=args.num_points, num_lines=args.num_lines, patch_size=args.patch_size,
             swap_prob=args.swap_prob, init_from=args.init_from,
             seed=args.seed, out_dir=args.out, num_workers=args.workers, device=args.device,
-            tensorboard=not args.no_tensorboard,
+            tensorboard=not args.no_tensorboard, scene_mix=args.scene_mix,
+            matches=args.matches, outlier_augment=args.outlier_augment,
+            geo_ess_start=args.geo_ess_start,
         )
         cfg.model_config()  # validate the model overrides before any work
     except (ValueError, TypeError) as err:

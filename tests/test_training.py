@@ -143,3 +143,50 @@ def test_init_from_loads_weights_and_rejects_other_architectures(tmp_path):
                                        "patch_features": 1})
     with pytest.raises(ValueError, match="matching this run's model config"):
         train(bad, progress=False)
+
+
+def test_geometric_head_trains_on_a_scene_distribution_from_regression_weights(tmp_path):
+    from strl_pyg.model import StrLPose, StrLPoseConfig
+    from strl_pyg.train_config import TrainConfig
+    from strl_pyg.training import shuffle_point_matches, train
+
+    base = StrLPose(StrLPoseConfig.ablation("full", hidden=16, layers=1, heads=2,
+                                            patch_features=1))
+    init = base.save(tmp_path / "regression.pt")
+    cfg = TrainConfig(train_pairs=8, val_pairs=4, steps=3, val_every=3, batch_size=4,
+                      scene_mix="mixed_small", outlier_augment=0.5, geo_ess_start=1,
+                      model_overrides=dict(hidden=16, layers=1, heads=2, geometric=True),
+                      init_from=str(init), out_dir=str(tmp_path / "run"), tensorboard=False)
+    res = train(cfg, progress=False)
+    assert res["step"] == 3 and "geo_rot_err_med" in res and "geo_auc10" in res
+    assert res["model"].inlier_head is not None
+    # outlier augmentation: some image-1 sides permuted, image-0 side untouched, input intact
+    from strl_pyg.data import build_pair_graph
+    from strl_pyg.synthetic import generate_pair
+
+    p = generate_pair(0)
+    g = build_pair_graph(p.matches, T_0to1=p.T_0to1)
+    before = g["point"]["pos1"].clone()
+    counts = []
+    for seed in range(10):  # the fraction is drawn in [0, 0.5) per call
+        h = shuffle_point_matches(g, 0.5, seed=seed)
+        assert torch.equal(g["point"]["pos1"], before)
+        assert torch.equal(h["point"]["pos0"], g["point"]["pos0"])
+        counts.append(int((h["point"]["pos1"] != before).any(-1).sum()))
+    assert max(counts) <= 0.5 * before.shape[0] and sum(c > 0 for c in counts) >= 7
+
+
+def test_training_flags_for_the_wider_distribution():
+    import argparse
+
+    from strl_pyg.train_config import TrainConfig, add_train_arguments
+
+    ap = add_train_arguments(argparse.ArgumentParser())
+    args = ap.parse_args(["--scene-mix", "mixed_small", "--matches", "frontend",
+                          "--outlier-augment", "0.4", "--geo-ess-start", "50"])
+    assert (args.scene_mix, args.matches, args.outlier_augment, args.geo_ess_start) == (
+        "mixed_small", "frontend", 0.4, 50)
+    with pytest.raises(ValueError, match="scene_mix"):
+        TrainConfig(scene_mix="nope")
+    with pytest.raises(ValueError, match="outlier_augment"):
+        TrainConfig(outlier_augment=1.5)
