@@ -7,10 +7,15 @@ The FLOP count is analytic (multiply-adds of every linear layer and of the atten
 times 2; norms, activations, softmax and gathers are not counted) and is compared with a
 square fp32 ``torch.mm`` measured in the same run.
 
+``torch.compile`` rows: the same dense forward through ``torch.compile(model)`` (inductor),
+against eager rows measured in the same run; the first call (tracing and compilation) is timed
+apart, and each compiled row reports the graph breaks ``torch._dynamo.explain`` counts.
+
 Usage::
 
     python benchmarks/bench_model.py                  # default config, 384 points + 192 lines
     python benchmarks/bench_model.py --batches 1 16 --explicit-batches 1 4 --repeats 5
+    python benchmarks/bench_model.py --rows compile --compile-batches 1 16   # compiled vs eager
 """
 
 from __future__ import annotations
@@ -87,6 +92,14 @@ def child(args) -> dict:
     cfg = StrLPoseConfig()
     model = StrLPose(cfg)
     data = make_batch(args.batch, args.points, args.lines, args.complete)
+    breaks = None
+    fn = model
+    if args.compile:
+        model.eval()
+        with torch.inference_mode():
+            breaks = torch._dynamo.explain(model)(data).graph_break_count
+        torch._dynamo.reset()
+        fn = torch.compile(model)
     base = _reset_peak_rss()
     times = []
 
@@ -96,16 +109,19 @@ def child(args) -> dict:
             with torch.inference_mode():
                 if args.bf16:
                     with torch.autocast("cpu", dtype=torch.bfloat16):
-                        model(data)
+                        fn(data)
                 else:
-                    model(data)
+                    fn(data)
         else:
             model.train()
             model.zero_grad(set_to_none=True)
-            out = model(data)
+            out = fn(data)
             (out.quaternion.sum() + out.translation.sum() + out.log_var.sum()).backward()
 
-    step()  # warm-up
+    t0 = time.perf_counter()
+    step()  # warm-up (and compilation)
+    first_s = time.perf_counter() - t0
+    step()
     for _ in range(args.repeats):
         t = time.perf_counter()
         step()
@@ -115,15 +131,17 @@ def child(args) -> dict:
     flops = model_flops(cfg, args.batch, args.points, args.lines)
     return {"best_ms": 1e3 * best / args.batch, "median_ms": 1e3 * med / args.batch,
             "peak_mib": peak_kib / 1024, "gflops": flops / best / 1e9,
-            "matmul_gflops": matmul_gflops()}
+            "matmul_gflops": matmul_gflops(), "first_s": first_s, "graph_breaks": breaks}
 
 
-def run_child(batch, complete, mode, bf16, args) -> dict:
+def run_child(batch, complete, mode, bf16, args, compile=False) -> dict:
     cmd = [sys.executable, __file__, "--child", "--batch", str(batch), "--complete", complete,
            "--mode", mode, "--points", str(args.points), "--lines", str(args.lines),
            "--repeats", str(args.repeats), "--threads", str(args.threads)]
     if bf16:
         cmd.append("--bf16")
+    if compile:
+        cmd.append("--compile")
     out = subprocess.run(cmd, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -139,6 +157,10 @@ def main() -> None:
     p.add_argument("--explicit-train-batches", type=int, nargs="*", default=[1],
                    help="fwd+bwd on explicit edges keeps ~3 gathered [E, 128] tensors per "
                         "attention layer for backward: ~11 GB for the default model at B=1")
+    p.add_argument("--compile-batches", type=int, nargs="*", default=[1, 16],
+                   help="batches of the torch.compile rows (each next to an eager row)")
+    p.add_argument("--rows", choices=("all", "compile"), default="all",
+                   help="'compile': only the eager and compiled forward rows")
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--threads", type=int, default=torch.get_num_threads())
     # internal: one measurement
@@ -147,6 +169,7 @@ def main() -> None:
     p.add_argument("--complete", default="implicit", help=argparse.SUPPRESS)
     p.add_argument("--mode", default="forward", help=argparse.SUPPRESS)
     p.add_argument("--bf16", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--compile", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args()
     torch.set_num_threads(args.threads)
     if args.child:
@@ -158,7 +181,8 @@ def main() -> None:
     print(f"machine: {platform.machine()} {_cpu_name()}, {os.cpu_count()} cores, "
           f"{args.threads} torch threads")
     print(f"versions: python {platform.python_version()}, torch {torch.__version__}, "
-          f"torch_geometric {torch_geometric.__version__}")
+          f"torch_geometric {torch_geometric.__version__}; torch.compile backend inductor, "
+          f"C++ compiler {_cxx()}")
     print(f"sizes: {args.points} points + {args.lines} lines = {n} nodes per pair; config "
           f"hidden={cfg.hidden} layers={cfg.layers} heads={cfg.heads} (full model: lines, "
           f"line MP, pixel visual graph, weighted fusion); repeats={args.repeats}")
@@ -168,15 +192,22 @@ def main() -> None:
           "matmul GFLOP/s | % of matmul |")
     print("|---|---|---|---|---|---|---|---|")
     dense = {}
-    rows = [("dense", b, "forward", False) for b in args.batches]
-    rows += [("dense", b, "fwd+bwd", False) for b in args.batches]
-    rows += [("dense bf16 autocast", max(args.batches), "forward", True)]
-    rows += [("explicit", b, "forward", False) for b in args.explicit_batches]
-    rows += [("explicit", b, "fwd+bwd", False) for b in args.explicit_train_batches]
+    rows = []
+    if args.rows == "all":
+        rows += [("dense", b, "forward", False) for b in args.batches]
+        rows += [("dense", b, "fwd+bwd", False) for b in args.batches]
+        rows += [("dense bf16 autocast", max(args.batches), "forward", True)]
+        rows += [("explicit", b, "forward", False) for b in args.explicit_batches]
+        rows += [("explicit", b, "fwd+bwd", False) for b in args.explicit_train_batches]
+    for b in args.compile_batches:
+        if args.rows == "compile" or b not in args.batches:
+            rows.append(("dense", b, "forward", False))
+        rows.append(("dense compiled", b, "forward", False))
     results = {}
     for name, b, mode, bf16 in rows:
         complete = "explicit" if name == "explicit" else "implicit"
-        r = run_child(b, complete, "forward" if mode == "forward" else "train", bf16, args)
+        r = run_child(b, complete, "forward" if mode == "forward" else "train", bf16, args,
+                      compile=name == "dense compiled")
         results[(name, b, mode)] = r
         if name == "dense":
             dense[(b, mode)] = r
@@ -186,6 +217,13 @@ def main() -> None:
         print(f"| {name} | {b} | {mode} | {r['best_ms']:.1f} ({r['median_ms']:.1f}) | "
               f"{r['peak_mib']:.0f} | {rate} | {mm:.0f} | {pct} |", flush=True)
     print()
+    for (name, b, mode), r in results.items():
+        if name == "dense compiled":
+            e = results[("dense", b, mode)]
+            print(f"compiled / eager, batch {b}, {mode}: {r['best_ms'] / e['best_ms']:.2f}x best "
+                  f"({r['median_ms'] / e['median_ms']:.2f}x median) time per pair; first "
+                  f"compiled call {r['first_s']:.1f} s (eager {e['first_s']:.1f} s); "
+                  f"{r['graph_breaks']} graph break(s)")
     for (name, b, mode), r in results.items():
         if name != "explicit":
             continue
@@ -213,6 +251,16 @@ def _reset_peak_rss() -> int:
     except OSError:  # not Linux: the peak then includes building the inputs
         pass
     return _status_kib("VmRSS")
+
+
+def _cxx() -> str:
+    import shutil
+
+    for cc in ("g++", "c++", "clang++"):
+        path = shutil.which(cc)
+        if path:
+            return path
+    return "none (inductor cannot compile C++ kernels here)"
 
 
 def _cpu_name() -> str:
