@@ -138,7 +138,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
             raise ValueError(f"Expected the checkpoint's config to match this run "
                              f"(got differences {{key: (checkpoint, now)}} = {diff})")
         model.load_state_dict(state["model"])
-        optimizer.load_state_dict(state["optimizer"])
+        optimizer.load_state_dict(model.upgrade_optimizer_state(state["optimizer"], state["model"]))
         start_step = int(state["step"])
         history = state.get("history", [])
         trivial_buf = [state["trivial_T"]] if "trivial_T" in state else []
