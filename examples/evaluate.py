@@ -2,7 +2,7 @@
 
 Examples::
 
-    python examples/evaluate.py --checkpoint strl_pyg/weights/strl_pose_synthetic.pt \\
+    python examples/evaluate.py --checkpoint strl_pyg/weights/strl_pose_geometric.pt \\
         --dataset synthetic --num-pairs 60 --noise-px 1 --outlier-fraction 0.3 --out out/syn
     python examples/evaluate.py --checkpoint ckpt.pt --dataset demon --data-root DEMON_ROOT
     python examples/evaluate.py --checkpoint ckpt.pt --dataset kitti --data-root KITTI_ROOT \\

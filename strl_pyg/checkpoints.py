@@ -38,7 +38,7 @@ __all__ = [
 ]
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
-DEFAULT_WEIGHTS = WEIGHTS_DIR / "strl_pose_synthetic.pt"
+DEFAULT_WEIGHTS = WEIGHTS_DIR / "strl_pose_geometric.pt"
 CHECKPOINT_VERSION = 2  # 2: every value loads with torch.load(weights_only=True)
 
 

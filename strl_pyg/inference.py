@@ -45,7 +45,8 @@ from strl_pyg.baselines import MIN_POINTS, estimate_relative_pose
 from strl_pyg.data.matches import PairMatches
 
 __all__ = [
-    "STATUSES", "RECOMMENDED_ORDER", "recommended_order", "MIN_POINTS", "ZERO_PARALLAX_PX", "ZERO_PARALLAX_FRACTION",
+    "STATUSES", "RECOMMENDED_ORDER", "recommended_order", "MIN_POINTS", "ZERO_PARALLAX_PX",
+    "ZERO_PARALLAX_FRACTION",
     "FOCAL_RANGE", "METHODS", "MethodSpec", "MethodResult", "MethodContext", "PoseEstimate",
     "PoseEstimator", "register_method", "prepare_matches", "prepare_graph", "forward_pose",
     "input_warnings", "zero_parallax",

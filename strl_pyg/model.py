@@ -249,7 +249,10 @@ class StrLPose(nn.Module):
     _READABLE_VERSIONS = (1, 2)
     #: Checkpoints shipped in the package (``strl_pyg/weights/``), for :meth:`from_pretrained`:
     #: ``name -> (file, metadata used when the file stores none)``.
+    #: ``"geometric"`` (the default): regression + geometric head, calibrated; ``"synthetic"``:
+    #: the paper's model alone (regression head), the first shipped weights.
     PRETRAINED: dict[str, tuple[str, dict[str, Any]]] = {
+        "geometric": ("strl_pose_geometric.pt", {}),
         "synthetic": ("strl_pose_synthetic.pt", {"training_data": (
             "generated street/indoor/boxes scenes only: 3000 pairs, ground-truth matches with "
             "0.7 px noise and 10% outliers, 4000 steps of batch 16, swap augmentation")}),
@@ -397,7 +400,7 @@ class StrLPose(nn.Module):
         return {**optimizer_state, "state": state, "param_groups": [group]}
 
     @classmethod
-    def from_pretrained(cls, name: str = "synthetic", map_location: Any = "cpu") -> StrLPose:
+    def from_pretrained(cls, name: str = "geometric", map_location: Any = "cpu") -> StrLPose:
         """A shipped checkpoint (:attr:`PRETRAINED`), read from the installed package (not the
         working directory), in eval mode."""
         if name not in cls.PRETRAINED:

@@ -35,41 +35,16 @@ HAVE_POSELIB = METHODS["poselib"].available()
 KEYS = {"method", "status", "T_0to1", "sigma", "covariance", "warnings", "time_ms",
         "num_inliers", "info"}
 
-# The "Using it" snippet proposed for README.md (/tmp/brief/readme_inference.md).
-# TODO(lead): once it is pasted into README.md, replace this constant by
-# ``SNIPPET = readme_python_block("PoseEstimator")`` so the test runs the README verbatim.
-SNIPPET = """\
-from strl_pyg import PairMatches
-from strl_pyg.inference import PoseEstimator
-from strl_pyg.synthetic import generate_pair
-
-pair = generate_pair(2_000_017)            # stands in for your data: images, K, matches
-m = pair.matches
-estimator = PoseEstimator()                # the shipped model (StrLPose.from_pretrained())
-
-# From your own match lists (pixels; endpoint k of line i in image 0 matches endpoint k of
-# line i in image 1):
-matches = PairMatches(m.points0, m.points1, m.lines0, m.lines1,  # [Np,2] [Np,2] [Nl,2,2] [Nl,2,2]
-                      K0=pair.K, K1=pair.K, image0=pair.image0, image1=pair.image1)
-est = estimator.estimate(matches)
-print(est.pose.status, est.pose.method, est.pose.warnings)   # ok poselib []
-if est.pose.status == "ok":
-    T_0to1 = est.pose.T_0to1      # [4, 4] numpy: camera-0 points into camera 1, X1 = R X0 + t
-    print(est.pose.sigma)         # {'rotation_deg': ..., 'translation_deg': ...}
-network = est.methods["regression"]   # each method by name: regression, opencv, poselib, fused
-
-# From images (K1 defaults to K0: one camera):
-est = estimator.estimate_images(pair.image0, pair.image1, K0=pair.K)
-print(est.to_dict()["pose"]["status"])    # the "pose" record of `strl-pose predict --json`
-"""
-
-
 def readme_python_block(must_contain: str) -> str:
     """The first ```python block of README.md that contains ``must_contain``."""
     text = (REPO_ROOT / "README.md").read_text()
     blocks = [b for b in re.findall(r"```python\n(.*?)```", text, re.S) if must_contain in b]
     assert blocks, f"no python block with {must_contain!r} in README.md"
     return blocks[0]
+
+
+# The README's "Using it" snippet, run verbatim (test_readme_snippet_runs_from_another_directory)
+SNIPPET = readme_python_block("PoseEstimator")
 
 
 # ----------------------------------------------------------------------------- fixtures
@@ -206,14 +181,22 @@ def test_a_failed_classical_solver_is_failed_and_not_used(model, pair, monkeypat
         n = matches.num_points
         return BaselineResult(Pose.identity(), np.zeros(n, bool), 1.0, method, False)
 
+    import strl_pyg.guided as guided
+
     monkeypatch.setattr(inference, "estimate_relative_pose", no_model)
+    monkeypatch.setattr(guided, "estimate_relative_pose", no_model)
+    monkeypatch.setattr(guided, "_opencv_prosac", lambda *a, **k: None)
     est = PoseEstimator(model).estimate(pair.matches)
     classical = ["opencv"] + (["poselib"] if HAVE_POSELIB else [])
     for name in classical:
         r = est.methods[name]
         assert r.status == "failed" and r.T_0to1 is None and "found no pose" in r.warnings[0]
     assert est.methods["fused"].status == "failed"
-    assert est.status == "ok" and est.pose.method == "regression"
+    assert est.methods["guided"].status == "failed"
+    # the first method of the recommended order that still answers: a network-only one
+    fallback = [m for m in inference.recommended_order(model) if est.methods[m].status == "ok"]
+    assert est.status == "ok" and est.pose.method == fallback[0]
+    assert fallback[0] in ("geometric", "regression")
     assert any(w.startswith("opencv failed") for w in est.warnings)
 
 
