@@ -141,3 +141,16 @@ def test_fuzz_shapes(n0, n1, d):
     else:
         with pytest.raises(ValueError, match="Expected"):
             PairMatches(p0, p1, image_size0=(H, W), image_size1=(H, W))
+
+
+def test_an_empty_npz_is_a_one_line_value_error(tmp_path):
+    import numpy as np
+
+    from strl_pyg.data.matches import MatchFileKeyError
+
+    path = tmp_path / "empty.npz"
+    np.savez(path)
+    with pytest.raises(ValueError, match=r"^Expected keys \['points0'") as info:
+        PairMatches.load(path)
+    assert isinstance(info.value, MatchFileKeyError) and isinstance(info.value, KeyError)
+    assert "\n" not in str(info.value) and not str(info.value).startswith('"')

@@ -18,6 +18,7 @@ from strl_pyg.io import atomic_open
 
 __all__ = [
     "PairMatches",
+    "MatchFileKeyError",
     "OUT_OF_IMAGE_TOLERANCE",
     "MIN_LINE_LENGTH",
 ]
@@ -131,6 +132,15 @@ def _check_in_image(coords: np.ndarray, size: tuple[int, int], name: str) -> Non
             f"(got {int(out.sum())} coordinates outside, first {xy[i].tolist()})"
         )
 
+
+
+class MatchFileKeyError(ValueError, KeyError):
+    """A match file without the arrays it needs: a ``ValueError`` (one-line "Expected ...
+    (got ...)" message, like every input error of the package) that is also a ``KeyError``
+    for code written against earlier versions."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
 
 @dataclass
 class PairMatches:
@@ -309,7 +319,8 @@ class PairMatches:
         data = _load_npz(path)
         missing = [k for k in ("points0", "points1", "image_size0", "image_size1") if k not in data]
         if missing:
-            raise KeyError(f"Expected keys {missing} in match file '{path}' (got {sorted(data)})")
+            raise MatchFileKeyError(
+                f"Expected keys {missing} in match file '{path}' (got {sorted(data)})")
         kwargs = {k: data[k] for k in _NPZ_ARRAYS if k in data}
         info = json.loads(str(data["info_json"])) if "info_json" in data else {}
         return cls(**kwargs, info=info)
