@@ -88,6 +88,22 @@ def _upgrade_legacy_keys(module, state_dict, prefix, local_metadata, strict, mis
 
 
 # ----------------------------------------------------------------------------- the model
+def _in_dtype(inp, dtype: torch.dtype):
+    """The gathered inputs' floating tensors in the model's dtype, so that a model moved with
+    ``.to(torch.bfloat16)`` (or float64) runs on a float32 graph."""
+    from dataclasses import fields, replace
+
+    def cast(x):
+        if isinstance(x, Tensor) and x.is_floating_point() and x.dtype != dtype:
+            return x.to(dtype)
+        if isinstance(x, tuple):
+            return tuple(cast(y) for y in x)
+        return x
+
+    return replace(inp, **{f.name: cast(getattr(inp, f.name)) for f in fields(inp)
+                           if f.name in ("coords", "line_feat", "visual", "images", "kpts")})
+
+
 class StrLPose(nn.Module):
     r"""Str-L Pose: relative pose ``T_0to1`` from a pair graph of matched points and line
     segments (Zhang et al., "Str-L Pose: Integrating Point and Structured Line for Relative Pose
@@ -167,7 +183,7 @@ class StrLPose(nn.Module):
         none for a single graph, or for explicit edges without the geometric head and the
         image encoder), then runs without touching the host."""
         cfg = self.config
-        inp = gather_inputs(cfg, data)
+        inp = _in_dtype(gather_inputs(cfg, data), next(self.parameters()).dtype)
         dense = (inp.self_edges is None or (cfg.visual_graph and inp.cross_edges is None)
                  or cfg.visual == "cnn" or cfg.geometric)  # what needs padded blocks
         layout = None

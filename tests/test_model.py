@@ -268,3 +268,22 @@ def test_small_model_overfits_eight_pairs():
         out = model(data)
         last = (sq_error(out), float(loss_fn(out, data[K.T_0TO1])["trans_err_deg"]))
     assert last[0] < first[0] / 20 and last[1] < first[1] / 5, (first, last)
+
+
+@pytest.mark.parametrize("dtype", [torch.bfloat16, torch.float64])
+def test_a_model_in_another_dtype_runs_on_a_float32_graph(dtype):
+    from strl_pyg.data import build_pair_graph
+    from strl_pyg.model import StrLPose, StrLPoseConfig
+    from strl_pyg.synthetic import generate_pair
+
+    p = generate_pair(1)
+    g = build_pair_graph(p.matches)
+    torch.manual_seed(0)
+    model = StrLPose(StrLPoseConfig.ablation("full", hidden=16, layers=1, heads=2,
+                                             patch_features=1, geometric=True)).eval()
+    with torch.no_grad():
+        ref = model(g)
+        out = model.to(dtype)(g)  # used to fail with a raw dtype error
+    assert out.quaternion.dtype == dtype and int(out.geometric.status[0]) == 0
+    tol = 5e-2 if dtype == torch.bfloat16 else 1e-5
+    assert torch.allclose(out.quaternion.float(), ref.quaternion, atol=tol)
