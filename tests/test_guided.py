@@ -39,7 +39,7 @@ def test_guided_with_oracle_weights_is_accurate(outlier_pair):
     p, base = outlier_pair
     m = p.matches
     inl = epipolar_residuals(m, p.T_0to1)[0] < 2.0
-    g = guided_estimate(m, 0.05 + 0.9 * inl, "opencv", classical=base)
+    g = guided_estimate(m, 0.05 + 0.9 * inl, "opencv", classical=base, refine_iterations=10)
     r, t = relative_pose_error(g.pose.matrix()[None].numpy(), p.T_0to1[None])
     assert float(r[0]) < 0.5 and float(t[0]) < 5.0
 
@@ -143,3 +143,17 @@ def test_geometric_loss_labels_follow_the_true_epipolar_error():
     with pytest.raises(ValueError, match="geometric=True"):
         GeometricLoss()(StrLPose(StrLPoseConfig.ablation("baseline", hidden=16, layers=1))(g),
                         g["T_0to1"])
+
+
+@pytest.mark.parametrize("weighting", ["network", "blend", "uniform"])
+def test_guided_refinement_weightings_never_raise_the_msac_cost(outlier_pair, weighting):
+    p, base = outlier_pair
+    m = p.matches
+    w = np.random.default_rng(0).random(m.num_points)
+    g = guided_estimate(m, w, "opencv", classical=base, refine_iterations=10,
+                        refine_weighting=weighting)
+    x0, x1, f = _normalised(m)
+    assert msac_cost(g.pose, x0, x1, 1.0 / f) <= msac_cost(base.pose, x0, x1, 1.0 / f) + 1e-12
+    with pytest.raises(ValueError, match="refine_weighting"):
+        guided_estimate(m, w, "opencv", classical=base, refine_iterations=10,
+                        refine_weighting="nope")
