@@ -354,6 +354,10 @@ def main(argv=None) -> int:
             except (NoMatchesError, RuntimeError):
                 continue
             cal.append((f"calib/{seed}", m, np.asarray(p.T_0to1)))
+        # fit on the uncalibrated model: scales stored by an earlier --calibrate would
+        # otherwise be applied during the fit and then overwritten by ~1
+        model.metadata = {k: v for k, v in model.metadata.items()
+                          if k not in ("calibration", "recommended_order")}
         scales, order, stats = fit_calibration(PoseEstimator(model), cal)
         print(f"calibration scales (variance multipliers) on {len(cal)} pairs: {scales}")
         print(f"recommended order (AUC@10 on the calibration pairs): {order}")
