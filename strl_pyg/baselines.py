@@ -133,7 +133,12 @@ def _unit_pose(R: np.ndarray, t: np.ndarray) -> Pose:
     return Pose(np.asarray(R, dtype=np.float64), t / np.linalg.norm(t))
 
 
-def _opencv(matches, threshold_px, confidence, max_iterations, seed) -> BaselineResult:
+def _opencv(matches, threshold_px, confidence, max_iterations, seed,
+            usac: int | None = None) -> BaselineResult:
+    """OpenCV's USAC essential matrix + ``recoverPose``; ``usac`` selects the sampler
+    (default ``cv2.USAC_MAGSAC``; ``cv2.USAC_PROSAC`` expects the matches ordered best first,
+    see :mod:`strl_pyg.guided`)."""
+    usac = cv2.USAC_MAGSAC if usac is None else usac
     n = matches.num_points
     cv2.setRNGSeed(int(seed))
     start = time.perf_counter()
@@ -149,7 +154,7 @@ def _opencv(matches, threshold_px, confidence, max_iterations, seed) -> Baseline
     p1 = np.ascontiguousarray(x1 @ K0[:2, :2].T + K0[:2, 2])
     try:
         E, mask = cv2.findEssentialMat(
-            p0, p1, K0, method=cv2.USAC_MAGSAC, prob=confidence, threshold=float(threshold_px),
+            p0, p1, K0, method=usac, prob=confidence, threshold=float(threshold_px),
             maxIters=int(max_iterations),
         )
     except cv2.error:  # OpenCV 5's USAC asserts on some degenerate samples: no model found

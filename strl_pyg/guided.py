@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from strl_pyg.baselines import MIN_POINTS, BaselineResult, _unit_pose, estimate_relative_pose
+from strl_pyg.baselines import MIN_POINTS, BaselineResult, estimate_relative_pose
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.essential import refine_pose
 from strl_pyg.geometry import Pose, normalize_points, signed_sampson, skew
@@ -162,28 +162,16 @@ def guided_estimate(
 
 def _opencv_prosac(matches: PairMatches, order: np.ndarray, threshold_px: float,
                    seed: int) -> BaselineResult | None:
+    """OpenCV's USAC_PROSAC (:func:`strl_pyg.baselines._opencv`) on the matches ordered by the
+    network's weight, best first; the inlier mask is returned in the original order."""
     import cv2
 
-    cv2.setRNGSeed(int(seed))
-    K0 = np.ascontiguousarray(matches.K0, dtype=np.float64)
-    p0 = np.ascontiguousarray(matches.points0[order], dtype=np.float64)
-    x1 = normalize_points(matches.points1[order], matches.K1).numpy()
-    p1 = np.ascontiguousarray(x1 @ K0[:2, :2].T + K0[:2, 2])
-    try:
-        E, mask = cv2.findEssentialMat(p0, p1, K0, method=cv2.USAC_PROSAC, prob=0.9999,
-                                       threshold=float(threshold_px), maxIters=10000)
-    except cv2.error:  # USAC asserts on some degenerate samples: no model
-        return None
-    if E is None or E.shape[0] < 3 or mask is None:
-        return None
-    best = None
-    for i in range(E.shape[0] // 3):
-        count, R, t, m = cv2.recoverPose(E[3 * i: 3 * i + 3], p0, p1, K0, mask=mask.copy())
-        if best is None or count > best[0]:
-            best = (count, R, t, m)
-    count, R, t, m = best
-    if count == 0:
+    from strl_pyg.baselines import _opencv
+
+    res = _opencv(matches.select(point_index=order), threshold_px, 0.9999, 10000, seed,
+                  usac=cv2.USAC_PROSAC)
+    if not res.success:
         return None
     inl = np.zeros(matches.num_points, dtype=bool)
-    inl[order] = m.reshape(-1) > 0
-    return BaselineResult(_unit_pose(R, t), inl, 0.0, "opencv_prosac", True, {})
+    inl[order] = res.inliers
+    return BaselineResult(res.pose, inl, res.time_ms, "opencv_prosac", True, res.info)

@@ -204,7 +204,7 @@ class GeometricLoss(nn.Module):
         loss = self.cls_weight * l_cls + self.ess_weight * l_ess
         with torch.no_grad():
             acc = ((geo.logits > 0).to(label) == label).to(label).mean()
-            ok = valid & (geo.status == 0)
+            ok = valid  # non-degenerate, with a ground-truth direction
             if bool(ok.any()):
                 r_err = rotation_error_deg(geo.R[ok].to(pose.R), pose.R[ok]).mean()
                 t_err = torch.nanmean(translation_angle_error_deg(geo.t[ok].to(t), t[ok]))

@@ -5,6 +5,7 @@ step batch sampler (the batch of global step ``s`` is a pure function of ``(seed
 
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 import torch
@@ -72,14 +73,12 @@ def shuffle_point_matches(data: HeteroData, max_fraction: float, seed: int) -> H
     m = int(float(torch.rand(1, generator=gen)) * max_fraction * n)
     if m < 2:
         return data
-    out = data.clone()  # small per-pair tensors; keeps the cached graph untouched
+    out = copy.copy(data)  # attributes are reassigned below, never modified in place
     idx = torch.randperm(n, generator=gen)[:m]
     perm = idx[torch.roll(torch.arange(m), 1)]
     for key in (keys_.POS1, keys_.KPTS1, keys_.PATCH1):
         if key in store:
-            x = store[key].clone()
-            x[idx] = store[key][perm]
-            out[keys_.POINT][key] = x
+            out[keys_.POINT][key] = store[key].index_copy(0, idx, store[key][perm])
     return out
 
 
