@@ -160,8 +160,9 @@ def test_gluestick_lines_oriented_by_point_matches(with_junc_idx):
         d["lines_junc_idx0"] = np.array([[[0, 1], [2, 3], [4, 5]]])
         d["lines_junc_idx1"] = np.array([[[0, 1], [3, 2], [4, 5]]])
     kp0, kp1 = d["keypoints0"][0], d["keypoints1"][0]
-    with pytest.warns(UserWarning, match="Dropped 1 of 3"):
+    with pytest.warns(UserWarning, match="Dropped 1 of 3") as record:
         pm = load_external_matches(d, (H, W), (H, W))
+    assert record[0].filename == __file__  # the warning names the caller's line
     assert_pairs(pm, [(0, 0), (1, 1), (2, 2), (3, 3), (6, 6)], kp0, kp1)
     np.testing.assert_array_equal(pm.lines1, kp1[[[0, 1], [2, 3]]])  # flipped line fixed
     np.testing.assert_array_equal(pm.lines0, kp0[[[0, 1], [2, 3]]])
@@ -253,6 +254,19 @@ def test_package_exports():
 
     assert data.load_external_matches is load_external_matches
     assert data.load_hloc_matches is load_hloc_matches
+    assert data.MatchFormatError is MatchFormatError and data.from_lightglue is from_lightglue
+
+
+def test_readers_split_by_layout():
+    """The layouts are split over modules (readers, shared checks): every format but strl has
+    one reader and one rank table, and the shared error is one class."""
+    from strl_pyg.data import external_checks, external_readers
+
+    assert set(FORMATS) == {"strl", *external_readers.READERS} == {"strl", *external_readers.RANKS}
+    assert external_checks.MatchFormatError is MatchFormatError
+    with pytest.raises(MatchFormatError, match=r"Expected 'matches0' values in \[-1, 5\)"):
+        load_external_matches(dict(keypoints0=KP0, keypoints1=KP1, matches0=M0 + 5,
+                                   matching_scores0=CONF), (H, W), (H, W))
 
 
 def test_matched_arrays():

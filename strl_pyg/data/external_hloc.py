@@ -22,7 +22,12 @@ from typing import Any
 
 import numpy as np
 
-from strl_pyg.data.external import _build, _filter, _index_per_node, _size
+from strl_pyg.data.external_checks import (
+    build_matches,
+    filter_scores,
+    image_size_from,
+    index_per_node,
+)
 from strl_pyg.data.matches import PairMatches
 
 __all__ = ["load_hloc_matches", "hloc_pair_names"]
@@ -109,7 +114,7 @@ def load_hloc_matches(
         m = np.asarray(f[pair]["matches0"][()])
         s = np.asarray(f[pair]["matching_scores0"][()]) if "matching_scores0" in f[pair] else None
     n_a, n_b = (len(kps[1]), len(kps[0])) if reverse else (len(kps[0]), len(kps[1]))
-    i_a, i_b = _index_per_node(m, n_a, n_b, f"{pair}/matches0")
+    i_a, i_b = index_per_node(m, n_a, n_b, f"{pair}/matches0")
     scores = None
     if s is not None:
         s = s.astype(np.float64).reshape(-1)
@@ -121,5 +126,5 @@ def load_hloc_matches(
     kw = dict(points0=kps[0][i0], points1=kps[1][i1], point_scores=scores, K0=K0, K1=K1,
               info={"source_format": "hloc", "hloc_pair": pair, "hloc_reversed": reverse})
     for i, arg in ((0, image_size0), (1, image_size1)):
-        kw[f"image_size{i}"] = _size(arg, sizes[i], "WH", i, False, "hloc", source)
-    return _filter(_build(kw), min_score, None)
+        kw[f"image_size{i}"] = image_size_from(arg, sizes[i], "WH", i, False, "hloc", source)
+    return filter_scores(build_matches(kw), min_score, None)
