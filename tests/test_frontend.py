@@ -107,11 +107,13 @@ def test_colour_and_different_sizes():
     "img, exc, match",
     [
         (np.zeros((0, 64), np.uint8), ValueError, "non-empty"),
-        (np.zeros((64, 64), np.float32), TypeError, "dtype uint8"),
+        (np.zeros((64, 64), np.int16), TypeError, "dtype uint8, float32 or float64"),
+        (np.full((64, 64), 2.0, np.float32), ValueError, r"in \[0, 1\] \(got values in"),
+        (np.full((64, 64), np.nan), ValueError, r"finite values in \[0, 1\] \(got NaN"),
         (np.zeros((2, 64, 64, 3), np.uint8), ValueError, r"shape \(H, W\)"),
         (np.zeros((64, 64, 4), np.uint8), ValueError, r"shape \(H, W\)"),
         (np.zeros((8, 64), np.uint8), ValueError, "at least 16x16"),
-        ([[0] * 64] * 64, TypeError, "numpy array"),
+        ([[0] * 64] * 64, TypeError, "numpy array or torch tensor"),
     ],
 )
 def test_bad_images(img, exc, match):
@@ -120,6 +122,38 @@ def test_bad_images(img, exc, match):
         match_images(img, good)
     with pytest.raises(exc, match=match.replace("image0", "image1")):
         match_images(good, img)
+
+
+@pytest.mark.parametrize(
+    "img",
+    [np.zeros((0, 64), np.uint8), np.zeros((64, 64), np.int16), np.full((64, 64), 2.0),
+     np.zeros((64, 64, 4), np.uint8), [[0] * 64] * 64],
+)
+def test_one_image_check_for_frontend_and_pair_matches(img):
+    """The front end and PairMatches refuse the same images with the same message (one
+    check, strl_pyg.images.check_image); they differ only by the front end's 16 px minimum."""
+    good = generate_pair(0, SceneConfig(kind="boxes", image_size=(64, 96))).image0
+    with pytest.raises((TypeError, ValueError)) as fe:
+        match_images(img, good)
+    with pytest.raises((TypeError, ValueError)) as pm:
+        PairMatches(np.zeros((1, 2)), np.zeros((1, 2)), image0=img, image_size1=(64, 64))
+    assert type(fe.value) is type(pm.value) and str(fe.value) == str(pm.value)
+    assert "\n" not in str(fe.value) and str(fe.value).startswith("Expected")
+    small = np.zeros((8, 64), np.uint8)  # the one documented difference: min_side
+    assert PairMatches(np.zeros((1, 2)), np.zeros((1, 2)), image0=small,
+                       image_size1=(8, 64)).image_size0 == (8, 64)
+
+
+def test_float_and_tensor_images_match_like_uint8():
+    """Float images in [0, 1] and torch tensors pass the same check as uint8 arrays (they were
+    refused before): the same matches as the uint8 image they come from."""
+    import torch
+
+    pair = generate_pair(1, SceneConfig(kind="boxes", image_size=(96, 160)))
+    ref = match_images(pair.image0, pair.image1)
+    as_float = match_images(pair.image0.astype(np.float32) / 255.0, torch.from_numpy(pair.image1))
+    for name in ("points0", "points1", "lines0", "lines1", "line_scores"):
+        np.testing.assert_array_equal(getattr(as_float, name), getattr(ref, name))
 
 
 def test_all_black_raises_no_matches():

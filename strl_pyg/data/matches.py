@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from strl_pyg.images import check_image
 from strl_pyg.io import atomic_open
 
 __all__ = [
@@ -97,23 +98,9 @@ def _check_K(value: Any, name: str) -> np.ndarray | None:
 
 
 def _check_image(value: Any, name: str) -> np.ndarray | None:
-    if value is None:
-        return None
-    if hasattr(value, "detach"):
-        value = value.detach().cpu().numpy()
-    img = np.asarray(value)
-    if img.dtype not in (np.uint8, np.float32, np.float64):
-        raise TypeError(f"Expected '{name}' of dtype uint8, float32 or float64 (got {img.dtype})")
-    if not (img.ndim == 2 or (img.ndim == 3 and img.shape[2] in (1, 3))):
-        raise ValueError(f"Expected '{name}' of shape (H, W) or (H, W, 1|3) (got {img.shape})")
-    if img.size == 0:
-        raise ValueError(f"Expected a non-empty '{name}' (got shape {img.shape})")
-    if img.dtype != np.uint8:
-        if not np.isfinite(img).all() or img.min() < 0.0 or img.max() > 1.0:
-            raise ValueError(f"Expected float '{name}' with finite values in [0, 1]")
-    if img.ndim == 3 and img.shape[2] == 1:
-        img = img[..., 0]
-    return img
+    """``None``, or the image checked by the package's one image check
+    (:func:`strl_pyg.images.check_image`, kept as given)."""
+    return None if value is None else check_image(value, name)
 
 
 def _check_in_image(coords: np.ndarray, size: tuple[int, int], name: str) -> None:

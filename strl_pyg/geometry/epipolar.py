@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numpy as np
 import torch
 
 from strl_pyg.geometry.manifold import skew
@@ -24,6 +25,8 @@ __all__ = [
     "signed_sampson",
     "sampson_error",
     "symmetric_epipolar_error",
+    "fundamental_from_pose",
+    "epipolar_residuals",
 ]
 
 
@@ -197,3 +200,39 @@ def symmetric_epipolar_error(
         + 1.0 / (Mtx1[..., 0] ** 2 + Mtx1[..., 1] ** 2 + eps)
     )
     return d2 if squared else torch.sqrt(d2 + eps) - math.sqrt(eps)
+
+
+# ----------------------------------------------------------------------------- numpy helpers
+def fundamental_from_pose(T_0to1: Any, K0: Any, K1: Any) -> np.ndarray:
+    """``F [3, 3]`` (float64 numpy) with ``x1^T F x0 = 0`` for ``T_0to1`` ``[4, 4]`` and
+    intrinsics ``K0``, ``K1`` ``[3, 3]``."""
+    T = np.asarray(T_0to1, dtype=np.float64)
+    E = essential_from_pose(T[:3, :3], T[:3, 3])
+    F = fundamental_from_essential(E, np.asarray(K0, np.float64), np.asarray(K1, np.float64))
+    return F.detach().cpu().numpy().astype(np.float64)
+
+
+def epipolar_residuals(matches: Any, T_0to1: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Sampson errors (pixels, not squared) of a pair's matches under a pose.
+
+    Args:
+        matches: a :class:`~strl_pyg.data.PairMatches` (or anything with ``points0/1``
+            ``[Np, 2]``, ``lines0/1`` ``[Nl, 2, 2]``, ``K0``, ``K1``), with intrinsics.
+        T_0to1: ``[4, 4]``, ``X1 = R X0 + t``.
+
+    Returns:
+        ``point_err [Np]`` and ``line_err [Nl]``, the larger of the two endpoints' errors
+        (float64 numpy).
+    """
+    if getattr(matches, "K0", None) is None or getattr(matches, "K1", None) is None:
+        raise ValueError("Expected matches with K0 and K1 (got none)")
+    F = fundamental_from_pose(T_0to1, matches.K0, matches.K1)
+
+    def err(x0: np.ndarray, x1: np.ndarray) -> np.ndarray:
+        if len(x0) == 0:
+            return np.zeros(0)
+        return sampson_error(F, x0, x1, squared=False).detach().cpu().numpy()
+
+    pe = err(matches.points0, matches.points1)
+    le = err(np.asarray(matches.lines0).reshape(-1, 2), np.asarray(matches.lines1).reshape(-1, 2))
+    return pe, le.reshape(-1, 2).max(1)

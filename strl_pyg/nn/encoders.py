@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import torch
-import torch.nn.functional as F
 from torch import Tensor, nn
 
+from strl_pyg.data.sampling import sample_bilinear
 from strl_pyg.nn.layout import DenseLayout
 from strl_pyg.nn.mlp import mlp, reset_mlp
 
@@ -97,7 +97,8 @@ def sample_at_pixels(fmap: Tensor, kpts: Tensor, batch: Tensor | None,
     r"""Bilinearly samples per-graph feature maps at node pixel coordinates.
 
     Pixel convention: OpenCV's, the centre of the top-left pixel of the *image* is ``(0, 0)``;
-    the feature map may have a lower resolution and covers the same field of view.
+    the feature map may have a lower resolution and covers the same field of view (the
+    package's one sampler, :func:`strl_pyg.data.sampling.sample_bilinear`).
 
     Args:
         fmap: feature maps, shape :math:`(B, C, h, w)`.
@@ -113,9 +114,6 @@ def sample_at_pixels(fmap: Tensor, kpts: Tensor, batch: Tensor | None,
     B = fmap.shape[0]
     if kpts.shape[0] == 0:
         return fmap.new_zeros(0, fmap.shape[1])
-    H, W = image_size
-    scale = kpts.new_tensor([2.0 / W, 2.0 / H])
-    grid = (kpts + 0.5) * scale - 1.0  # align_corners=False maps pixel centres this way
     if layout is None:
         if batch is None:
             batch = kpts.new_zeros(kpts.shape[0], dtype=torch.long)
@@ -123,10 +121,8 @@ def sample_at_pixels(fmap: Tensor, kpts: Tensor, batch: Tensor | None,
     if layout.num_graphs != B:
         raise ValueError(f"Expected one feature map per graph (got {B} maps for "
                          f"{layout.num_graphs} graphs)")
-    dense = layout.to_dense(grid)
-    out = F.grid_sample(fmap, dense.unsqueeze(1).to(fmap.dtype), mode="bilinear",
-                        padding_mode="zeros", align_corners=False)  # [B, C, 1, L]
-    return layout.from_dense(out.squeeze(2).transpose(1, 2))
+    out = sample_bilinear(fmap, layout.to_dense(kpts), image_size, padding="zeros")  # [B, C, L]
+    return layout.from_dense(out.transpose(1, 2))
 
 
 class ImageEncoder(nn.Module):

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.frontend import epipolar_residuals
+from strl_pyg.geometry.epipolar import epipolar_residuals
 from strl_pyg.synthetic.pair import SyntheticPair
 
 __all__ = ["plane_homographies", "point_transfer_error", "line_transfer_error",

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.frontend import fundamental_from_pose
+from strl_pyg.geometry.epipolar import fundamental_from_pose
 from strl_pyg.synthetic.photometric import apply_photometric
 from strl_pyg.synthetic.render import View, project, render_view
 from strl_pyg.synthetic.scene import Scene, SceneConfig, build_scene

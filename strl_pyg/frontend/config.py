@@ -1,0 +1,92 @@
+"""Configuration of the image front end (:func:`strl_pyg.frontend.match_images`) and its
+"no matches" error."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["FrontendConfig", "NoMatchesError"]
+
+
+class NoMatchesError(ValueError):
+    """No point and no line match was found between the two images (featureless, all-black or
+    unrelated images)."""
+
+
+@dataclass
+class FrontendConfig:
+    """Configuration of :func:`match_images`.
+
+    Args:
+        detector: ``"sift"`` (default) or ``"orb"`` (faster, fewer and less precise matches).
+        max_keypoints: keypoints detected per image (strongest first). (default: 2048)
+        ratio: Lowe's ratio test threshold on nearest / second nearest descriptor distance.
+            (default: 0.8)
+        mutual: keep only mutual nearest neighbours. (default: True)
+        max_points: cap on returned point matches, lowest ratio first. (default: 1024)
+        filter_points: keep only the point matches consistent with the fitted ``F``
+            (default: False, the learned model sees the outliers).
+        ransac_threshold: epipolar threshold (px) of the ``F`` fit. (default: 1.0)
+        ransac_confidence, ransac_max_iters: of the ``F`` fit. (default: 0.999, 10000)
+        lsd_scale: image scale at which LSD runs (its ``scale`` parameter). (default: 1.0)
+        min_line_length: shortest detected segment kept, pixels. (default: 15.0)
+        max_detected_lines: segments kept per image, longest first. (default: 512)
+        max_lines: cap on returned line matches, best score first. (default: 256)
+        min_matched_length: shortest clipped segment kept, pixels. (default: 10.0)
+        line_min_overlap: common part / shorter of the two segments (measured on the segment
+            in image 1) below which a pair is discarded. (default: 0.5)
+        line_min_angle_deg: smallest angle between a segment and the epipolar lines (a segment
+            along its epipolar lines has no defined endpoints). (default: 10.0)
+        line_polarity: require the same contrast polarity in both images. (default: True)
+        line_guide_k: point matches near a segment whose median displacement predicts it in
+            image 1; 0 disables the guidance. (default: 8)
+        line_guide_tol: allowed distance (fraction of the image-1 diagonal) between the
+            predicted midpoint and the supporting line of the candidate. (default: 0.05)
+        line_samples: descriptor positions along a segment. (default: 12)
+        line_profile: samples across a segment at each position. (default: 9)
+        line_profile_halfwidth: half width of the profile, pixels. (default: 6.0)
+        line_min_score: smallest normalised cross-correlation kept. (default: 0.6)
+        seed: seeds OpenCV's RNG before the robust fit, for determinism. (default: 0)
+    """
+
+    detector: str = "sift"
+    max_keypoints: int = 2048
+    ratio: float = 0.8
+    mutual: bool = True
+    max_points: int = 1024
+    filter_points: bool = False
+    ransac_threshold: float = 1.0
+    ransac_confidence: float = 0.999
+    ransac_max_iters: int = 10000
+    lsd_scale: float = 1.0
+    min_line_length: float = 15.0
+    max_detected_lines: int = 512
+    max_lines: int = 256
+    min_matched_length: float = 10.0
+    line_min_overlap: float = 0.5
+    line_min_angle_deg: float = 10.0
+    line_polarity: bool = True
+    line_guide_k: int = 8
+    line_guide_tol: float = 0.05
+    line_samples: int = 12
+    line_profile: int = 9
+    line_profile_halfwidth: float = 6.0
+    line_min_score: float = 0.6
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.detector not in ("sift", "orb"):
+            raise ValueError(f"Expected detector 'sift' or 'orb' (got {self.detector!r})")
+        if not 0.0 < self.ratio <= 1.0:
+            raise ValueError(f"Expected ratio in (0, 1] (got {self.ratio})")
+        for name in ("max_keypoints", "max_points", "max_lines", "max_detected_lines"):
+            if int(getattr(self, name)) < 0:
+                raise ValueError(f"Expected {name} >= 0 (got {getattr(self, name)})")
+        if self.line_samples < 2 or self.line_profile < 1:
+            raise ValueError(
+                "Expected line_samples >= 2 and line_profile >= 1 "
+                f"(got {self.line_samples}, {self.line_profile})"
+            )
+        if not 0.0 < self.lsd_scale <= 1.0:
+            raise ValueError(f"Expected lsd_scale in (0, 1] (got {self.lsd_scale})")
+

@@ -1,0 +1,106 @@
+"""The front end's pipeline: two images -> :class:`~strl_pyg.data.PairMatches` (points,
+fundamental matrix, lines), with per-stage timings."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict
+from typing import Any
+
+import numpy as np
+
+from strl_pyg.data.matches import PairMatches
+from strl_pyg.frontend.config import FrontendConfig, NoMatchesError
+from strl_pyg.frontend.lines import detect_lines, match_lines
+from strl_pyg.frontend.points import fit_fundamental, match_points
+from strl_pyg.images import FRONTEND_MIN_SIDE, check_image
+
+__all__ = ["match_images", "check_frontend_image"]
+
+
+def check_frontend_image(image: Any, name: str) -> np.ndarray:
+    """``image`` as grey uint8 ``[H, W]`` for the detectors: the package's one image check
+    (:func:`strl_pyg.images.check_image`) with ``grayscale=True`` and
+    ``min_side=FRONTEND_MIN_SIDE`` (16 px)."""
+    return check_image(image, name, grayscale=True, min_side=FRONTEND_MIN_SIDE)
+
+
+def match_images(
+    image0: np.ndarray,
+    image1: np.ndarray,
+    K0: Any = None,
+    K1: Any = None,
+    config: FrontendConfig | None = None,
+) -> PairMatches:
+    """Matches points and line segments between two images.
+
+    Args:
+        image0, image1: ``(H, W)``, ``(H, W, 1)`` or RGB ``(H, W, 3)`` images, numpy or torch,
+            uint8 or float in ``[0, 1]``, at least 16x16 (:func:`check_frontend_image`); the
+            two may have different sizes.
+        K0, K1: optional intrinsics ``[3, 3]`` (pixels), attached to the result (both or none).
+        config: :class:`FrontendConfig` (default ``FrontendConfig()``).
+
+    Returns:
+        :class:`PairMatches` with ``points0/1 [Np, 2]``, ``lines0/1 [Nl, 2, 2]`` (endpoint ``k``
+        matches endpoint ``k``), ``point_scores`` (``1 - ratio``), ``line_scores`` (NCC), the
+        grey images attached, and ``info`` holding ``timings_ms`` per stage
+        (``points_detect``, ``points_match``, ``geometry``, ``lines_detect``, ``lines_match``,
+        ``total``), counts, ``lines_status`` and the configuration. Lines need a fundamental
+        matrix from at least 8 point matches; without one the result has points only.
+
+    Raises:
+        TypeError, ValueError: invalid images.
+        NoMatchesError: no point and no line match (e.g. an all-black image).
+    """
+    cfg = config if config is not None else FrontendConfig()
+    if not isinstance(cfg, FrontendConfig):
+        raise TypeError(f"Expected a FrontendConfig (got {type(cfg).__name__})")
+    gray0 = check_frontend_image(image0, "image0")
+    gray1 = check_frontend_image(image1, "image1")
+    t_start = time.perf_counter()
+    p0, p1, p_scores, stats = match_points(gray0, gray1, cfg)
+    timings = dict(stats.pop("timings_ms"))
+
+    t = time.perf_counter()
+    F, inl = fit_fundamental(p0, p1, cfg)
+    timings["geometry"] = 1e3 * (time.perf_counter() - t)
+    if cfg.filter_points and F is not None:
+        p0, p1, p_scores, inl = p0[inl], p1[inl], p_scores[inl], inl[inl]
+
+    t = time.perf_counter()
+    seg0, seg1 = detect_lines(gray0, cfg), detect_lines(gray1, cfg)
+    timings["lines_detect"] = 1e3 * (time.perf_counter() - t)
+
+    t = time.perf_counter()
+    if F is None:
+        l0 = l1 = np.zeros((0, 2, 2))
+        l_scores = np.zeros(0)
+        status = "skipped: fewer than 8 point matches or no fundamental matrix"
+    else:
+        l0, l1, l_scores = match_lines(seg0, seg1, gray0, gray1, F, cfg, guide=(p0[inl], p1[inl]))
+        status = "ok"
+    timings["lines_match"] = 1e3 * (time.perf_counter() - t)
+    timings["total"] = 1e3 * (time.perf_counter() - t_start)
+
+    if len(p0) == 0 and len(l0) == 0:
+        raise NoMatchesError(
+            "Expected at least one point or line match (got none: "
+            f"{stats['keypoints0']}/{stats['keypoints1']} keypoints, "
+            f"{len(seg0)}/{len(seg1)} segments); the images may be featureless "
+            "(e.g. all black) or show different scenes"
+        )
+    info = {
+        "source": f"strl_pyg.frontend ({cfg.detector}+lsd)",
+        "timings_ms": timings,
+        **stats,
+        "segments0": len(seg0),
+        "segments1": len(seg1),
+        "point_geometric_inliers": int(inl.sum()),
+        "lines_status": status,
+        "config": asdict(cfg),
+    }
+    return PairMatches(
+        p0, p1, lines0=l0, lines1=l1, point_scores=p_scores, line_scores=l_scores,
+        K0=K0, K1=K1, image0=gray0, image1=gray1, info=info,
+    )
