@@ -33,6 +33,7 @@ from strl_pyg.data.datasets import (
     read_demon_camera,
     read_image,
     read_kitti_calib,
+    read_kitti_poses,
     scale_intrinsics,
 )
 from strl_pyg.data.transforms import FixedSizeResample
@@ -71,8 +72,9 @@ def kitti_ds(kitti_root, tmp_path_factory):
 
 
 def test_kitti_indexes_existing_frames(kitti_root, tmp_path):
-    with pytest.warns(UserWarning, match="06: images for 51 of 1101"):
+    with pytest.warns(UserWarning, match="06: images for 51 of 1101") as record:
         ds = KITTIOdometry(kitti_root, cache_dir=tmp_path, sequences=["06"], frame_gap=5)
+    assert record[0].filename == __file__  # attributed to the line that built the dataset
     assert ds.frames == {"06": (51, 1101)}
     assert len(ds.records) == 46  # (i, i + 5) for i = 0..45
     r = ds.records[0]
@@ -175,7 +177,72 @@ def test_kitti_calib_is_parsed_generically(tmp_path):
         read_kitti_calib(tmp_path / "nowhere" / "calib.txt")
 
 
+def test_kitti_poses_are_read_exactly_and_non_finite_ones_raise(tmp_path):
+    p = tmp_path / "06.txt"
+    rows = np.arange(24, dtype=np.float64).reshape(2, 12)
+    np.savetxt(p, rows)
+    T = read_kitti_poses(p)
+    assert T.shape == (2, 4, 4)
+    np.testing.assert_array_equal(T[1, :3], rows[1].reshape(3, 4))
+    np.testing.assert_array_equal(T[:, 3], [[0, 0, 0, 1]] * 2)
+    rows[1, 5] = np.nan  # used to give a NaN ground-truth pose
+    np.savetxt(p, rows)
+    with pytest.raises(ValueError, match=r"Expected rows of 12 numbers in .*06.txt.*row 2"):
+        read_kitti_poses(p)
+    np.savetxt(p, rows[:, :11])
+    with pytest.raises(ValueError, match=r"rows of 12 numbers .*got shape \(2, 11\)"):
+        read_kitti_poses(p)
+    with pytest.raises(FileNotFoundError, match="Expected a KITTI pose file at"):
+        read_kitti_poses(tmp_path / "07.txt")
+
+
 # --------------------------------------------------------------------------- DeMoN
+def _write_demon_folder(root, poses):
+    """One two-view sequence ``mvs_a`` in the DeepSfM layout, listed with an absent one."""
+    seq = root / "test" / "mvs_a"
+    seq.mkdir(parents=True)
+    (root / "test" / "test.txt").write_text("mvs_a\nsun3d_gone\n")
+    np.savetxt(seq / "cam.txt", [[100.0, 0, 16], [0, 100, 12], [0, 0, 1]])
+    np.savetxt(seq / "poses.txt", np.asarray(poses).reshape(-1, 12))
+    for i in range(len(poses)):
+        cv2.imwrite(str(seq / f"{i:04d}.png"), np.full((24, 32), 40 * i, np.uint8))
+
+
+def test_demon_folder_poses_known_answer_and_errors(tmp_path):
+    rng = np.random.default_rng(3)
+    W = [np.hstack([cv2.Rodrigues(rng.normal(size=3))[0], rng.normal(size=(3, 1))])
+         for _ in range(2)]
+    _write_demon_folder(tmp_path, W)
+    with pytest.raises(FileNotFoundError, match=r"2 sequences listed.*1 absent.*on_missing='skip'"):
+        DeMoNFolder(tmp_path, cache_dir=tmp_path / "c")
+    with pytest.warns(UserWarning, match=r"1 absent, e.g. \['sun3d_gone'\]\): skipped") as record:
+        ds = DeMoNFolder(root=tmp_path, cache_dir=tmp_path / "c", on_missing="skip")
+    assert record[0].filename == __file__
+    assert ds.split == "test" and ds.missing_sequences == ["sun3d_gone"]
+    assert ds.kind == "demon_folder" and ds.root == str(tmp_path) and ds.image_size == (192, 256)
+    (r,) = ds.records
+    assert r.pair_id == "demon/test/mvs_a/0-1" and r.subset == "MVS"
+    W0, W1 = (np.vstack([w, [0, 0, 0, 1]]) for w in W)  # world-to-camera: T_0to1 = W1 W0^-1
+    np.testing.assert_allclose(r.T_0to1, W1 @ np.linalg.inv(W0), atol=1e-12)
+    bad = np.array(W).reshape(2, 12)
+    bad[1, 3] = np.inf
+    np.savetxt(tmp_path / "test" / "mvs_a" / "poses.txt", bad)
+    with pytest.raises(ValueError, match=r"rows of 12 numbers .*poses.txt.*NaN or inf on row 2"):
+        DeMoNFolder(tmp_path, cache_dir=tmp_path / "c", on_missing="skip")
+
+
+def test_demon_hdf5_keywords_and_missing_files(tmp_path):
+    pytest.importorskip("h5py")
+    gone = tmp_path / "mvs_gone.h5"
+    with pytest.raises(FileNotFoundError, match=r"mvs_gone.h5.*on_missing='skip'"):
+        DeMoNHDF5(files=gone, cache_dir=tmp_path)
+    with pytest.warns(UserWarning, match="absent.*skipped") as record:
+        ds = DeMoNHDF5(files=[gone], cache_dir=tmp_path, on_missing="skip", pairs="all")
+    assert record[0].filename == __file__
+    assert ds.kind == "demon_h5" and ds.files == [] and len(ds) == 0
+    with pytest.raises(ValueError, match="Expected pairs in"):
+        DeMoNHDF5(gone, cache_dir=tmp_path, pairs="every")
+
 def test_demon_missing_sequences_are_reported_or_skipped(demon_root, tmp_path):
     with pytest.raises(FileNotFoundError, match=r"354 sequences listed in .*test.txt.*353 absent"):
         DeMoNFolder(demon_root, cache_dir=tmp_path)

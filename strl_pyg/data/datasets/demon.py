@@ -20,7 +20,6 @@ The subset comes from the name prefix of a sequence folder or ``.h5`` file.
 from __future__ import annotations
 
 import os
-import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -28,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from strl_pyg.data.datasets.base import ImageSource, PairDataset, PairRecord, check_on_missing
+from strl_pyg.data.datasets.files import read_number_rows, report_missing, rows_to_matrices
 from strl_pyg.geometry import relative_pose_from_w2c
 
 __all__ = [
@@ -90,19 +90,41 @@ def read_demon_camera(values: Any, name: str = "camera") -> tuple[np.ndarray, np
     return K, T
 
 
-def _load_matrix(path: Path, shape_desc: str, cols: int) -> np.ndarray:
-    if not path.is_file():
-        raise FileNotFoundError(f"Expected '{path.name}' at '{path}' (got no such file)")
-    try:
-        arr = np.loadtxt(path, dtype=np.float64, ndmin=2)
-    except ValueError as err:
-        raise ValueError(f"Expected {shape_desc} in '{path}' (got {err})") from err
-    if arr.shape[1] != cols or not np.isfinite(arr).all():
-        raise ValueError(f"Expected {shape_desc} in '{path}' (got shape {arr.shape})")
-    return arr
+class _DeMoNPairs(PairDataset):
+    """What both DeMoN layouts share: the options, checked before anything is read, and the
+    dataset built from the records that a subclass's :meth:`_index` reads from its source."""
+
+    _KIND = "demon"
+
+    def __init__(
+        self,
+        source: Any,
+        *,
+        cache_dir: str | os.PathLike,
+        subsets: Sequence[str] | None = None,
+        pairs: str = "reference",
+        image_size: tuple[int, int] | None = (192, 256),
+        on_missing: str = "error",
+        transform: Callable | None = None,
+        **kwargs: Any,
+    ) -> None:
+        check_on_missing(on_missing)
+        pair_indices(2, pairs)  # validates the mode
+        records, root = self._index(source, _check_subsets(subsets), pairs, on_missing)
+        if root is not None:
+            kwargs["root"] = root
+        super().__init__(
+            records, cache_dir=cache_dir, image_size=image_size, transform=transform,
+            kind=self._KIND, **kwargs,
+        )
+
+    def _index(self, source: Any, keep: set[str] | None, pairs: str,
+               on_missing: str) -> tuple[list[PairRecord], Path | None]:
+        """``(records, data folder or None)`` of ``source``, subsets ``keep`` only."""
+        raise NotImplementedError
 
 
-class DeMoNFolder(PairDataset):
+class DeMoNFolder(_DeMoNPairs):
     """DeMoN pairs in the DeepSfM folder layout, as pair graphs.
 
     The sequences are those listed in ``<split>/<split>.txt`` when it exists, else every
@@ -124,28 +146,18 @@ class DeMoNFolder(PairDataset):
             ``limit`` of :class:`PairDataset`.
     """
 
-    def __init__(
-        self,
-        root: str | os.PathLike,
-        *,
-        cache_dir: str | os.PathLike,
-        split: str = "test",
-        subsets: Sequence[str] | None = None,
-        pairs: str = "reference",
-        image_size: tuple[int, int] | None = (192, 256),
-        on_missing: str = "error",
-        transform: Callable | None = None,
-        **kwargs: Any,
-    ) -> None:
-        root = Path(root)
-        check_on_missing(on_missing)
-        pair_indices(2, pairs)  # validates the mode
-        keep = _check_subsets(subsets)
+    _KIND = "demon_folder"
+
+    def __init__(self, root: str | os.PathLike, *, split: str = "test", **kwargs: Any) -> None:
         self.split = split
-        split_dir = root / split
+        super().__init__(root, **kwargs)
+
+    def _index(self, root, keep, pairs, on_missing):
+        root = Path(root)
+        split_dir = root / self.split
         if not split_dir.is_dir():
             raise FileNotFoundError(f"Expected a DeMoN split folder at '{split_dir}' (got none)")
-        list_file = split_dir / f"{split}.txt"
+        list_file = split_dir / f"{self.split}.txt"
         if list_file.is_file():
             names = [s.strip() for s in list_file.read_text().splitlines() if s.strip()]
         else:
@@ -153,33 +165,26 @@ class DeMoNFolder(PairDataset):
         if keep is not None:
             names = [n for n in names if demon_subset(n) in keep]
         missing = [n for n in names if not (split_dir / n).is_dir()]
-        if missing:
-            msg = (
-                f"Expected the {len(names)} sequences listed in '{list_file}' under "
-                f"'{split_dir}' (got {len(missing)} absent, e.g. {missing[:3]})"
-            )
-            if on_missing == "error":
-                raise FileNotFoundError(msg + "; pass on_missing='skip' to use the others")
-            warnings.warn(msg + ": skipped", stacklevel=2)
+        report_missing(missing, f"Expected the {len(names)} sequences listed in '{list_file}' "
+                       f"under '{split_dir}' (got {len(missing)} absent, e.g. {missing[:3]})",
+                       on_missing)
         #: Listed sequences with no folder (skipped).
         self.missing_sequences = missing
         self.sequences = [n for n in names if n not in set(missing)]
         records = []
         for name in self.sequences:
             records.extend(self._sequence_records(split_dir / name, pairs))
-        super().__init__(
-            records, cache_dir=cache_dir, image_size=image_size, transform=transform,
-            kind="demon_folder", root=root, **kwargs,
-        )
+        return records, root
 
     @staticmethod
     def _sequence_records(seq_dir: Path, mode: str) -> list[PairRecord]:
-        K = _load_matrix(seq_dir / "cam.txt", "a 3x3 intrinsics matrix", 3)
+        K = read_number_rows(seq_dir / "cam.txt", 3, "a 3x3 intrinsics matrix", "'cam.txt'")
         if K.shape != (3, 3):
             raise ValueError(
                 f"Expected a 3x3 intrinsics matrix in '{seq_dir / 'cam.txt'}' (got {K.shape})"
             )
-        poses = _load_matrix(seq_dir / "poses.txt", "rows of 12 numbers (3x4 world-to-camera)", 12)
+        poses = read_number_rows(seq_dir / "poses.txt", 12,
+                                 "rows of 12 numbers (3x4 world-to-camera)", "'poses.txt'")
         images = sorted(p for p in seq_dir.iterdir() if p.suffix.lower() in _IMAGE_EXT)
         if len(images) < 2:
             raise FileNotFoundError(
@@ -190,8 +195,7 @@ class DeMoNFolder(PairDataset):
                 f"Expected one pose per image in '{seq_dir / 'poses.txt'}' "
                 f"(got {len(poses)} poses for {len(images)} images)"
             )
-        W = np.tile(np.eye(4), (len(poses), 1, 1))
-        W[:, :3, :] = poses.reshape(-1, 3, 4)
+        W = rows_to_matrices(poses)
         subset = demon_subset(seq_dir.name)
         records = []
         for i, j in pair_indices(len(images), mode):
@@ -209,7 +213,7 @@ class DeMoNFolder(PairDataset):
         return records
 
 
-class DeMoNHDF5(PairDataset):
+class DeMoNHDF5(_DeMoNPairs):
     """DeMoN pairs read from the original HDF5 files, as pair graphs.
 
     Args:
@@ -224,33 +228,22 @@ class DeMoNHDF5(PairDataset):
         **kwargs: as :class:`PairDataset`.
     """
 
-    def __init__(
-        self,
-        files: str | os.PathLike | Sequence[str | os.PathLike],
-        *,
-        cache_dir: str | os.PathLike,
-        subsets: Sequence[str] | None = None,
-        pairs: str = "reference",
-        image_size: tuple[int, int] | None = (192, 256),
-        on_missing: str = "error",
-        transform: Callable | None = None,
-        **kwargs: Any,
-    ) -> None:
+    _KIND = "demon_h5"
+
+    def __init__(self, files: str | os.PathLike | Sequence[str | os.PathLike],
+                 **kwargs: Any) -> None:
+        super().__init__(files, **kwargs)
+
+    def _index(self, files, keep, pairs, on_missing):
         import h5py
 
-        check_on_missing(on_missing)
-        pair_indices(2, pairs)
-        keep = _check_subsets(subsets)
         files = [files] if isinstance(files, (str, os.PathLike)) else list(files)
         files = [Path(f) for f in files]
         if keep is not None:
             files = [f for f in files if demon_subset(f.stem) in keep]
         missing = [str(f) for f in files if not f.is_file()]
-        if missing:
-            msg = f"Expected DeMoN HDF5 files {missing} (got {len(missing)} absent)"
-            if on_missing == "error":
-                raise FileNotFoundError(msg)
-            warnings.warn(msg + ": skipped", stacklevel=2)
+        report_missing(missing, f"Expected DeMoN HDF5 files {missing} (got {len(missing)} absent)",
+                       on_missing)
         self.missing_files = missing
         self.files = [f for f in files if f.is_file()]
         records = []
@@ -260,10 +253,7 @@ class DeMoNHDF5(PairDataset):
                     records.extend(self._file_records(path, f, pairs))
             except OSError as err:
                 raise ValueError(f"Expected a readable HDF5 file at '{path}' (got {err})") from err
-        super().__init__(
-            records, cache_dir=cache_dir, image_size=image_size, transform=transform,
-            kind="demon_h5", **kwargs,
-        )
+        return records, None
 
     @staticmethod
     def _file_records(path: Path, f: Any, mode: str) -> list[PairRecord]:

@@ -14,7 +14,6 @@ rectified offset ``K_c^{-1} P_c[:, 3]`` from camera 0.
 from __future__ import annotations
 
 import os
-import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -22,6 +21,12 @@ from typing import Any
 import numpy as np
 
 from strl_pyg.data.datasets.base import ImageSource, PairDataset, PairRecord, check_on_missing
+from strl_pyg.data.datasets.files import (
+    read_number_rows,
+    report_missing,
+    rows_to_matrices,
+    warn_caller,
+)
 from strl_pyg.geometry import relative_pose_from_c2w
 
 __all__ = [
@@ -69,18 +74,7 @@ def read_kitti_calib(path: str | os.PathLike) -> dict[str, np.ndarray]:
 
 def read_kitti_poses(path: str | os.PathLike) -> np.ndarray:
     """Reads a pose file: ``[N, 4, 4]`` camera-to-world matrices (rows are 3x4 row-major)."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"Expected a KITTI pose file at '{path}' (got no such file)")
-    try:
-        rows = np.loadtxt(path, dtype=np.float64, ndmin=2)
-    except ValueError as err:
-        raise ValueError(f"Expected rows of 12 numbers in '{path}' (got {err})") from err
-    if rows.shape[1] != 12 or len(rows) == 0:
-        raise ValueError(f"Expected rows of 12 numbers in '{path}' (got shape {rows.shape})")
-    T = np.tile(np.eye(4), (len(rows), 1, 1))
-    T[:, :3, :] = rows.reshape(-1, 3, 4)
-    return T
+    return rows_to_matrices(read_number_rows(path, 12, "rows of 12 numbers", "a KITTI pose file"))
 
 
 class KITTIOdometry(PairDataset):
@@ -138,14 +132,9 @@ class KITTIOdometry(PairDataset):
         self.frames: dict[str, tuple[int, int]] = {}
         seq_dir = root / "sequences"
         missing = [s for s in sequences if not (seq_dir / s / camera).is_dir()]
-        if missing:
-            msg = (
-                f"Expected KITTI sequences {missing} with a '{camera}' folder under '{seq_dir}' "
-                f"(got {len(missing)} of {len(sequences)} absent)"
-            )
-            if on_missing == "error":
-                raise FileNotFoundError(msg + "; pass on_missing='skip' to use the others")
-            warnings.warn(msg + ": skipped", stacklevel=2)
+        report_missing(missing, f"Expected KITTI sequences {missing} with a '{camera}' folder "
+                       f"under '{seq_dir}' (got {len(missing)} of {len(sequences)} absent)",
+                       on_missing)
         self.sequences = [s for s in sequences if s not in missing]
         self.missing_sequences = missing
         records = []
@@ -186,10 +175,9 @@ class KITTIOdometry(PairDataset):
             )
         self.frames[seq] = (len(frames), len(poses))
         if len(frames) < len(poses):
-            warnings.warn(
+            warn_caller(
                 f"KITTI {seq}: images for {len(frames)} of {len(poses)} posed frames in "
-                f"'{seq_dir / self.camera}'; pairs use only existing frames",
-                stacklevel=3,
+                f"'{seq_dir / self.camera}'; pairs use only existing frames"
             )
         records = []
         k = self.frame_gap
