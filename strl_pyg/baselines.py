@@ -123,9 +123,13 @@ def estimate_relative_pose(
 def _normalised(matches: PairMatches, threshold_px: float) -> tuple[np.ndarray, np.ndarray, float]:
     x0 = normalize_points(matches.points0, matches.K0).numpy()
     x1 = normalize_points(matches.points1, matches.K1).numpy()
+    return np.ascontiguousarray(x0), np.ascontiguousarray(x1), threshold_px / _mean_focal(matches)
+
+
+def _mean_focal(matches: PairMatches) -> float:
+    """Mean of ``fx``, ``fy`` of both cameras: pixels per normalised unit of the thresholds."""
     K0, K1 = matches.K0, matches.K1
-    focal = np.mean([K0[0, 0], K0[1, 1], K1[0, 0], K1[1, 1]])
-    return np.ascontiguousarray(x0), np.ascontiguousarray(x1), threshold_px / focal
+    return float(np.mean([K0[0, 0], K0[1, 1], K1[0, 0], K1[1, 1]]))
 
 
 def _unit_pose(R: np.ndarray, t: np.ndarray) -> Pose:

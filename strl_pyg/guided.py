@@ -27,7 +27,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from strl_pyg.baselines import MIN_POINTS, BaselineResult, estimate_relative_pose
+from strl_pyg.baselines import (
+    MIN_POINTS,
+    BaselineResult,
+    _failed,
+    _mean_focal,
+    estimate_relative_pose,
+)
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.essential import refine_pose
 from strl_pyg.geometry import Pose, normalize_points, signed_sampson, skew
@@ -41,9 +47,7 @@ REFINE_WEIGHTINGS = ("network", "blend", "uniform")
 def _normalised(matches: PairMatches) -> tuple[torch.Tensor, torch.Tensor, float]:
     x0 = normalize_points(matches.points0, matches.K0).double()
     x1 = normalize_points(matches.points1, matches.K1).double()
-    K0, K1 = matches.K0, matches.K1
-    focal = float(np.mean([K0[0, 0], K0[1, 1], K1[0, 0], K1[1, 1]]))
-    return x0, x1, focal
+    return x0, x1, _mean_focal(matches)
 
 
 def _sampson(R: torch.Tensor, t: torch.Tensor, x0: torch.Tensor, x1: torch.Tensor):
@@ -129,10 +133,8 @@ def guided_estimate(
     x0, x1, focal = _normalised(matches)
     thr = threshold_px / focal
     if not candidates:
-        out = BaselineResult(Pose.identity(), np.zeros(n, dtype=bool),
-                             (time.perf_counter() - start) * 1e3, f"guided_{method}", False,
-                             {"candidate": None, "refined": False})
-        return out
+        return _failed(n, f"guided_{method}", (time.perf_counter() - start) * 1e3,
+                       candidate=None, refined=False)
     scored = [(msac_cost(r.pose, x0, x1, thr), name, r) for name, r in candidates]
     best_cost, name, best = min(scored, key=lambda c: c[0])
     pose = best.pose.to(torch.float64)

@@ -157,3 +157,19 @@ def test_guided_refinement_weightings_never_raise_the_msac_cost(outlier_pair, we
     with pytest.raises(ValueError, match="refine_weighting"):
         guided_estimate(m, w, "opencv", classical=base, refine_iterations=10,
                         refine_weighting="nope")
+
+
+def test_guided_without_any_hypothesis_reports_failure(outlier_pair):
+    """No classical pose, too few matches for a 'top' subset and no PROSAC (PoseLib): an
+    explicit failure with the identity pose and no inliers, never a confident pose."""
+    from strl_pyg.baselines import BaselineResult
+    from strl_pyg.geometry import Pose
+
+    pm = outlier_pair[0].matches.select(point_index=np.arange(8))
+    failed = BaselineResult(Pose.identity(), np.zeros(8, dtype=bool), 0.0, "poselib", False)
+    g = guided_estimate(pm, np.ones(8), method="poselib", keep=1.0, classical=failed)
+    assert not g.success and g.method == "guided_poselib"
+    assert g.info == {"candidate": None, "refined": False}
+    assert g.inliers.dtype == bool and g.inliers.shape == (8,) and not g.inliers.any()
+    np.testing.assert_array_equal(g.pose.R.numpy(), np.eye(3))
+    assert g.pose.t.abs().sum() == 0 and g.time_ms >= 0
