@@ -136,12 +136,6 @@ METHOD_LABELS = {"regression": "Str-L Pose", "opencv": "OpenCV MAGSAC", "poselib
                  "fused": "fused"}
 
 
-def _estimator(model, baseline: bool = True):
-    from strl_pyg.inference import PoseEstimator
-
-    return PoseEstimator(model, methods=None if baseline else ("regression",))
-
-
 def _print_estimate(est, indent: str = "") -> None:
     """The recommended pose in words: status, method, uncertainty, warnings; then each
     method's own result."""
@@ -181,7 +175,9 @@ def cmd_demo(args) -> int:
     print(f"front end: {matches.num_points} points, {matches.num_lines} lines "
           f"in {tm.get('total', float('nan')):.0f} ms")
     pred = predict_pair(model, matches, warmup=True)  # warm-up: steady-state times below
-    est = _estimator(model).estimate(matches)
+    from strl_pyg.inference import PoseEstimator
+
+    est = PoseEstimator(model).estimate(matches)  # every method
     T_gt = pair.T_0to1
     print(f"\n{'method':<14} {'status':<10} {'rot err':>8} {'t err':>8} {'ms':>7}   pose")
     print(f"{'ground truth':<14} {'':<10} {0.0:8.3f} {0.0:8.3f} {'-':>7}   {_fmt_pose(T_gt)}")
@@ -238,15 +234,18 @@ def cmd_match(args) -> int:
 
 def cmd_predict(args) -> int:
     """Pose of two images: the recommended ``"pose"`` record (:mod:`strl_pyg.inference`)
-    and every method's own result. Exit status 0 when the pose's status is ``"ok"``, 1 when it
-    is ``"degenerate"`` or ``"failed"`` (the result is printed either way)."""
+    and the own result of each method run (``--methods``; default: only the ones the
+    recommended pose needs, :mod:`strl_pyg.recommended`). Exit status 0 when the pose's status
+    is ``"ok"``, 1 when it is ``"degenerate"`` or ``"failed"`` (printed either way)."""
     inputs = read_pair(args)  # fail on bad files before any heavy work
     model = load_model(args.checkpoint)
     from strl_pyg.frontend import FrontendConfig
 
     img0, img1, K0, K1 = inputs
-    est = _estimator(model, baseline=not args.no_baseline).estimate_images(
-        img0, img1, K0, K1, frontend_config=FrontendConfig(detector=args.detector))
+    from strl_pyg.recommended import estimate_methods
+
+    est = estimate_methods(model, img0, img1, K0, K1, FrontendConfig(detector=args.detector),
+                           "regression" if args.no_baseline else args.methods)
     code = 0 if est.status == "ok" else 1
     if args.json:
         print(json.dumps({**est.to_dict(), "translation_kind": model.config.translation,
@@ -390,7 +389,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_pair_args(p)
     p.add_argument("--checkpoint", default=None, help="default: the shipped weights")
     p.add_argument("--json", action="store_true", help="print JSON only")
-    p.add_argument("--no-baseline", action="store_true", help="skip the classical estimate")
+    p.add_argument("--no-baseline", action="store_true", help="the network's regression only")
+    p.add_argument("--methods", default="recommended", metavar="M",
+                   help="'recommended' (default: the checkpoint's recommended order, stopping "
+                        "at the first 'ok' method), 'all', or names, e.g. 'regression,opencv'")
     p = sub.add_parser("train", help="train a model (see examples/train.py)")
     add_train_arguments(p)
     sub.add_parser("evaluate", help="evaluate a checkpoint (see examples/evaluate.py)",

@@ -47,10 +47,18 @@ def test_demo_prints_pose_and_writes_png(checkpoint, tmp_path, capsys):
 
 def test_predict_real_kitti_pair_json(checkpoint, kitti_pair, capsys):
     img0, img1, calib, poses = kitti_pair
-    code = cli.main(["predict", img0, img1, "--K", calib, "--checkpoint", checkpoint, "--json"])
+    code = cli.main(["predict", img0, img1, "--K", calib, "--checkpoint", checkpoint, "--json",
+                     "--methods", "all"])
     assert code == 0
     result = json.loads(capsys.readouterr().out)
     assert result["pose"]["status"] == "ok" and result["pose"]["method"] in result["methods"]
+    # the default runs only what the recommended pose needs, and gives the same pose
+    assert cli.main(["predict", img0, img1, "--K", calib, "--checkpoint", checkpoint,
+                     "--json"]) == 0
+    default = json.loads(capsys.readouterr().out)
+    assert default["pose"]["method"] == result["pose"]["method"]
+    assert set(default["methods"]) < set(result["methods"])
+    np.testing.assert_allclose(default["pose"]["T_0to1"], result["pose"]["T_0to1"], atol=1e-9)
     T = np.asarray(result["methods"]["regression"]["T_0to1"])
     assert T.shape == (4, 4) and np.allclose(T[3], [0, 0, 0, 1])
     R = T[:3, :3]

@@ -47,6 +47,8 @@ class FrontendConfig:
         line_profile_halfwidth: half width of the profile, pixels. (default: 6.0)
         line_min_score: smallest normalised cross-correlation kept. (default: 0.6)
         seed: seeds OpenCV's RNG before the robust fit, for determinism. (default: 0)
+        lines: detect and match line segments; ``False`` gives a points-only result (no LSD,
+            for callers that use points only, e.g. the classical solvers). (default: True)
     """
 
     detector: str = "sift"
@@ -73,6 +75,7 @@ class FrontendConfig:
     line_profile_halfwidth: float = 6.0
     line_min_score: float = 0.6
     seed: int = 0
+    lines: bool = True
 
     def __post_init__(self) -> None:
         if self.detector not in ("sift", "orb"):

@@ -69,11 +69,18 @@ def match_images(
         p0, p1, p_scores, inl = p0[inl], p1[inl], p_scores[inl], inl[inl]
 
     t = time.perf_counter()
-    seg0, seg1 = detect_lines(gray0, cfg), detect_lines(gray1, cfg)
+    if cfg.lines:
+        seg0, seg1 = detect_lines(gray0, cfg), detect_lines(gray1, cfg)
+    else:
+        seg0 = seg1 = np.zeros((0, 2, 2))
     timings["lines_detect"] = 1e3 * (time.perf_counter() - t)
 
     t = time.perf_counter()
-    if F is None:
+    if not cfg.lines:
+        l0 = l1 = np.zeros((0, 2, 2))
+        l_scores = np.zeros(0)
+        status = "skipped: lines=False in the FrontendConfig"
+    elif F is None:
         l0 = l1 = np.zeros((0, 2, 2))
         l_scores = np.zeros(0)
         status = "skipped: fewer than 8 point matches or no fundamental matrix"

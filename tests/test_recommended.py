@@ -1,0 +1,77 @@
+"""strl-pose predict's default: the recommended pose with only the methods (and the line
+matching) it needs, equal to the pose of the run of every method."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from strl_pyg.frontend import FrontendConfig, match_images
+from strl_pyg.inference import PoseEstimator
+from strl_pyg.recommended import estimate_methods, estimate_recommended, methods_needed
+from strl_pyg.synthetic import SceneConfig, generate_pair
+
+
+@pytest.fixture(scope="module")
+def model():
+    from strl_pyg.model import StrLPose
+
+    return StrLPose.from_pretrained()
+
+
+@pytest.fixture(scope="module")
+def pair():
+    return generate_pair(3, SceneConfig(kind="street", image_size=(192, 320)))
+
+
+def _with_order(model, order):
+    m = copy.copy(model)  # shares the weights; only the metadata differs
+    m.metadata = {**model.metadata, "recommended_order": list(order)}
+    return m
+
+
+def test_points_only_front_end():
+    p = generate_pair(0, SceneConfig(kind="street", image_size=(192, 320)))
+    full = match_images(p.image0, p.image1)
+    pts = match_images(p.image0, p.image1, config=FrontendConfig(lines=False))
+    assert full.num_lines > 0 and pts.num_lines == 0
+    assert pts.info["lines_status"].startswith("skipped") and pts.info["segments0"] == 0
+    np.testing.assert_array_equal(pts.points1, full.points1)  # points do not depend on lines
+
+
+@pytest.mark.parametrize("order", [None, ("fused", "opencv"), ("geometric", "regression")])
+def test_same_pose_as_every_method(model, pair, order):
+    mdl = model if order is None else _with_order(model, order)
+    lazy = estimate_recommended(mdl, pair.image0, pair.image1, pair.K, pair.K)
+    full = PoseEstimator(mdl).estimate_images(pair.image0, pair.image1, pair.K, pair.K)
+    assert lazy.status == full.status == "ok" and lazy.pose.method == full.pose.method
+    np.testing.assert_allclose(lazy.T_0to1, full.T_0to1, atol=1e-9)
+    chosen = lazy.pose.method
+    assert set(methods_needed([chosen])) <= set(lazy.methods)
+    assert set(lazy.methods) < set(full.methods)
+    reads_lines = any(m in ("regression", "geometric", "guided", "fused") for m in lazy.methods)
+    assert (lazy.num_lines > 0) == reads_lines and full.num_lines > 0
+
+
+def test_default_order_runs_the_classical_solver_only(model, pair):
+    est = estimate_recommended(model, pair.image0, pair.image1, pair.K, pair.K)
+    assert list(est.methods) == [model.metadata["recommended_order"][0]]
+
+
+def test_methods_argument(model, pair):
+    est = estimate_methods(model, pair.image0, pair.image1, pair.K, pair.K, FrontendConfig(),
+                           "regression, opencv")
+    assert list(est.methods) == ["regression", "opencv"]
+    with pytest.raises(ValueError, match="Expected methods from"):
+        estimate_methods(model, pair.image0, pair.image1, pair.K, pair.K, FrontendConfig(),
+                         "nope")
+    with pytest.raises(TypeError, match="Expected a FrontendConfig"):
+        estimate_recommended(model, pair.image0, pair.image1, pair.K, pair.K, {})
+
+
+def test_no_matches_is_degenerate(model):
+    black = np.zeros((96, 128), np.uint8)
+    est = estimate_recommended(model, black, black)
+    assert est.status == "degenerate" and est.T_0to1 is None
