@@ -11,7 +11,8 @@ from tqdm.auto import tqdm
 from strl_pyg.data import keys as keys_
 from strl_pyg.geometry import Pose, rotation_to_quaternion
 from strl_pyg.loss import PoseLoss
-from strl_pyg.metrics import pose_auc, relative_pose_error
+from strl_pyg.metrics import relative_pose_error
+from strl_pyg.pose_stats import pose_error_stats
 
 __all__ = ["mean_pose", "evaluate_model"]
 
@@ -39,17 +40,17 @@ def _errors(q: Tensor, t: Tensor, T_gt: Tensor) -> tuple[Tensor, Tensor]:
 
 
 def _summary(rot: Tensor, trans: Tensor, prefix: str) -> dict[str, float]:
-    rot, trans = rot.double(), trans.double()
-    worst = torch.maximum(rot, torch.nan_to_num(trans, nan=180.0))
-    auc = pose_auc(worst.numpy(), (5.0, 10.0, 20.0))
+    """:func:`~strl_pyg.pose_stats.pose_error_stats` under the training log's key names
+    (``{prefix}rot_err_deg``: mean, ``..._med``: median, ``{prefix}auc5/10/20``)."""
+    s = pose_error_stats(rot, trans)
     return {
-        f"{prefix}rot_err_deg": float(rot.mean()),
-        f"{prefix}rot_err_med": float(rot.median()),
-        f"{prefix}trans_err_deg": float(torch.nanmean(trans)),
-        f"{prefix}trans_err_med": float(torch.nanmedian(trans)),
-        f"{prefix}auc5": float(auc[0]),
-        f"{prefix}auc10": float(auc[1]),
-        f"{prefix}auc20": float(auc[2]),
+        f"{prefix}rot_err_deg": s["rot_mean"],
+        f"{prefix}rot_err_med": s["rot_median"],
+        f"{prefix}trans_err_deg": s["trans_mean"],
+        f"{prefix}trans_err_med": s["trans_median"],
+        f"{prefix}auc5": s["auc5"],
+        f"{prefix}auc10": s["auc10"],
+        f"{prefix}auc20": s["auc20"],
     }
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -122,18 +124,75 @@ def test_evaluate_pairs_rejects_bad_arguments(tiny_checkpoint):
                              image_size1=(10, 10)), np.eye(4), "s", "p")
 
 
+def _one_error_line(capsys, expected: str) -> str:
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("error: Expected"), err
+    assert expected in err, err
+    return err
+
+
 def test_script_errors_for_missing_checkpoint_and_root(tiny_checkpoint, tmp_path, capsys):
     script = _script()
-    with pytest.raises(SystemExit):
-        script.main(["--checkpoint", str(tmp_path / "nope.pt")])
-    assert "Expected a checkpoint file" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        script.main(["--checkpoint", str(tiny_checkpoint), "--dataset", "kitti"])
-    assert "Expected --data-root" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        script.main(["--checkpoint", str(tiny_checkpoint), "--dataset", "demon",
-                     "--data-root", str(tmp_path / "missing")])
-    assert "Expected a data folder" in capsys.readouterr().err
+    assert script.main(["--checkpoint", str(tmp_path / "nope.pt")]) == 2
+    _one_error_line(capsys, "Expected a checkpoint file")
+    assert script.main(["--checkpoint", str(tiny_checkpoint), "--dataset", "kitti"]) == 2
+    _one_error_line(capsys, "Expected --data-root")
+    assert script.main(["--checkpoint", str(tiny_checkpoint), "--dataset", "demon",
+                        "--data-root", str(tmp_path / "missing")]) == 2
+    _one_error_line(capsys, "Expected a data folder")
+
+
+@pytest.mark.parametrize("flags, expected", [
+    (["--num-pairs", "x"], "--num-pairs: Expected an integer >= 1 (got 'x')"),
+    (["--num-pairs", "0"], "--num-pairs: Expected an integer >= 1 (got '0')"),
+    (["--threshold-px", "nan"], "--threshold-px: Expected a finite number > 0"),
+    (["--outlier-fraction", "1"], "--outlier-fraction: Expected a fraction in [0, 1)"),
+    (["--dataset", "mnist"], "invalid choice: 'mnist'"),
+    (["--bogus"], "unrecognized arguments: --bogus"),
+    (["--num-pairs"], "expected one argument"),
+    (["--device", "warp9"], "Expected a torch device"),
+])
+def test_evaluate_user_errors_are_one_line_and_exit_2(flags, expected, tiny_checkpoint,
+                                                      capsys):
+    """`strl-pose evaluate` used argparse's two-line usage error (SystemExit) where every other
+    command prints one 'error: Expected ...' line and returns 2."""
+    from strl_pyg import cli
+
+    argv = ["--checkpoint", str(tiny_checkpoint), *flags]
+    assert cli.main(["evaluate", *argv]) == 2
+    err = _one_error_line(capsys, expected)
+    if not flags[0] == "--device":
+        assert "see 'strl-pose evaluate --help'" in err
+    assert _script().main(argv) == 2  # the example script alike
+    _one_error_line(capsys, expected)
+
+
+def test_evaluate_refuses_a_corrupt_checkpoint_in_one_line(tmp_path, capsys):
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"not a checkpoint")
+    assert _script().main(["--checkpoint", str(bad)]) == 2
+    err = _one_error_line(capsys, str(bad))
+    assert "weights_only" not in err and "allow_pickle" not in err
+
+
+def test_split_modules_are_re_exported():
+    import strl_pyg.eval_pairs as pairs
+    import strl_pyg.eval_report as report
+    import strl_pyg.evaluation as evaluation
+
+    for mod in (pairs, report):
+        for name in mod.__all__:
+            assert getattr(evaluation, name) is getattr(mod, name), name
+            assert name in evaluation.__all__, name
+
+
+def test_python_dash_m_runs_the_command_line(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "strl_pyg.evaluation", "--checkpoint",
+                          str(tmp_path / "nope.pt")], capture_output=True, text=True,
+                         cwd=REPO, timeout=300)
+    assert res.returncode == 2 and res.stdout == ""
+    assert res.stderr.startswith("error: Expected a checkpoint file") and (
+        res.stderr.count("\n") == 1), res.stderr
 
 
 def test_script_end_to_end_on_kitti_slice(kitti_root, tiny_checkpoint, tmp_path, capsys):
