@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import torch
 
-from strl_pyg import cli, inference
+from strl_pyg import cli, inference, pose_methods
 from strl_pyg.baselines import BaselineResult
 from strl_pyg.data import PairMatches
 from strl_pyg.geometry import Pose
@@ -183,7 +183,7 @@ def test_a_failed_classical_solver_is_failed_and_not_used(model, pair, monkeypat
 
     import strl_pyg.guided as guided
 
-    monkeypatch.setattr(inference, "estimate_relative_pose", no_model)
+    monkeypatch.setattr(pose_methods, "estimate_relative_pose", no_model)
     monkeypatch.setattr(guided, "estimate_relative_pose", no_model)
     monkeypatch.setattr(guided, "_opencv_prosac", lambda *a, **k: None)
     est = PoseEstimator(model).estimate(pair.matches)
@@ -201,7 +201,7 @@ def test_a_failed_classical_solver_is_failed_and_not_used(model, pair, monkeypat
 
 
 def test_all_methods_failing_gives_status_failed(pair, monkeypatch):
-    monkeypatch.setattr(inference, "estimate_relative_pose",
+    monkeypatch.setattr(pose_methods, "estimate_relative_pose",
                         lambda m, method, *a, **k: BaselineResult(
                             Pose.identity(), np.zeros(m.num_points, bool), 1.0, method, False))
     est = PoseEstimator(methods=("opencv",)).estimate(pair.matches)
@@ -278,6 +278,22 @@ def test_a_new_method_is_one_registration(pair, monkeypatch):
         inference.register_method("guess", identity_guess)
 
 
+def test_the_split_modules_stay_importable_from_inference():
+    from strl_pyg import pose_input, pose_methods, pose_record
+
+    assert set(inference.__all__) == {  # inference.__all__ before the split
+        "STATUSES", "RECOMMENDED_ORDER", "recommended_order", "MIN_POINTS", "ZERO_PARALLAX_PX",
+        "ZERO_PARALLAX_FRACTION", "FOCAL_RANGE", "METHODS", "MethodSpec", "MethodResult",
+        "MethodContext", "PoseEstimate", "PoseEstimator", "register_method", "prepare_matches",
+        "prepare_graph", "forward_pose", "input_warnings", "zero_parallax"}
+    for mod in (pose_record, pose_input, pose_methods):
+        for name in mod.__all__:  # one object, two import paths
+            assert getattr(inference, name) is getattr(mod, name), name
+    assert list(inference.METHODS) == ["regression", "opencv", "poselib", "fused", "geometric",
+                                       "guided"]
+    assert inference.METHODS["fused"].fn is pose_methods._fused
+
+
 def test_method_results_hold_a_pose_only_when_ok():
     assert MethodResult("x", "failed", np.eye(4)).T_0to1 is None
     with pytest.raises(ValueError, match="Expected a finite T_0to1"):
@@ -306,7 +322,8 @@ def pngs(pair, tmp_path_factory):
 
 def test_predict_json_round_trips_with_the_pose_record(pngs, capsys):
     d, K = pngs
-    code = cli.main(["predict", str(d / "a.png"), str(d / "b.png"), "--K", K, "--json"])
+    code = cli.main(["predict", str(d / "a.png"), str(d / "b.png"), "--K", K, "--json",
+                     "--methods", "all"])  # every method (the default stops at the first ok)
     out = json.loads(capsys.readouterr().out)
     assert code == 0
     assert set(out["pose"]) == KEYS and out["pose"]["status"] == "ok"
@@ -326,7 +343,8 @@ def test_predict_identical_images_is_degenerate_with_exit_status_1(pngs, capsys)
 
 def test_predict_text_says_status_method_and_warnings(pngs, capsys):
     d, K = pngs
-    code = cli.main(["predict", str(d / "a.png"), str(d / "big.png"), "--K", K])
+    code = cli.main(["predict", str(d / "a.png"), str(d / "big.png"), "--K", K,
+                     "--methods", "all"])
     out = capsys.readouterr().out
     assert code == 0 and re.search(r"pose: ok, from (poselib|opencv)", out)
     assert "warning: the images have different sizes" in out and "regression" in out

@@ -375,3 +375,22 @@ def test_trajectory_writers_are_atomic_and_check_their_input(tmp_path, monkeypat
     with pytest.raises(ValueError, match="Expected 'T_w_c'"):
         write_kitti_trajectory(tmp_path / "bad.txt", np.zeros((4, 5)))
     assert not any(p.name.startswith("bad") for p in tmp_path.iterdir())
+
+
+# ------------------------------------------------------------------ module split
+def test_metrics_keeps_every_public_name_and_odometry_defines_the_trajectory_ones():
+    from strl_pyg import metrics, odometry, trajectory
+
+    before_split = {  # strl_pyg.metrics.__all__ before the trajectory metrics moved out
+        "rotation_error_deg", "translation_angle_error_deg", "relative_pose_error", "pose_auc",
+        "KITTI_SEGMENT_LENGTHS", "KittiSegmentErrors", "kitti_odometry_errors",
+        "kitti_odometry_summary", "umeyama_alignment", "ATEResult",
+        "absolute_trajectory_error", "relative_translation_norms", "integrate_relative_poses",
+        "project_to_so3", "write_kitti_trajectory", "write_tum_trajectory",
+    }
+    assert set(metrics.__all__) == before_split
+    for name in odometry.__all__:  # one object, two import paths
+        assert getattr(metrics, name) is getattr(odometry, name), name
+    for name in trajectory.__all__:
+        assert getattr(metrics, name) is getattr(trajectory, name), name
+    assert set(odometry.__all__) | set(trajectory.__all__) < before_split

@@ -1,0 +1,231 @@
+"""The pose methods :class:`~strl_pyg.inference.PoseEstimator` runs, one function each, and
+the context they share; :mod:`strl_pyg.inference` registers them in :data:`METHODS
+<strl_pyg.inference.METHODS>`, in this order:
+
+* ``regression``: the network's pose head (resampled graph, as in training).
+* ``opencv``, ``poselib``: the classical essential-matrix solvers (:mod:`strl_pyg.baselines`).
+* ``fused`` (:func:`_fused`): the network and the first ``"ok"`` classical pose combined in
+  information form (:func:`~strl_pyg.pose_fusion.fuse_poses`).
+* ``geometric``: the weighted eight-point solve of the geometric head, refined.
+* ``guided``: the classical solver guided by the geometric head's inlier weights
+  (:func:`~strl_pyg.guided.guided_estimate`).
+
+A method is ``fn(matches, context) -> MethodResult``; ``context.results`` holds the methods
+run before it. Covariances (:mod:`strl_pyg.pose_record`): the network's from its predicted
+log-variances, the classical ones from the Sampson residuals of their inliers (first order:
+optimistic for RANSAC estimates), the fused one from the information-form fusion.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import torch
+
+from strl_pyg.baselines import estimate_relative_pose
+from strl_pyg.data.matches import PairMatches
+from strl_pyg.pose_input import forward_pose, prepare_graph
+from strl_pyg.pose_record import MethodResult
+
+if TYPE_CHECKING:
+    from strl_pyg.inference import PoseEstimator
+
+__all__ = ["MethodContext", "MethodFn"]
+
+
+# ----------------------------------------------------------------------------- context
+@dataclass
+class MethodContext:
+    """What a method sees besides the matches: the estimator (model, seed, threshold) and
+    the results of the methods run before it."""
+
+    estimator: PoseEstimator
+    results: dict[str, MethodResult]
+    cache: dict[str, Any] = field(default_factory=dict)  # shared work, e.g. a forward pass
+
+    @property
+    def model(self) -> torch.nn.Module:
+        return self.estimator.model
+
+
+MethodFn = Callable[[PairMatches, MethodContext], MethodResult]
+
+
+# ----------------------------------------------------------------------------- methods
+def _regression(matches: PairMatches, ctx: MethodContext) -> MethodResult:
+    from strl_pyg.geometry import Pose
+    from strl_pyg.pose_fusion import network_covariance, tangent_basis
+
+    est, model = ctx.estimator, ctx.model
+    start = time.perf_counter()
+    out = forward_pose(model, prepare_graph(matches, model, est.seed), est.device)
+    ms = (time.perf_counter() - start) * 1e3
+    q, t, lv = (x[0].detach().cpu().double() for x in (out.quaternion, out.translation,
+                                                       out.log_var))
+    if not all(bool(torch.isfinite(x).all()) for x in (q, t, lv)) or float(t.norm()) < 1e-12:
+        return MethodResult("regression", "failed", time_ms=ms, raw=out,
+                            warnings=["the network returned a non-finite or zero pose"])
+    cov = network_covariance(q, t, lv, tangent_basis(t)).numpy()
+    info = {"quaternion": q, "translation": t, "log_var": lv,
+            "sigma_components": torch.exp(0.5 * lv),
+            "translation_kind": model.config.translation}
+    return MethodResult("regression", "ok", Pose.from_quaternion(q, t).matrix().numpy(), cov,
+                        time_ms=ms, info=info, raw=out)
+
+
+def _classical(name: str) -> MethodFn:
+    def fn(matches: PairMatches, ctx: MethodContext) -> MethodResult:
+        from strl_pyg.pose_fusion import classical_covariance
+
+        thr = ctx.estimator.threshold_px
+        res = estimate_relative_pose(matches, name, thr, seed=ctx.estimator.seed)
+        if not res.success:
+            return MethodResult(name, "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
+                                warnings=[f"{name} found no pose (no essential matrix with "
+                                          "points in front of both cameras)"])
+        warnings, cov = [], None
+        try:
+            cov = classical_covariance(res.pose, matches, res.inliers, threshold_px=thr)[1]
+            cov = cov.numpy()
+        except ValueError as err:
+            warnings.append(f"{name}: no covariance ({err})")
+        return MethodResult(name, "ok", res.pose.matrix().numpy(), cov, warnings, res.time_ms,
+                            res.num_inliers, info=dict(res.info), raw=res)
+
+    return fn
+
+
+def _full_forward(matches: PairMatches, ctx: MethodContext):
+    """The network on every match (no resampling: the geometric head weighs each match),
+    computed once per pair and shared by ``geometric`` and ``guided``."""
+    if "full_forward" not in ctx.cache:
+        est, model = ctx.estimator, ctx.model
+        start = time.perf_counter()
+        out = forward_pose(model, prepare_graph(matches, model, est.seed, resample=None),
+                           est.device)
+        ctx.cache["full_forward"] = (out, (time.perf_counter() - start) * 1e3)
+    return ctx.cache["full_forward"]
+
+
+def _no_head(name: str, ctx: MethodContext) -> MethodResult | None:
+    if not getattr(ctx.model.config, "geometric", False):
+        return MethodResult(name, "failed", warnings=[
+            f"{name} needs a model with the geometric head (config.geometric=True); this "
+            "checkpoint has only the regression head"])
+    return None
+
+
+def _with_covariance(name: str, pose_T: np.ndarray, matches: PairMatches, thr: float,
+                     **kw: Any) -> MethodResult:
+    from strl_pyg.geometry import Pose
+    from strl_pyg.guided import _normalised, _sampson
+    from strl_pyg.pose_fusion import classical_covariance
+
+    pose = Pose.from_matrix(torch.as_tensor(pose_T, dtype=torch.float64))
+    x0, x1, focal = _normalised(matches)
+    inl = (_sampson(pose.R, pose.t, x0, x1) < thr / focal).numpy()
+    warnings = list(kw.pop("warnings", []))
+    cov = None
+    try:
+        cov = classical_covariance(pose, matches, inl, threshold_px=thr)[1].numpy()
+    except ValueError as err:
+        warnings.append(f"{name}: no covariance ({err})")
+    return MethodResult(name, "ok", pose_T, cov, warnings, num_inliers=int(inl.sum()), **kw)
+
+
+def _geometric(matches: PairMatches, ctx: MethodContext) -> MethodResult:
+    from strl_pyg.essential import DEGENERATE, refine_pose
+    from strl_pyg.geometry import Pose
+    from strl_pyg.guided import _normalised
+
+    bad = _no_head("geometric", ctx)
+    if bad is not None:
+        return bad
+    out, ms = _full_forward(matches, ctx)
+    geo = out.geometric
+    status = int(geo.status[0])
+    if status != 0:
+        why = "degenerate weighted solve (too few effective matches or rank-deficient)" \
+            if status == DEGENERATE else "no intrinsics: the weighted solve needs K0, K1"
+        return MethodResult("geometric", "degenerate" if status == DEGENERATE else "failed",
+                            time_ms=ms, warnings=[f"geometric: {why}"], raw=out)
+    start = time.perf_counter()
+    w = torch.sigmoid(geo.point_logits.double().cpu())
+    x0, x1, focal = _normalised(matches)
+    R, t = refine_pose(geo.R[:1].cpu(), geo.t[:1].cpu(), x0[None], x1[None], w[None],
+                       iterations=10, tau=ctx.estimator.threshold_px / focal)
+    T = Pose(R[0], t[0]).matrix().numpy()
+    ms += (time.perf_counter() - start) * 1e3
+    return _with_covariance("geometric", T, matches, ctx.estimator.threshold_px, time_ms=ms,
+                            info={"mean_weight": float(w.mean())}, raw=out)
+
+
+def _guided(matches: PairMatches, ctx: MethodContext) -> MethodResult:
+    from strl_pyg.guided import guided_estimate
+
+    bad = _no_head("guided", ctx)
+    if bad is not None:
+        return bad
+    base = "poselib" if _have_poselib() else "opencv"
+    out, ms = _full_forward(matches, ctx)
+    w = torch.sigmoid(out.geometric.point_logits.double().cpu()).numpy()
+    prior = ctx.results.get(base)
+    classical = prior.raw if prior is not None and prior.status == "ok" else None
+    res = guided_estimate(matches, w, base, ctx.estimator.threshold_px, seed=ctx.estimator.seed,
+                          classical=classical)
+    ms += res.time_ms
+    if not res.success:
+        return MethodResult("guided", "failed", time_ms=ms, raw=res,
+                            warnings=[f"guided {base}: no hypothesis found"])
+    info = {"base": base, "candidate": res.info["candidate"], "refined": res.info["refined"]}
+    return _with_covariance("guided", res.pose.matrix().numpy(), matches,
+                            ctx.estimator.threshold_px, time_ms=ms, info=info, raw=res)
+
+
+def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:
+    from strl_pyg.pose_fusion import fuse_poses
+
+    net = ctx.results.get("regression")
+    cls = next((ctx.results[c] for c in ("poselib", "opencv")
+                if c in ctx.results and ctx.results[c].status == "ok"), None)
+    if net is None or net.status != "ok" or cls is None:
+        return MethodResult("fused", "failed", warnings=[
+            "fused needs an 'ok' regression and an 'ok' classical estimate (poselib or opencv)"])
+    start = time.perf_counter()
+    scale = _calibration(ctx.model).get("regression", 1.0)
+    f = fuse_poses(net.raw, None, cls.raw, matches, threshold_px=ctx.estimator.threshold_px,
+                   network_scale=scale)
+    ms = (time.perf_counter() - start) * 1e3 + net.time_ms + cls.time_ms
+    if f.source == "network":
+        return MethodResult("fused", "failed", time_ms=ms, raw=f, warnings=[
+            f"fused: too few {cls.method} inliers for a covariance ({f.info['num_inliers']})"])
+    gate = f.info.get("gate", {})
+    info = {"classical": cls.method, "network_weight": f.weights,
+            "sign_disagreement": f.info["sign_disagreement"], "used": f.source,
+            "gate_d2": gate.get("d2")}
+    warnings = [] if f.source == "fused" else [f"fused: {gate.get('reason')}"]
+    return MethodResult("fused", "ok", f.pose.matrix().numpy(), f.covariance.numpy(),
+                        warnings, time_ms=ms, num_inliers=f.info["num_inliers"], info=info,
+                        raw=f)
+
+
+def _calibration(model: torch.nn.Module | None) -> dict[str, float]:
+    """Per-method covariance scales fitted on held-out data (checkpoint metadata
+    ``"calibration"``; ``{}`` when the checkpoint has none)."""
+    if model is None:
+        return {}
+    md = getattr(model, "metadata", None)
+    cal = md.get("calibration", {}) if isinstance(md, dict) else {}
+    return {str(k): float(v) for k, v in cal.items()} if isinstance(cal, dict) else {}
+
+
+def _have_poselib() -> bool:
+    try:
+        import poselib  # noqa: F401
+    except ImportError:
+        return False
+    return True
