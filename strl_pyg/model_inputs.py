@@ -36,7 +36,7 @@ class ModelInputs:
     kpts: tuple[Tensor, Tensor] | None  # pixels in image 0 / 1, for visual="cnn"
     images: tuple[Tensor, Tensor] | None
     self_edges: Tensor | None  # explicit [2, E]; None = implicit complete (dense path)
-    cross_edges: Tensor | None
+    cross_edges: Tensor | None  # the self edges, or the graph's own explicit cross edges
     line_edges: Tensor | None
     inv: Tensor | None = None  # storage index -> model position (None: identity)
     sizes: dict | None = None  # nodes per type, in order
@@ -133,6 +133,8 @@ def gather_inputs(cfg: StrLPoseConfig, data: HeteroData) -> ModelInputs:
         line_edges = remap(data[K.LINE_EDGE].edge_index + offsets[K.ENDPOINT])
 
     def complete(rel: str) -> Tensor | None:
+        """The explicit edges of relation ``rel`` in model positions; None when implicit
+        (``dense`` markers) or absent."""
         ets = [(s, rel, d) for s in types for d in types]
         present = [et for et in ets if et in data.edge_types]
         explicit = [et for et in present if K.EDGE_INDEX in data[et]]
@@ -166,6 +168,15 @@ def gather_inputs(cfg: StrLPoseConfig, data: HeteroData) -> ModelInputs:
         images = (data[K.IMAGE0].float(), data[K.IMAGE1].float())
         kpts = (order(torch.cat(kpts0)), order(torch.cat(kpts1)))
 
+    # One set of complete edges serves all three attentions (data.keys): the cross-attention
+    # runs over the self edges unless the graph brings explicit cross edges of its own
+    # (implicit cross markers of 0.1.x graphs mean the self edges and are ignored).
+    self_edges = complete(K.SELF_REL)
+    cross_edges = None
+    if cfg.visual_graph:
+        cross_edges = complete(K.CROSS_REL)
+        cross_edges = self_edges if cross_edges is None else cross_edges
+
     batch = order(batch) if num_graphs > 1 else None
     # The model sorted the nodes itself from PyG's batch vector: the layout needs no
     # validation, only its block size, which StrLPose.forward reads (the one host read).
@@ -179,8 +190,8 @@ def gather_inputs(cfg: StrLPoseConfig, data: HeteroData) -> ModelInputs:
         visual=order(torch.cat(visual)) if visual else None,
         kpts=kpts,
         images=images,
-        self_edges=complete(K.SELF_REL),
-        cross_edges=complete(K.CROSS_REL) if cfg.visual_graph else None,
+        self_edges=self_edges,
+        cross_edges=cross_edges,
         line_edges=line_edges,
         inv=inv,
         sizes=sizes,

@@ -111,7 +111,7 @@ def test_edge_index_dict_values():
     d = edge_index_dict(implicit)
     assert set(d) == set(K.EDGE_TYPES)
     assert torch.equal(d[K.LINE_EDGE], explicit[K.LINE_EDGE].edge_index)
-    marker = d[(K.POINT, K.CROSS_REL, K.ENDPOINT)]
+    marker = d[(K.POINT, K.SELF_REL, K.ENDPOINT)]
     assert isinstance(marker, CompleteEdges)
     assert torch.equal(marker.batch_src, implicit[K.POINT].batch)
     assert torch.equal(marker.batch_dst, implicit[K.ENDPOINT].batch)
@@ -121,14 +121,17 @@ def test_edge_index_dict_values():
 # ----------------------------------------------------------------------------- to_homogeneous
 @pytest.mark.parametrize("single", [True, False])
 def test_to_homogeneous_keeps_complete_edges(single):
-    """The reproduced bug: ``to_homogeneous`` dropped the complete edges (4 of 102 left)."""
+    """The reproduced bug: ``to_homogeneous`` dropped the complete edges (4 of 53 left; of
+    102 while the graph also carried the duplicated cross types)."""
     if single:
         implicit, explicit = build_pair_graph(make(3, 2)), build_pair_graph(
             make(3, 2), complete_edges="explicit")
     else:
         implicit, explicit = batches()
     h, he = implicit.to_homogeneous(), explicit.to_homogeneous()
-    assert h.num_edges == he.num_edges > 100
+    assert h.num_edges == he.num_edges
+    if single:  # 3 points + 4 endpoints, complete: 7 ** 2, plus the 4 line edges (53, not 4)
+        assert h.num_edges == 7 ** 2 + 4
     assert edge_set(h.edge_index, h.edge_type) == edge_set(he.edge_index, he.edge_type)
     assert set(h.keys()) == set(he.keys()) and K.DENSE not in h
     for key in (K.POS0, K.KPTS1, "node_type"):
@@ -147,7 +150,7 @@ def test_pyg_edge_readers_refuse_or_agree():
         implicit.get_all_edge_attrs()  # the graph-store view that PyG's samplers read
     assert implicit.num_edges == explicit.num_edges
     g = pairs("implicit")[1]
-    assert g.num_edges == pairs("explicit")[1].num_edges == 9 * 2  # 3 points, no lines
+    assert g.num_edges == pairs("explicit")[1].num_edges == 9  # 3 points, no lines
     assert implicit.has_isolated_nodes() == explicit.has_isolated_nodes()
     assert implicit.is_undirected() == explicit.is_undirected()
     one = build_pair_graph(make(1, 0))  # one node: only a self-loop, isolated in PyG's sense
@@ -187,7 +190,7 @@ def test_validate_checks_the_markers():
     with pytest.raises(ValueError, match="either"):
         neither.validate()
     wrong = copy.copy(g)
-    wrong[K.CROSS_EDGE_TYPES[0]][K.DENSE] = torch.ones(2, dtype=torch.bool)
+    wrong[K.SELF_EDGE_TYPES[1]][K.DENSE] = torch.ones(2, dtype=torch.bool)
     with pytest.raises(ValueError, match="one bool per graph"):
         wrong.validate()
     assert not wrong.validate(raise_on_error=False)
@@ -197,7 +200,7 @@ def test_save_load_keeps_the_class(tmp_path):
     g = build_pair_graph(make(4, 2))
     r = load_graph(save_graph(g, tmp_path / "g.pt"))
     assert type(r) is PairGraph and has_implicit_complete_edges(r)
-    assert r.to_homogeneous().num_edges == g.to_homogeneous().num_edges == (4 + 4) ** 2 * 2 + 4
+    assert r.to_homogeneous().num_edges == g.to_homogeneous().num_edges == (4 + 4) ** 2 + 4
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")

@@ -24,6 +24,8 @@ __all__ = [
     "build_pair_graph",
     "PairGraph",
     "ImplicitEdgesError",
+    "CompleteEdges",
+    "drop_legacy_cross_edges",
     "edge_index_dict",
     "complete_edge_index",
     "has_implicit_complete_edges",
@@ -47,6 +49,8 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "build_pair_graph": _GRAPH,
     "PairGraph": _GRAPH,
     "ImplicitEdgesError": _GRAPH,
+    "CompleteEdges": "strl_pyg.data.pair_graph",
+    "drop_legacy_cross_edges": "strl_pyg.data.pair_graph",
     "edge_index_dict": _GRAPH,
     "complete_edge_index": _GRAPH,
     "has_implicit_complete_edges": _GRAPH,
@@ -75,6 +79,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
         save_graph,
     )
     from strl_pyg.data.matches import PairMatches
+    from strl_pyg.data.pair_graph import CompleteEdges, drop_legacy_cross_edges
     from strl_pyg.data.transforms import (
         FixedSizeResample,
         MaterializeCompleteEdges,

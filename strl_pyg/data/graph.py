@@ -2,8 +2,8 @@
 
 The layout is documented once, in :mod:`strl_pyg.data.keys`.
 
-Complete edge types (intra-graph self-attention and geometric-to-visual cross-attention connect
-every node of a pair to every node of it) are **implicit** by default: each such edge type
+Complete edge types (the ``self`` types: every node of a pair to every node of it, the edges of
+all three attentions of the dual graph) are **implicit** by default: each such edge type
 carries only a ``dense`` marker and layers run dense attention over per-graph blocks, so a
 graph's memory grows O(N), not O(N^2) (a 576-node graph would otherwise hold 331,776 edges per
 edge family). :func:`materialize_complete_edges` turns the markers into explicit
@@ -20,7 +20,6 @@ from typing import Any
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from torch import Tensor
 from torch_geometric.data import HeteroData
 
@@ -30,6 +29,7 @@ from strl_pyg.data.pair_graph import (
     ImplicitEdgesError,
     PairGraph,
     complete_edge_index,
+    drop_legacy_cross_edges,
     edge_index_dict,
     has_implicit_complete_edges,
     implicit_edge_types,
@@ -112,7 +112,9 @@ def sample_patches(image: Tensor, xy: Tensor, patch_size: int = 1) -> Tensor:
     Returns:
         ``(N, C * patch_size**2)``, channel-major (all offsets of channel 0 first).
     """
-    c, h, w = image.shape
+    from strl_pyg.data.sampling import sample_bilinear  # the package's one sampler
+
+    c = image.shape[0]
     n = xy.shape[0]
     if n == 0:
         return image.new_zeros(0, c * patch_size * patch_size)
@@ -120,12 +122,8 @@ def sample_patches(image: Tensor, xy: Tensor, patch_size: int = 1) -> Tensor:
     off = torch.arange(-r, r + 1, dtype=xy.dtype, device=xy.device)
     oy, ox = torch.meshgrid(off, off, indexing="ij")
     pts = xy[:, None, :] + torch.stack([ox, oy], dim=-1).reshape(1, -1, 2)  # [N, p*p, 2]
-    scale = xy.new_tensor([2.0 / max(w - 1, 1), 2.0 / max(h - 1, 1)])
-    grid = (pts * scale - 1.0).to(image.dtype).unsqueeze(0)  # [1, N, p*p, 2]
-    out = F.grid_sample(
-        image.unsqueeze(0), grid, mode="bilinear", padding_mode="border", align_corners=True
-    )  # [1, C, N, p*p]
-    return out[0].permute(1, 0, 2).reshape(n, c * patch_size * patch_size)
+    out = sample_bilinear(image.unsqueeze(0), pts.reshape(1, -1, 2), padding="border")
+    return out[0].view(c, n, -1).permute(1, 0, 2).reshape(n, c * patch_size * patch_size)
 
 
 def line_edge_index(num_lines: int) -> Tensor:
@@ -297,4 +295,4 @@ def load_graph(path: str | os.PathLike) -> PairGraph:
         ) from err
     if not isinstance(raw, dict) or keys_.POINT not in raw:
         raise ValueError(f"Expected a pair-graph dict in '{path}' (got {type(raw).__name__})")
-    return PairGraph.from_dict(raw)
+    return drop_legacy_cross_edges(PairGraph.from_dict(raw))

@@ -13,12 +13,24 @@ Layout of a pair graph (:func:`strl_pyg.data.build_pair_graph`)::
                      line_feat    [2*Nl, 8] (x0, y0, dx0, dy0, x1, y1, dx1, dy1), normalised,
                                   delta = other endpoint - this endpoint
     data[LINE_EDGE]  edge_index [2, 2*Nl]  endpoint 2i <-> 2i+1, both directions
-    data[et] for et in SELF_EDGE_TYPES + CROSS_EDGE_TYPES:
+    data[et] for et in SELF_EDGE_TYPES (4 types: point/endpoint to point/endpoint):
                      either ``dense`` [1] (bool, implicit complete bipartite edges between the
                      two node types of the same pair; the default) or ``edge_index`` (explicit).
     graph level      image_size0, image_size1 [1, 2] (H, W); K0, K1 [1, 3, 3] when known;
                      T_0to1 [1, 4, 4] when a ground-truth pose is given;
                      image0, image1 [1, C, H, W] float in [0, 1] with keep_images=True.
+
+One set of complete edges serves every attention of the dual graph: the GCG and the GGVG share
+their node set (node ``i`` of both streams is the same match), so the GCG self-attention, the
+GGVG self-attention and the Geometry-Guided cross-attention all run over the ``self`` edges of a
+pair. For the cross-attention, the edge ``j -> i`` reads keys and values from the GGVG (visual)
+feature of source ``j`` and the query from the GCG (geometric) feature of target ``i``, and it
+updates the visual feature of ``i`` (:class:`strl_pyg.nn.DualGraphLayer`, step 4).
+
+Optional: explicit ``edge_index`` tensors on the CROSS_EDGE_TYPES give the cross-attention an
+edge set of its own (for example k-nearest neighbours); graphs built by this package carry none.
+Graphs saved by strl-pyg 0.1.x carry implicit ``cross`` markers as well: they mean the same
+complete edges, so the model ignores them and :func:`strl_pyg.data.load_graph` drops them.
 """
 
 from __future__ import annotations
@@ -31,16 +43,15 @@ NODE_TYPES = (POINT, ENDPOINT)
 # Edge relations.
 SELF_REL = "self"  # intra-graph self-attention: every node of a pair to every node of it
 LINE_REL = "line"  # the two endpoints of one matched line segment
-# Inter-graph Geometry-Guided cross-attention, edge j -> i within a pair: the query is the GCG
-# (geometric) feature of target i, keys and values are the GGVG (visual) features of source j,
-# and the visual feature of i is updated (strl_pyg.nn.DualGraphLayer, step 4).
+# Optional explicit edges of the Geometry-Guided cross-attention (see the module docstring);
+# absent from built graphs, where the cross-attention runs over the SELF_EDGE_TYPES.
 CROSS_REL = "cross"
 
 LINE_EDGE = (ENDPOINT, LINE_REL, ENDPOINT)
 SELF_EDGE_TYPES = tuple((s, SELF_REL, d) for s in NODE_TYPES for d in NODE_TYPES)
 CROSS_EDGE_TYPES = tuple((s, CROSS_REL, d) for s in NODE_TYPES for d in NODE_TYPES)
-COMPLETE_EDGE_TYPES = SELF_EDGE_TYPES + CROSS_EDGE_TYPES
-EDGE_TYPES = SELF_EDGE_TYPES + (LINE_EDGE,) + CROSS_EDGE_TYPES
+COMPLETE_EDGE_TYPES = SELF_EDGE_TYPES  # the edge types that are complete within a pair
+EDGE_TYPES = SELF_EDGE_TYPES + (LINE_EDGE,)  # the edge types of a built pair graph
 
 # Node attributes.
 KPTS0 = "kpts0"

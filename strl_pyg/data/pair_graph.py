@@ -1,7 +1,7 @@
 """The pair-graph class and its complete edge types, implicit or explicit.
 
-Complete edge types (intra-graph self-attention and geometric-to-visual cross-attention connect
-every node of a pair to every node of it) are **implicit** by default: each such edge type
+Complete edge types (the ``self`` types: every node of a pair to every node of it, the edges of
+all three attentions of the dual graph) are **implicit** by default: each such edge type
 carries only a ``dense`` marker (one bool per graph) and layers run dense attention over
 per-graph blocks, so a graph's memory grows O(N), not O(N^2).
 :func:`materialize_complete_edges` turns the markers into explicit ``edge_index`` tensors.
@@ -28,7 +28,7 @@ graph is complete on the kept nodes, which is what the marker says).
 from __future__ import annotations
 
 import copy
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import torch
 from torch import Tensor
@@ -36,18 +36,54 @@ from torch_geometric.data import Batch, HeteroData
 
 from strl_pyg.data import keys as keys_
 
-if TYPE_CHECKING:  # the marker belongs to the layers, one level above the data
-    from strl_pyg.nn.attention import CompleteEdges
-
 __all__ = [
     "PairGraph",
+    "CompleteEdges",
     "ImplicitEdgesError",
     "complete_edge_index",
+    "drop_legacy_cross_edges",
     "edge_index_dict",
     "has_implicit_complete_edges",
     "implicit_edge_types",
     "materialize_complete_edges",
 ]
+
+
+class CompleteEdges:
+    """An ``edge_index`` stand-in that asks :class:`~strl_pyg.nn.AttentionConv` for complete
+    attention: every source node to every target node **of the same graph**, without an O(N^2)
+    edge list. It is data (the implicit edges of a pair graph), so it lives here; ``strl_pyg.nn``
+    re-exports it.
+
+    It carries the graph ids itself, so that code that hands edges around per edge type
+    (:func:`torch_geometric.nn.to_hetero`, :func:`strl_pyg.data.edge_index_dict`) cannot
+    lose them and attend across the graphs of a batch.
+
+    Args:
+        batch_src: Graph id of each source node ``[N_src]``, or ``None``: take the layer's
+            ``batch`` argument (no ``batch`` either: all nodes form one graph).
+        batch_dst: Graph id of each target node ``[N_dst]`` (default: ``batch_src``, for
+            self-attention on one node set).
+    """
+
+    __slots__ = ("batch_src", "batch_dst")
+
+    def __init__(self, batch_src: Tensor | None = None, batch_dst: Tensor | None = None) -> None:
+        if batch_src is None and batch_dst is not None:
+            raise ValueError("Expected 'batch_src' together with 'batch_dst' (got only batch_dst)")
+        for name, b in (("batch_src", batch_src), ("batch_dst", batch_dst)):
+            if b is not None and (not isinstance(b, Tensor) or b.dim() != 1
+                                  or b.dtype != torch.long):
+                got = f"{b.dtype} {tuple(b.shape)}" if isinstance(b, Tensor) else type(b).__name__
+                raise TypeError(f"Expected '{name}' as a 1-D long tensor or None (got {got})")
+        self.batch_src = batch_src
+        self.batch_dst = batch_src if batch_dst is None else batch_dst
+
+    def __repr__(self) -> str:
+        def n(b):
+            return "None" if b is None else f"[{b.numel()}]"
+
+        return f"CompleteEdges(batch_src={n(self.batch_src)}, batch_dst={n(self.batch_dst)})"
 
 
 class ImplicitEdgesError(ValueError):
@@ -124,13 +160,24 @@ def materialize_complete_edges(data: HeteroData) -> HeteroData:
     that tests compare the dense path against.
     """
     num_graphs = _num_graphs(data)
-    for et in keys_.COMPLETE_EDGE_TYPES:
+    legacy = [et for et in implicit_edge_types(data) if et not in keys_.COMPLETE_EDGE_TYPES]
+    for et in (*keys_.COMPLETE_EDGE_TYPES, *legacy):
         src, _, dst = et
         data[et].edge_index = complete_edge_index(
             _batch_of(data, src), _batch_of(data, dst), num_graphs
         )
         if keys_.DENSE in data[et]:
             del data[et][keys_.DENSE]
+    return data
+
+
+def drop_legacy_cross_edges(data: HeteroData) -> HeteroData:
+    """Removes the implicit ``cross`` edge types that graphs of strl-pyg 0.1.x carried beside
+    the ``self`` types (the same complete edges, see :mod:`strl_pyg.data.keys`), in place.
+    Explicit ``cross`` edges are the user's own cross-attention edges and are kept."""
+    for et in keys_.CROSS_EDGE_TYPES:
+        if et in data.edge_types and keys_.EDGE_INDEX not in data[et]:
+            del data[et]
     return data
 
 
@@ -143,8 +190,6 @@ def edge_index_dict(data: HeteroData) -> dict[tuple[str, str, str], Tensor | Com
     Every edge type of ``data`` is present; explicit types map to their ``edge_index``. Layers
     that take only tensors need :func:`materialize_complete_edges` instead.
     """
-    from strl_pyg.nn.attention import CompleteEdges  # the layers' input type (upper layer)
-
     implicit = set(implicit_edge_types(data))
     out: dict[tuple[str, str, str], Tensor | CompleteEdges] = {}
     for et in data.edge_types:
@@ -229,7 +274,8 @@ class PairGraph(HeteroData):
         ``dense`` (a bool per graph) and ``edge_index``."""
         status = super().validate(raise_on_error)
         n = _num_graphs(self)
-        for et in keys_.COMPLETE_EDGE_TYPES:
+        marked = [et for et in self.edge_types if keys_.DENSE in self[et]]
+        for et in dict.fromkeys((*keys_.COMPLETE_EDGE_TYPES, *marked)):
             if et not in self.edge_types:
                 continue
             store = self[et]

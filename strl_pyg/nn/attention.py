@@ -10,47 +10,13 @@ from torch import Tensor, nn
 from torch_geometric.nn import MessagePassing
 from torch_geometric.utils import softmax
 
+from strl_pyg.data.pair_graph import CompleteEdges  # the marker is data; re-exported here
 from strl_pyg.nn.layout import DenseLayout
 from strl_pyg.nn.mlp import as_pair, mlp, reset_mlp
 
 __all__ = ["AttentionConv", "CompleteEdges"]
 
 PairTensor = tuple[Tensor, Tensor]
-
-
-class CompleteEdges:
-    """An ``edge_index`` stand-in that asks :class:`AttentionConv` for complete attention:
-    every source node to every target node **of the same graph**, without an O(N^2) edge list.
-
-    It carries the graph ids itself, so that code that hands edges around per edge type
-    (:func:`torch_geometric.nn.to_hetero`, :func:`strl_pyg.data.edge_index_dict`) cannot
-    lose them and attend across the graphs of a batch.
-
-    Args:
-        batch_src: Graph id of each source node ``[N_src]``, or ``None``: take the layer's
-            ``batch`` argument (no ``batch`` either: all nodes form one graph).
-        batch_dst: Graph id of each target node ``[N_dst]`` (default: ``batch_src``, for
-            self-attention on one node set).
-    """
-
-    __slots__ = ("batch_src", "batch_dst")
-
-    def __init__(self, batch_src: Tensor | None = None, batch_dst: Tensor | None = None) -> None:
-        if batch_src is None and batch_dst is not None:
-            raise ValueError("Expected 'batch_src' together with 'batch_dst' (got only batch_dst)")
-        for name, b in (("batch_src", batch_src), ("batch_dst", batch_dst)):
-            if b is not None and (not isinstance(b, Tensor) or b.dim() != 1
-                                  or b.dtype != torch.long):
-                got = f"{b.dtype} {tuple(b.shape)}" if isinstance(b, Tensor) else type(b).__name__
-                raise TypeError(f"Expected '{name}' as a 1-D long tensor or None (got {got})")
-        self.batch_src = batch_src
-        self.batch_dst = batch_src if batch_dst is None else batch_dst
-
-    def __repr__(self) -> str:
-        def n(b):
-            return "None" if b is None else f"[{b.numel()}]"
-
-        return f"CompleteEdges(batch_src={n(self.batch_src)}, batch_dst={n(self.batch_dst)})"
 
 
 def _graph_ids(name: str, ids: Tensor | None, n: int) -> Tensor | None:
