@@ -3,11 +3,12 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from typing import Any
 
 from torch import Tensor
 
+from strl_pyg._dataclass import strict_from_dict
 from strl_pyg.geometry import Pose, quaternion_to_rotation
 from strl_pyg.nn.heads import TRANSLATION_MODES
 
@@ -115,11 +116,7 @@ class StrLPoseConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> StrLPoseConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"Expected StrLPoseConfig fields (got unknown keys {unknown})")
-        return cls(**d)
+        return strict_from_dict(cls, d)
 
 
 @dataclass

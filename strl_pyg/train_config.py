@@ -9,9 +9,10 @@ and argument errors return before torch is loaded.
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from typing import Any
 
+from strl_pyg._dataclass import strict_from_dict
 from strl_pyg.synthetic.config import LINE_SCENE_KINDS  # numpy only
 
 __all__ = [
@@ -118,11 +119,7 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"Expected TrainConfig fields (got unknown keys {unknown})")
-        return cls(**d)
+        return strict_from_dict(cls, d)
 
 
 def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:

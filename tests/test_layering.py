@@ -24,6 +24,7 @@ PACKAGE = ROOT / "strl_pyg"
 #: Layer of each module (prefix match, longest first); lower never imports higher.
 LAYERS: dict[str, int] = {
     "strl_pyg._lazy": 0,
+    "strl_pyg._dataclass": 0,
     "strl_pyg.io": 0,
     "strl_pyg.images": 1,
     "strl_pyg.geometry": 0,
