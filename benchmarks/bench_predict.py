@@ -140,10 +140,13 @@ def _end_to_end(img0, img1, K, model, repeat: int) -> dict[str, float]:
     from strl_pyg.recommended import estimate_methods
 
     out = {}
-    for label, methods in (("predict (default: --methods recommended)", "recommended"),
-                           ("predict --methods all", "all")):
+    for label, methods, boot in (
+            ("predict (default: --methods recommended)", "recommended", 8),
+            ("predict --bootstrap 0 (first-order covariance only)", "recommended", 0),
+            ("predict --methods all", "all", 8)):
         out[label], res = _median_ms(
-            lambda m=methods: estimate_methods(model, img0, img1, K, K, FrontendConfig(), m),
+            lambda m=methods, b=boot: estimate_methods(model, img0, img1, K, K,
+                                                       FrontendConfig(), m, bootstrap=b),
             repeat)
         out[f"{label}: method"] = f"{res.pose.method}; ran {', '.join(res.methods)}"
     return out

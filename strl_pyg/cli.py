@@ -37,7 +37,9 @@ from strl_pyg.cli_inputs import (  # noqa: F401  (re-exported: the readers' publ
     UsageError,
     _check_input_file,
     _intrinsics,
+    bootstrap_count,
     downscale_for_matching,
+    non_negative_int,
     read_image_file,
     read_intrinsics,
     read_pair,
@@ -245,7 +247,8 @@ def cmd_predict(args) -> int:
     from strl_pyg.recommended import estimate_methods
 
     est = estimate_methods(model, img0, img1, K0, K1, FrontendConfig(detector=args.detector),
-                           "regression" if args.no_baseline else args.methods)
+                           "regression" if args.no_baseline else args.methods,
+                           bootstrap=args.bootstrap)
     code = 0 if est.status == "ok" else 1
     if args.json:
         print(json.dumps({**est.to_dict(), "translation_kind": model.config.translation,
@@ -345,19 +348,9 @@ def _add_pair_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--K0", help="intrinsics of image 0 (same formats)")
     p.add_argument("--K1", help="intrinsics of image 1 (default: --K0)")
     p.add_argument("--detector", choices=("sift", "orb"), default="sift")
-    p.add_argument("--max-side", type=_non_negative_int, default=MAX_SIDE, metavar="PX",
+    p.add_argument("--max-side", type=non_negative_int, default=MAX_SIDE, metavar="PX",
                    help=f"downscale images whose longer side exceeds PX for matching, K scaled "
                         f"alike (default {MAX_SIDE}; 0: full resolution)")
-
-
-def _non_negative_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"Expected an integer >= 0 (got {text!r})") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"Expected an integer >= 0 (got {text!r})")
-    return value
 
 
 class _Parser(argparse.ArgumentParser):
@@ -376,7 +369,7 @@ def build_parser() -> argparse.ArgumentParser:
                  formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="command", required=True)
     p = sub.add_parser("demo", help="the main job on a generated pair (no downloads)")
-    p.add_argument("--seed", type=_non_negative_int, default=DEMO_SEED)
+    p.add_argument("--seed", type=non_negative_int, default=DEMO_SEED)
     p.add_argument("--kind", choices=LINE_SCENE_KINDS, default="street")
     p.add_argument("--checkpoint", default=None, help="default: the shipped weights")
     p.add_argument("--out", default="outputs/demo", help="folder for the match drawing")
@@ -393,6 +386,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--methods", default="recommended", metavar="M",
                    help="'recommended' (default: the checkpoint's recommended order, stopping "
                         "at the first 'ok' method), 'all', or names, e.g. 'regression,opencv'")
+    p.add_argument("--bootstrap", type=bootstrap_count, default=8, metavar="N",
+                   help="resamples behind the PoseLib/OpenCV covariance (default 8, the "
+                        "calibrated setting; 0: first-order covariance only, faster)")
     p = sub.add_parser("train", help="train a model (see examples/train.py)")
     add_train_arguments(p)
     sub.add_parser("evaluate", help="evaluate a checkpoint (see examples/evaluate.py)",

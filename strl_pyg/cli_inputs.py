@@ -7,6 +7,7 @@ image is read.
 
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 from pathlib import Path
@@ -14,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["UsageError", "MAX_SIDE", "read_image_file", "read_intrinsics",
-           "downscale_for_matching", "PairInputs", "read_pair"]
+           "downscale_for_matching", "PairInputs", "read_pair", "non_negative_int",
+           "bootstrap_count"]
 
 #: Default longest image side for matching (``--max-side``); larger images are downscaled.
 #: A 6000x4000 pair at full resolution took 5.6 GB and 48 s in `strl-pose match`; 0.5 GB and
@@ -183,3 +185,22 @@ def read_pair(args) -> PairInputs:
               f"({img0.shape[1]}x{img0.shape[0]} -> {small0.shape[1]}x{small0.shape[0]}); "
               "--max-side 0 keeps the full resolution", file=sys.stderr)
     return inputs
+
+
+def non_negative_int(text: str) -> int:
+    """argparse type: an integer >= 0, one-line error otherwise."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"Expected an integer >= 0 (got {text!r})") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"Expected an integer >= 0 (got {text!r})")
+    return value
+
+
+def bootstrap_count(text: str) -> int:
+    """argparse type of ``--bootstrap``: 0 (off) or an integer >= 3."""
+    value = non_negative_int(text)
+    if value in (1, 2):
+        raise argparse.ArgumentTypeError(f"Expected 0 or an integer >= 3 (got {text!r})")
+    return value

@@ -134,11 +134,14 @@ class PoseEstimator:
         threshold_px: inlier threshold of the classical solvers, pixels.
         device: where the network runs (default: the model's device).
         raise_errors: re-raise a method's exception instead of recording ``"failed"``.
+        bootstrap: resamples of the point matches behind the ``poselib`` / ``opencv``
+            covariances (first order + bootstrap, :mod:`strl_pyg.pose_uncertainty`; the
+            checkpoint's calibration was fitted with the default 8); ``0``: first order only.
     """
 
     def __init__(self, model: torch.nn.Module | None = None, methods: Any = None,
                  seed: int = 0, threshold_px: float = 1.0, device: Any = None,
-                 raise_errors: bool = False) -> None:
+                 raise_errors: bool = False, bootstrap: int = 8) -> None:
         names = tuple(methods) if methods is not None else tuple(
             n for n, s in METHODS.items() if s.available())
         unknown = [n for n in names if n not in METHODS]
@@ -149,7 +152,12 @@ class PoseEstimator:
             raise ValueError(f"Expected installed methods (got {missing}: not importable here)")
         if not threshold_px > 0:
             raise ValueError(f"Expected threshold_px > 0 (got {threshold_px!r})")
+        if isinstance(bootstrap, bool) or not isinstance(bootstrap, int) or not (
+                bootstrap == 0 or bootstrap >= 3):
+            raise ValueError(f"Expected bootstrap = 0 (off) or an integer >= 3 (got "
+                             f"{bootstrap!r})")
         self.method_names = names
+        self.bootstrap = bootstrap
         self._model = model
         self.seed, self.threshold_px, self.device = int(seed), float(threshold_px), device
         self.raise_errors = raise_errors

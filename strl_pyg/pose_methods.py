@@ -30,6 +30,7 @@ from strl_pyg.baselines import estimate_relative_pose
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.pose_input import forward_pose, prepare_graph
 from strl_pyg.pose_record import MethodResult
+from strl_pyg.pose_uncertainty import bootstrap_covariance
 
 if TYPE_CHECKING:
     from strl_pyg.inference import PoseEstimator
@@ -87,14 +88,30 @@ def _classical(name: str) -> MethodFn:
             return MethodResult(name, "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
                                 warnings=[f"{name} found no pose (no essential matrix with "
                                           "points in front of both cameras)"])
-        warnings, cov = [], None
+        warnings, cov, info = [], None, dict(res.info)
         try:
             cov = classical_covariance(res.pose, matches, res.inliers, threshold_px=thr)[1]
             cov = cov.numpy()
         except ValueError as err:
             warnings.append(f"{name}: no covariance ({err})")
-        return MethodResult(name, "ok", res.pose.matrix().numpy(), cov, warnings, res.time_ms,
-                            res.num_inliers, info=dict(res.info), raw=res)
+        n_boot, ms = ctx.estimator.bootstrap, res.time_ms
+        if cov is not None and n_boot:
+            # first order (noise around a right solution) + bootstrap (instability of the
+            # solution itself), see strl_pyg.pose_uncertainty
+            start = time.perf_counter()
+            boot = bootstrap_covariance(matches, res.pose, name, n_boot, thr, ctx.estimator.seed)
+            ms += (time.perf_counter() - start) * 1e3
+            if boot is None:
+                warnings.append(f"{name}: fewer than 3 of {n_boot} bootstrap resamples gave a "
+                                "pose; first-order covariance only")
+            else:
+                cov = cov + boot
+            info["covariance"] = "first-order" if boot is None else \
+                f"first-order + bootstrap ({n_boot})"
+        elif cov is not None:
+            info["covariance"] = "first-order"
+        return MethodResult(name, "ok", res.pose.matrix().numpy(), cov, warnings, ms,
+                            res.num_inliers, info=info, raw=res)
 
     return fn
 

@@ -59,6 +59,12 @@ def test_predict_real_kitti_pair_json(checkpoint, kitti_pair, capsys):
     assert default["pose"]["method"] == result["pose"]["method"]
     assert set(default["methods"]) < set(result["methods"])
     np.testing.assert_allclose(default["pose"]["T_0to1"], result["pose"]["T_0to1"], atol=1e-9)
+    # --bootstrap 0: the same pose, the first-order covariance only (smaller)
+    assert cli.main(["predict", img0, img1, "--K", calib, "--checkpoint", checkpoint,
+                     "--json", "--bootstrap", "0"]) == 0
+    first = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(first["pose"]["T_0to1"], default["pose"]["T_0to1"], atol=1e-9)
+    assert np.trace(first["pose"]["covariance"]) < np.trace(default["pose"]["covariance"])
     T = np.asarray(result["methods"]["regression"]["T_0to1"])
     assert T.shape == (4, 4) and np.allclose(T[3], [0, 0, 0, 1])
     R = T[:3, :3]
@@ -92,6 +98,8 @@ def test_match_writes_npz_and_png(kitti_pair, tmp_path, capsys):
         (["predict", "{img}", "{img}", "--K", "1,2,3"], "4 (fx,fy,cx,cy)"),
         (["predict", "{img}", "{img}", "--K", "0,100,50,50"], "positive focal"),
         (["predict", "{img}", "{img}", "--K", "not/a/file"], "neither an existing file"),
+        (["predict", "{img}", "{img}", "--bootstrap", "2"], "0 or an integer >= 3"),
+        (["predict", "{img}", "{img}", "--bootstrap", "-1"], "integer >= 0"),
         (["demo", "--checkpoint", "{missing}"], "model checkpoint"),
         (["demo", "--checkpoint", "{bad}"], "readable StrLPose checkpoint"),
     ],

@@ -25,6 +25,7 @@ PACKAGE = ROOT / "strl_pyg"
 LAYERS: dict[str, int] = {
     "strl_pyg._lazy": 0,
     "strl_pyg._dataclass": 0,
+    "strl_pyg.pose_uncertainty": 5,
     "strl_pyg.io": 0,
     "strl_pyg.images": 1,
     "strl_pyg.geometry": 0,
