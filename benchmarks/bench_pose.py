@@ -44,10 +44,11 @@ from tqdm.auto import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import banner  # noqa: E402
 
+from strl_pyg.pose_uncertainty import BOOTSTRAPPED  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data"
 GENERATED = ("driving", "indoor", "object", "wide", "outliers50", "low_texture")
-BOOTSTRAPPED = ("poselib", "opencv")  # covariances with a bootstrap term (pose_uncertainty)
 CHI2_5 = {1: 5.8876, 2: 11.3141}  # chi-square (5 dof) quantiles of 68.27 % and 95.45 %
 
 
@@ -366,13 +367,15 @@ def main(argv=None) -> int:
         # fit on the uncalibrated model: scales stored by an earlier --calibrate would
         # otherwise be applied during the fit and then overwritten by ~1
         model.metadata = {k: v for k, v in model.metadata.items()
-                          if k not in ("calibration", "recommended_order")}
+                          if k not in ("calibration", "recommended_order",
+                                       "calibration_bootstrap")}
         scales, order, stats = fit_calibration(PoseEstimator(model), cal)
         print(f"calibration scales (variance multipliers) on {len(cal)} pairs: {scales}")
         print(f"recommended order (AUC@10 on the calibration pairs): {order}")
         print(markdown({"calibration split (mixed_small, seeds 3,000,000+)": stats}, order))
         md = dict(model.metadata)
         md["calibration"] = scales
+        md["calibration_bootstrap"] = PoseEstimator(model).bootstrap  # what the fit used
         md["recommended_order"] = order
         model.save(args.checkpoint, metadata=md)
         model = StrLPose.load(args.checkpoint).eval()

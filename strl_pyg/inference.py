@@ -59,6 +59,7 @@ from strl_pyg.pose_methods import (
     _regression,
 )
 from strl_pyg.pose_record import STATUSES, MethodResult, PoseEstimate
+from strl_pyg.pose_uncertainty import BOOTSTRAPPED
 
 __all__ = [
     "STATUSES", "RECOMMENDED_ORDER", "recommended_order", "MIN_POINTS", "ZERO_PARALLAX_PX",
@@ -135,8 +136,10 @@ class PoseEstimator:
         device: where the network runs (default: the model's device).
         raise_errors: re-raise a method's exception instead of recording ``"failed"``.
         bootstrap: resamples of the point matches behind the ``poselib`` / ``opencv``
-            covariances (first order + bootstrap, :mod:`strl_pyg.pose_uncertainty`; the
-            checkpoint's calibration was fitted with the default 8); ``0``: first order only.
+            covariances (first order + bootstrap, :mod:`strl_pyg.pose_uncertainty`); ``0``:
+            first order only. Their calibration scales apply only when the checkpoint's
+            ``metadata["calibration_bootstrap"]`` (0 when absent) equals it; otherwise the
+            record keeps the uncalibrated covariance and says so in ``warnings``.
     """
 
     def __init__(self, model: torch.nn.Module | None = None, methods: Any = None,
@@ -185,7 +188,12 @@ class PoseEstimator:
         ctx = MethodContext(self, {})
         needs_model = any(m in ("regression", "geometric", "guided", "fused")
                           for m in self.method_names)
-        calibration = _calibration(self.model) if needs_model else {}
+        # a model passed in calibrates the classical methods too, also when no network
+        # method runs (the default predict path: PoseLib only)
+        model = self.model if needs_model else self._model
+        calibration = _calibration(model)
+        md = getattr(model, "metadata", None) if model is not None else None
+        fitted_boot = int(md.get("calibration_bootstrap", 0)) if isinstance(md, dict) else 0
         for name in self.method_names:
             spec = METHODS[name]
             if degenerate is not None:
@@ -206,6 +214,12 @@ class PoseEstimator:
                     res = MethodResult(name, "failed",
                                        warnings=[f"{name} raised {type(err).__name__}: {first}"])
             scale = calibration.get(name)
+            if (scale is not None and name in BOOTSTRAPPED and res.covariance is not None
+                    and fitted_boot != self.bootstrap):
+                res.warnings.append(
+                    f"{name}: covariance not calibrated (the checkpoint's scale was fitted with "
+                    f"bootstrap={fitted_boot}, this estimate used bootstrap={self.bootstrap})")
+                scale = None
             if scale is not None and res.covariance is not None and name != "fused":
                 res.covariance = res.covariance * scale
                 res.info["calibration_scale"] = scale

@@ -169,13 +169,18 @@ def gather_inputs(cfg: StrLPoseConfig, data: HeteroData) -> ModelInputs:
         kpts = (order(torch.cat(kpts0)), order(torch.cat(kpts1)))
 
     # One set of complete edges serves all three attentions (data.keys): the cross-attention
-    # runs over the self edges unless the graph brings explicit cross edges of its own
-    # (implicit cross markers of 0.1.x graphs mean the self edges and are ignored).
+    # runs over the self edges unless the graph brings explicit cross edges of its own, or
+    # the implicit cross markers of a 0.1.x graph (complete cross-attention, as then).
     self_edges = complete(K.SELF_REL)
     cross_edges = None
     if cfg.visual_graph:
         cross_edges = complete(K.CROSS_REL)
-        cross_edges = self_edges if cross_edges is None else cross_edges
+        legacy_implicit = any(K.DENSE in data[(s, K.CROSS_REL, d)] for s in types for d in types
+                              if (s, K.CROSS_REL, d) in data.edge_types)
+        if cross_edges is None and not legacy_implicit:
+            cross_edges = self_edges
+        # else: 0.1.x implicit cross markers beside explicit self edges mean dense complete
+        # cross-attention, as they did then (None = dense)
 
     batch = order(batch) if num_graphs > 1 else None
     # The model sorted the nodes itself from PyG's batch vector: the layout needs no

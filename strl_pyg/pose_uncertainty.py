@@ -23,7 +23,10 @@ from strl_pyg.baselines import estimate_relative_pose
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.geometry import Pose
 
-__all__ = ["bootstrap_covariance", "MIN_BOOTSTRAP"]
+__all__ = ["bootstrap_covariance", "MIN_BOOTSTRAP", "BOOTSTRAPPED"]
+
+#: The methods whose records carry first-order + bootstrap covariances.
+BOOTSTRAPPED = ("poselib", "opencv")
 
 #: Fewest resamples that give a covariance (a 5x5 covariance from fewer is mostly noise).
 MIN_BOOTSTRAP = 3
@@ -39,15 +42,22 @@ def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poseli
 
     Each resample draws ``num_points`` point matches with replacement (seeded: the same inputs
     give the same covariance) and runs :func:`~strl_pyg.baselines.estimate_relative_pose` with
-    ``method``; line segments are not used. Returns ``None`` when fewer than
+    ``method``; line segments are not used. The covariance is the second moment of the
+    resampled poses' tangent coordinates about ``pose`` (so a consistent offset counts, not
+    only the spread). Returns ``None`` when fewer than
     :data:`MIN_BOOTSTRAP` resamples gave a pose.
     """
     from strl_pyg.pose_fusion import pose_to_tangent, tangent_basis
 
     if not isinstance(matches, PairMatches):
         raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")
-    if not isinstance(n, int) or isinstance(n, bool) or n < MIN_BOOTSTRAP:
+    if not isinstance(pose, Pose) or pose.R.dim() != 2:
+        raise TypeError(f"Expected an unbatched Pose (got {type(pose).__name__})")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < MIN_BOOTSTRAP:
         raise ValueError(f"Expected n as an integer >= {MIN_BOOTSTRAP} (got {n!r})")
+    if not threshold_px > 0:
+        raise ValueError(f"Expected threshold_px > 0 (got {threshold_px!r})")
+    n = int(n)
     R0 = pose.R.double()
     t0 = pose.t.double()
     norm = float(t0.norm())
@@ -67,4 +77,7 @@ def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poseli
             xs.append(pose_to_tangent(res.pose, R0, t0, basis).numpy())
     if len(xs) < MIN_BOOTSTRAP:
         return None
-    return np.cov(np.asarray(xs, dtype=np.float64).T)
+    X = np.asarray(xs, dtype=np.float64)
+    # second moment about the estimate (the chart origin), not about the resamples' mean: when
+    # the resamples agree on another solution, that offset is part of the uncertainty
+    return X.T @ X / len(X)

@@ -105,3 +105,27 @@ def test_explicit_cross_edges_are_used():
         assert not torch.allclose(model(pruned).quaternion, ref, atol=1e-4)
         geo_only = StrLPose(small("LP")).eval()
         assert torch.allclose(geo_only(pruned).quaternion, geo_only(g).quaternion, atol=1e-6)
+
+
+def test_legacy_implicit_cross_beside_explicit_self_edges_stays_complete(tmp_path):
+    """0.1.x: implicit cross markers meant complete cross-attention whatever the self edges
+    were; a graph with pruned explicit self edges keeps that meaning (model and load_graph)."""
+    torch.manual_seed(0)
+    model = StrLPose(small("full")).eval()
+    g = make_pair(2, 8, 2, complete="explicit")
+    pruned = copy.copy(g)
+    for et in K.SELF_EDGE_TYPES:  # self-attention over self-loops only
+        ei = g[et].edge_index
+        pruned[et].edge_index = ei[:, ei[0] == ei[1]] if et[0] == et[2] else ei[:, :0]
+    legacy = copy.copy(pruned)
+    for et in K.CROSS_EDGE_TYPES:
+        legacy[et][K.DENSE] = torch.ones(1, dtype=torch.bool)
+    reference = copy.copy(pruned)  # the same meaning, spelled out: explicit complete cross edges
+    for et in K.CROSS_EDGE_TYPES:
+        reference[et].edge_index = g[(et[0], K.SELF_REL, et[2])].edge_index
+    with torch.no_grad():
+        out = model(legacy).quaternion
+        assert torch.allclose(out, model(reference).quaternion, atol=1e-5)
+        assert not torch.allclose(out, model(pruned).quaternion, atol=1e-4)
+    r = load_graph(save_graph(legacy, tmp_path / "legacy.pt"))
+    assert set(K.CROSS_EDGE_TYPES) <= set(r.edge_types)

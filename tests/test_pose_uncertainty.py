@@ -45,7 +45,7 @@ def test_bootstrap_errors_and_no_pose(pair):
         bootstrap_covariance(m, res.pose, "opencv", n=2)
     with pytest.raises(TypeError, match="Expected a PairMatches"):
         bootstrap_covariance({"points0": 1}, res.pose)
-    # 5 identical matches repeated: no resample determines a pose
+    # one match repeated 6 times: no resample determines a pose
     few = replace(m, points0=np.repeat(m.points0[:1], 6, 0), points1=np.repeat(m.points1[:1], 6, 0),
                   point_scores=None, lines0=None, lines1=None, line_scores=None)
     assert bootstrap_covariance(few, res.pose, "opencv", n=3) is None
@@ -63,3 +63,23 @@ def test_estimator_adds_the_bootstrap_to_the_first_order_covariance(pair):
         with pytest.raises(ValueError, match="Expected bootstrap = 0"):
             PoseEstimator(methods=["opencv"], bootstrap=bad)
 
+
+
+def test_calibration_applies_on_the_lazy_path_and_only_to_the_fitted_bootstrap(pair):
+    """The default predict path runs PoseLib alone: its covariance must still be calibrated,
+    and equal to the one of the run of every method; a scale fitted with bootstrap=8 is not
+    applied to a bootstrap=0 covariance (it says so)."""
+    from strl_pyg.model import StrLPose
+
+    model = StrLPose.from_pretrained()
+    fitted = model.metadata.get("calibration_bootstrap")
+    assert fitted == 8 and "opencv" in model.metadata["calibration"]
+    alone = PoseEstimator(model, methods=["opencv"]).estimate(pair.matches).methods["opencv"]
+    with_net = PoseEstimator(model, methods=["opencv", "regression"]).estimate(
+        pair.matches).methods["opencv"]
+    assert alone.info["calibration_scale"] == model.metadata["calibration"]["opencv"]
+    np.testing.assert_allclose(alone.covariance, with_net.covariance, rtol=1e-12)
+    off = PoseEstimator(model, methods=["opencv"], bootstrap=0).estimate(pair.matches)
+    rec = off.methods["opencv"]
+    assert "calibration_scale" not in rec.info
+    assert any("not calibrated" in w and "bootstrap=8" in w for w in rec.warnings)

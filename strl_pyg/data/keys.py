@@ -29,8 +29,10 @@ updates the visual feature of ``i`` (:class:`strl_pyg.nn.DualGraphLayer`, step 4
 
 Optional: explicit ``edge_index`` tensors on the CROSS_EDGE_TYPES give the cross-attention an
 edge set of its own (for example k-nearest neighbours); graphs built by this package carry none.
-Graphs saved by strl-pyg 0.1.x carry implicit ``cross`` markers as well: they mean the same
-complete edges, so the model ignores them and :func:`strl_pyg.data.load_graph` drops them.
+Graphs saved by strl-pyg 0.1.x carry implicit ``cross`` markers as well. Beside implicit
+``self`` edges they mean the same complete edges, so the model ignores them and
+:func:`strl_pyg.data.load_graph` drops them; beside explicit ``self`` edges they keep their
+0.1.x meaning (complete cross-attention) and are kept.
 """
 
 from __future__ import annotations

@@ -174,7 +174,11 @@ def materialize_complete_edges(data: HeteroData) -> HeteroData:
 def drop_legacy_cross_edges(data: HeteroData) -> HeteroData:
     """Removes the implicit ``cross`` edge types that graphs of strl-pyg 0.1.x carried beside
     the ``self`` types (the same complete edges, see :mod:`strl_pyg.data.keys`), in place.
-    Explicit ``cross`` edges are the user's own cross-attention edges and are kept."""
+    Explicit ``cross`` edges are the user's own cross-attention edges and are kept; so are
+    implicit ones beside explicit ``self`` edges (they then mean complete cross-attention over
+    different edges than the self-attention's, which the model honours)."""
+    if any(keys_.EDGE_INDEX in data[et] for et in keys_.SELF_EDGE_TYPES if et in data.edge_types):
+        return data
     for et in keys_.CROSS_EDGE_TYPES:
         if et in data.edge_types and keys_.EDGE_INDEX not in data[et]:
             del data[et]
