@@ -369,13 +369,14 @@ def main(argv=None) -> int:
         model.metadata = {k: v for k, v in model.metadata.items()
                           if k not in ("calibration", "recommended_order",
                                        "calibration_bootstrap")}
-        scales, order, stats = fit_calibration(PoseEstimator(model), cal)
+        fit_estimator = PoseEstimator(model)
+        scales, order, stats = fit_calibration(fit_estimator, cal)
         print(f"calibration scales (variance multipliers) on {len(cal)} pairs: {scales}")
         print(f"recommended order (AUC@10 on the calibration pairs): {order}")
         print(markdown({"calibration split (mixed_small, seeds 3,000,000+)": stats}, order))
         md = dict(model.metadata)
         md["calibration"] = scales
-        md["calibration_bootstrap"] = PoseEstimator(model).bootstrap  # what the fit used
+        md["calibration_bootstrap"] = fit_estimator.bootstrap  # what the fit used
         md["recommended_order"] = order
         model.save(args.checkpoint, metadata=md)
         model = StrLPose.load(args.checkpoint).eval()

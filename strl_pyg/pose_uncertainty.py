@@ -70,8 +70,11 @@ def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poseli
     for b in range(n):
         idx = rng.integers(0, matches.num_points, matches.num_points)
         scores = None if matches.point_scores is None else matches.point_scores[idx]
+        # points only: the solver reads neither lines nor images (and re-validating the
+        # images on every resample would cost more than the solve on small pairs)
         sample = replace(matches, points0=matches.points0[idx], points1=matches.points1[idx],
-                         point_scores=scores, lines0=None, lines1=None, line_scores=None)
+                         point_scores=scores, lines0=None, lines1=None, line_scores=None,
+                         image0=None, image1=None)
         res = estimate_relative_pose(sample, method, threshold_px, seed=seed + b + 1)
         if res.success:
             xs.append(pose_to_tangent(res.pose, R0, t0, basis).numpy())
