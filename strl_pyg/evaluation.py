@@ -57,6 +57,13 @@ from strl_pyg.eval_report import (
 from strl_pyg.geometry import Pose
 from strl_pyg.inference import forward_pose, prepare_graph, prepare_matches
 from strl_pyg.io import one_line
+from strl_pyg.metrics import (  # noqa: F401  (names this module had before the 0.2 split)
+    integrate_relative_poses,
+    kitti_odometry_errors,
+    kitti_odometry_summary,
+    pose_auc,
+    relative_pose_error,
+)
 from strl_pyg.pose_fusion import fuse_poses
 from strl_pyg.synthetic.config import LINE_SCENE_KINDS, SCENE_KINDS
 

@@ -35,7 +35,10 @@ from typing import Any
 import numpy as np
 import torch
 
-from strl_pyg.baselines import MIN_POINTS
+from strl_pyg.baselines import (
+    MIN_POINTS,
+    estimate_relative_pose,  # noqa: F401  (0.1.x name here)
+)
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.pose_input import (
     FOCAL_RANGE,

@@ -41,7 +41,9 @@ def _errors(q: Tensor, t: Tensor, T_gt: Tensor) -> tuple[Tensor, Tensor]:
 
 def _summary(rot: Tensor, trans: Tensor, prefix: str) -> dict[str, float]:
     """:func:`~strl_pyg.pose_stats.pose_error_stats` under the training log's key names
-    (``{prefix}rot_err_deg``: mean, ``..._med``: median, ``{prefix}auc5/10/20``)."""
+    (``{prefix}rot_err_deg``: mean, ``..._med``: median, ``{prefix}auc5/10/20``, and
+    ``{prefix}failures``: the pairs without a finite rotation error, e.g. a NaN network
+    output, which the means and medians leave out and the AUCs count as failed)."""
     s = pose_error_stats(rot, trans)
     return {
         f"{prefix}rot_err_deg": s["rot_mean"],
@@ -51,6 +53,7 @@ def _summary(rot: Tensor, trans: Tensor, prefix: str) -> dict[str, float]:
         f"{prefix}auc5": s["auc5"],
         f"{prefix}auc10": s["auc10"],
         f"{prefix}auc20": s["auc20"],
+        f"{prefix}failures": float(s["failures"]),
     }
 
 

@@ -186,6 +186,17 @@ def test_split_modules_are_re_exported():
             assert name in evaluation.__all__, name
 
 
+def test_names_imported_here_before_the_split_still_resolve():
+    """0.1.x code did ``from strl_pyg.evaluation import pose_auc`` (the module imported it);
+    after the 0.2 split those names had gone from the module (AttributeError)."""
+    import strl_pyg.evaluation as evaluation
+    from strl_pyg import metrics
+
+    for name in ("integrate_relative_poses", "kitti_odometry_errors", "kitti_odometry_summary",
+                 "pose_auc", "relative_pose_error"):
+        assert getattr(evaluation, name) is getattr(metrics, name), name
+
+
 def test_python_dash_m_runs_the_command_line(tmp_path):
     res = subprocess.run([sys.executable, "-m", "strl_pyg.evaluation", "--checkpoint",
                           str(tmp_path / "nope.pt")], capture_output=True, text=True,

@@ -292,6 +292,10 @@ def test_the_split_modules_stay_importable_from_inference():
     assert list(inference.METHODS) == ["regression", "opencv", "poselib", "fused", "geometric",
                                        "guided"]
     assert inference.METHODS["fused"].fn is pose_methods._fused
+    # a name the module imported in 0.1.x (gone after the split, restored)
+    from strl_pyg import baselines
+
+    assert inference.estimate_relative_pose is baselines.estimate_relative_pose
 
 
 def test_method_results_hold_a_pose_only_when_ok():

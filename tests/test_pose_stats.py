@@ -23,7 +23,8 @@ EXPECTED = {"n": 4, "failures": 0, "rot_mean": 4.0, "rot_median": 2.5,  # mean o
             "auc5": 0.25, "auc10": 0.375, "auc20": 0.4375}
 VALIDATION_KEYS = {"rot_mean": "rot_err_deg", "rot_median": "rot_err_med",
                    "trans_mean": "trans_err_deg", "trans_median": "trans_err_med",
-                   "auc5": "auc5", "auc10": "auc10", "auc20": "auc20"}
+                   "auc5": "auc5", "auc10": "auc10", "auc20": "auc20",
+                   "failures": "failures"}
 
 
 def _rows(rot, trans, success=None):
@@ -70,6 +71,18 @@ def test_failures_leave_the_means_and_count_as_infinite():
     for other in (s2, s3):
         assert other["failures"] == 1 and other["rot_median"] == 2.5
         assert other["auc20"] == pytest.approx(0.35, rel=1e-12)
+
+
+def test_training_log_counts_the_failures_it_leaves_out():
+    """Before: a NaN network output left the validation means and medians without a trace in
+    log.csv (the summary had no failure count); now ``failures`` says how many."""
+    rot = torch.tensor(ROT + [math.nan, math.nan])
+    trans = torch.tensor(TRANS + [math.nan, 5.0])
+    logged = _summary(rot, trans, "geo_")
+    assert logged["geo_failures"] == 2.0
+    assert logged["geo_rot_err_med"] == 2.5  # the 4 finite pairs
+    assert logged["geo_auc20"] == pytest.approx(0.4375 * 4 / 6, rel=1e-12)
+    assert _summary(torch.tensor(ROT), torch.tensor(TRANS), "")["failures"] == 0.0
 
 
 def test_all_failed_gives_nan_statistics_and_zero_auc():
