@@ -97,7 +97,8 @@ def guided_estimate(
 
     Returns:
         :class:`~strl_pyg.baselines.BaselineResult` with ``method = "guided_<method>"``;
-        ``info["candidate"]`` names the hypothesis chosen (``"all"``, ``"top"``, ``"prosac"``)
+        ``info["candidate"]`` names the hypothesis chosen (``"all"``, ``"top"``, ``"prosac"``),
+        ``info["point_index"]`` the point matches it was solved from (``None``: all of them)
         and ``info["refined"]`` whether the refinement was kept.
     """
     if not isinstance(matches, PairMatches):
@@ -125,6 +126,7 @@ def guided_estimate(
         sub = matches.select(point_index=top)
         res = estimate_relative_pose(sub, method, threshold_px, seed=seed)
         if res.success:
+            res.info["point_index"] = top  # the matches this hypothesis was solved from
             candidates.append(("top", res))
     if method == "opencv" and n >= MIN_POINTS:
         res = _opencv_prosac(matches, order, threshold_px, seed)
@@ -159,7 +161,8 @@ def guided_estimate(
     elapsed = (time.perf_counter() - start) * 1e3
     return BaselineResult(pose, inl.astype(bool), elapsed, f"guided_{method}", True,
                           {"candidate": name, "refined": refined, "msac_cost": best_cost,
-                           "candidates": [c[1] for c in scored]})
+                           "candidates": [c[1] for c in scored],
+                           "point_index": best.info.get("point_index")})
 
 
 def _opencv_prosac(matches: PairMatches, order: np.ndarray, threshold_px: float,

@@ -223,7 +223,7 @@ class PoseEstimator:
                     f"{name}: covariance not calibrated (the checkpoint's scale was fitted with "
                     f"bootstrap={fitted_boot}, this estimate used bootstrap={self.bootstrap})")
                 scale = None
-            if scale is not None and res.covariance is not None and name != "fused":
+            if scale is not None and res.covariance is not None:
                 res.covariance = res.covariance * scale
                 res.info["calibration_scale"] = scale
             ctx.results[name] = res

@@ -101,6 +101,7 @@ def _classical(name: str) -> MethodFn:
             start = time.perf_counter()
             boot = bootstrap_covariance(matches, res.pose, name, n_boot, thr, ctx.estimator.seed)
             ms += (time.perf_counter() - start) * 1e3
+            ctx.cache[f"bootstrap_{name}"] = boot  # guided reuses it when it keeps this pose
             if boot is None:
                 warnings.append(f"{name}: fewer than 3 of {n_boot} bootstrap resamples gave a "
                                 "pose; first-order covariance only")
@@ -199,8 +200,34 @@ def _guided(matches: PairMatches, ctx: MethodContext) -> MethodResult:
         return MethodResult("guided", "failed", time_ms=ms, raw=res,
                             warnings=[f"guided {base}: no hypothesis found"])
     info = {"base": base, "candidate": res.info["candidate"], "refined": res.info["refined"]}
-    return _with_covariance("guided", res.pose.matrix().numpy(), matches,
-                            ctx.estimator.threshold_px, time_ms=ms, info=info, raw=res)
+    rec = _with_covariance("guided", res.pose.matrix().numpy(), matches,
+                           ctx.estimator.threshold_px, time_ms=ms, info=info, raw=res)
+    n_boot = ctx.estimator.bootstrap
+    if rec.covariance is not None and n_boot:
+        # the same bootstrap as the classical records, of the solve guided kept: on all the
+        # matches (then it is the base method's own, computed once) or on the network's top
+        # matches; the refinement, when kept, is not re-run per resample
+        start = time.perf_counter()
+        subset = res.info.get("point_index")
+        key = f"bootstrap_{base}"
+        if (subset is None and res.info["candidate"] == "all" and not res.info["refined"]
+                and key in ctx.cache):
+            boot = ctx.cache[key]
+        else:
+            sub = matches if subset is None else matches.select(point_index=subset)
+            boot = bootstrap_covariance(sub, res.pose, base, n_boot,
+                                        ctx.estimator.threshold_px, ctx.estimator.seed)
+        rec.time_ms += (time.perf_counter() - start) * 1e3
+        if boot is None:
+            rec.warnings.append(f"guided: fewer than 3 of {n_boot} bootstrap resamples gave a "
+                                "pose; first-order covariance only")
+            info["covariance"] = "first-order"
+        else:
+            rec.covariance = rec.covariance + boot
+            info["covariance"] = f"first-order + bootstrap ({n_boot})"
+    elif rec.covariance is not None:
+        info["covariance"] = "first-order"
+    return rec
 
 
 def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:

@@ -107,3 +107,59 @@ def test_other_thresholds_name_their_keys():
 def test_bad_input_gets_a_one_line_error(args, exc, match):
     with pytest.raises(exc, match=match):
         pose_error_stats(*args)
+
+
+def test_coverage_interval_known_answers_and_bad_input():
+    from strl_pyg.pose_stats import coverage_interval
+
+    lo, hi = coverage_interval(30, 30)  # by hand: n/(n+z^2) = 30/33.8416
+    assert hi == 1.0 and lo == pytest.approx(30 / (30 + 1.96**2), rel=1e-12)
+    assert coverage_interval(0, 30)[0] == 0.0
+    lo, hi = coverage_interval(15, 30)  # symmetric about 1/2
+    assert lo + hi == pytest.approx(1.0, rel=1e-12) and 0.33 < lo < 0.34
+    # the normal approximation for a large n
+    lo, hi = coverage_interval(9500, 10000)
+    half = 1.96 * math.sqrt(0.95 * 0.05 / 10000)
+    assert (lo, hi) == pytest.approx((0.95 - half, 0.95 + half), abs=5e-4)
+    for bad in ((31, 30), (-1, 30), (1, 0), (1.5, 30)):
+        with pytest.raises(ValueError, match="Expected"):
+            coverage_interval(*bad)
+
+
+def test_median_ratio_interval_brackets_the_ratio_and_is_paired():
+    from strl_pyg.pose_stats import median_ratio_interval
+
+    rng = np.random.default_rng(1)
+    b = rng.gamma(2.0, 1.0, size=200)
+    r, lo, hi = median_ratio_interval(1.5 * b, b)
+    assert r == pytest.approx(1.5, rel=1e-12)
+    assert lo == pytest.approx(1.5, rel=1e-12) and hi == pytest.approx(1.5, rel=1e-12)  # paired
+    noisy = b * rng.uniform(0.8, 1.4, size=200)
+    r, lo, hi = median_ratio_interval(noisy, b)
+    assert lo < r < hi and hi - lo < 0.3
+    assert median_ratio_interval(noisy, b) == median_ratio_interval(noisy, b)  # seeded
+    assert median_ratio_interval([1.0], [0.0])[0] == math.inf
+    with pytest.raises(ValueError, match="one length"):
+        median_ratio_interval([1.0, 2.0], [1.0])
+    with pytest.raises(ValueError, match="finite"):
+        median_ratio_interval([1.0, math.nan], [1.0, 1.0])
+
+
+def test_auc_difference_interval_sees_a_real_gain_and_not_a_tie():
+    from strl_pyg.metrics import pose_auc
+    from strl_pyg.pose_stats import auc_difference_interval
+
+    rng = np.random.default_rng(2)
+    b = rng.gamma(2.0, 3.0, size=80)
+    d, lo, hi = auc_difference_interval(0.5 * b, b)  # a halves every error: clearly better
+    assert d == pytest.approx(pose_auc(0.5 * b, (10.0,))[0] - pose_auc(b, (10.0,))[0])
+    assert 0 < lo <= d <= hi
+    tie = b.copy()
+    tie[0] *= 0.9  # one pair a little better: within the noise
+    d, lo, hi = auc_difference_interval(tie, b)
+    assert d >= 0 and lo <= 0 <= hi
+    # failures count as beyond the threshold
+    d, _, _ = auc_difference_interval([math.inf, 1.0], [math.nan, 1.0])
+    assert d == 0.0
+    with pytest.raises(ValueError, match="one length"):
+        auc_difference_interval([1.0], [1.0, 2.0])
