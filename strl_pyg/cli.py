@@ -146,7 +146,10 @@ def _print_estimate(est, indent: str = "") -> None:
         label = METHOD_LABELS.get(pose.method, pose.method)
         print(f"{indent}pose: ok, from {pose.method} ({label}): {_fmt_pose(pose.T_0to1)}")
         if pose.sigma is not None:
-            print(f"{indent}  sigma (1st order): rotation {pose.sigma['rotation_deg']:.3f} deg, "
+            kind = pose.info.get("covariance", "")
+            cal = " calibrated" if "calibration_scale" in pose.info else ""
+            print(f"{indent}  sigma ({kind + ',' if kind else ''}{cal or ' uncalibrated'}): "
+                  f"rotation {pose.sigma['rotation_deg']:.3f} deg, "
                   f"translation direction {pose.sigma['translation_deg']:.3f} deg")
     else:
         print(f"{indent}pose: {pose.status}, no pose given")

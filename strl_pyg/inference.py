@@ -28,6 +28,7 @@ Adding a method is one call: ``register_method("name", fn)`` with
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
@@ -108,9 +109,35 @@ def recommended_order(model: torch.nn.Module | None) -> tuple[str, ...]:
     Methods that are not installed are skipped when the estimate is made."""
     md = getattr(model, "metadata", None) if model is not None else None
     order = md.get("recommended_order") if isinstance(md, dict) else None
-    if isinstance(order, (list, tuple)) and order and all(isinstance(m, str) for m in order):
-        return tuple(order)
-    return RECOMMENDED_ORDER
+    if not (isinstance(order, (list, tuple)) and order and all(isinstance(m, str) for m in order)):
+        order = RECOMMENDED_ORDER
+    order = tuple(order)
+    if "poselib" in order and not METHODS["poselib"].available():
+        # measured with PoseLib, which fused and guided also start from: without it those are
+        # other, unmeasured methods, so OpenCV (the remaining classical default) takes its place
+        i = order.index("poselib")
+        order = tuple(m for m in order[:i] if m != "opencv") + ("opencv",) + tuple(
+            m for m in order[i + 1:] if m != "opencv")
+    return order
+
+
+#: Default :class:`PoseEstimator` ``min_inlier_ratio``.
+MIN_INLIER_RATIO = 0.2
+#: The methods whose poses need that support (their inliers are counted on the point matches).
+SUPPORT_CHECKED = ("poselib", "opencv", "guided", "geometric", "fused")
+
+#: Added to the recommended pose's warnings when the order was measured with PoseLib and it is
+#: not installed here.
+POSELIB_MISSING = ("PoseLib is not installed: the recommended order was measured with it, so "
+                   "OpenCV takes its place (pip install 'strl-pyg[poselib]' for the measured "
+                   "default)")
+
+
+def _measured_with_missing_poselib(model: torch.nn.Module | None) -> bool:
+    md = getattr(model, "metadata", None) if model is not None else None
+    order = md.get("recommended_order") if isinstance(md, dict) else None
+    return (isinstance(order, (list, tuple)) and "poselib" in order
+            and not METHODS["poselib"].available())
 
 
 register_method("regression", _regression, needs_intrinsics=False)
@@ -143,11 +170,28 @@ class PoseEstimator:
             first order only. Their calibration scales apply only when the checkpoint's
             ``metadata["calibration_bootstrap"]`` (0 when absent) equals it; otherwise the
             record keeps the uncalibrated covariance and says so in ``warnings``.
+        min_inlier_ratio: a solver's pose (:data:`SUPPORT_CHECKED`) whose inliers are fewer
+            than this fraction of the point matches is ``"failed"``: the matches do not
+            support it (RANSAC finds a few percent of "inliers" among random matches); the
+            regression is then not used as the recommended pose either. Default 0.2 (the
+            held-out pairs of ``benchmarks/bench_pose.py`` have >= 0.27, 0.37 where the solve
+            was right); ``0`` switches the check off.
     """
 
-    def __init__(self, model: torch.nn.Module | None = None, methods: Any = None,
+    def __init__(self, model: Any = None, methods: Any = None,
                  seed: int = 0, threshold_px: float = 1.0, device: Any = None,
-                 raise_errors: bool = False, bootstrap: int = 8) -> None:
+                 raise_errors: bool = False, bootstrap: int = 8,
+                 min_inlier_ratio: float = MIN_INLIER_RATIO) -> None:
+        if isinstance(model, (str, os.PathLike)):  # a checkpoint path, as --checkpoint takes
+            from strl_pyg.model import StrLPose
+
+            model = StrLPose.load(model)
+        elif model is not None and not isinstance(model, torch.nn.Module):
+            raise TypeError(f"Expected a StrLPose, a checkpoint path or None (got "
+                            f"{type(model).__name__})")
+        if not (isinstance(min_inlier_ratio, (int, float)) and 0 <= min_inlier_ratio < 1):
+            raise ValueError(f"Expected min_inlier_ratio in [0, 1) (got {min_inlier_ratio!r})")
+        self.min_inlier_ratio = float(min_inlier_ratio)
         names = tuple(methods) if methods is not None else tuple(
             n for n, s in METHODS.items() if s.available())
         unknown = [n for n in names if n not in METHODS]
@@ -216,6 +260,7 @@ class PoseEstimator:
                     first = str(err).splitlines()[0] if str(err) else ""
                     res = MethodResult(name, "failed",
                                        warnings=[f"{name} raised {type(err).__name__}: {first}"])
+            res = self._support(res, n)
             scale = calibration.get(name)
             if (scale is not None and name in BOOTSTRAPPED and res.covariance is not None
                     and fitted_boot != self.bootstrap):
@@ -250,13 +295,30 @@ class PoseEstimator:
                                 methods, 0, 0, None)
         return self.estimate(matches)
 
+    def _support(self, res: MethodResult, n: int) -> MethodResult:
+        """``res`` as ``"failed"`` when its inliers are below ``min_inlier_ratio`` of ``n``."""
+        k = res.num_inliers
+        if (res.status != "ok" or res.method not in SUPPORT_CHECKED or k is None or n <= 0
+                or not k < self.min_inlier_ratio * n):
+            return res
+        return MethodResult(res.method, "failed", time_ms=res.time_ms, num_inliers=k,
+                            raw=res.raw, info={**res.info, "unsupported": True},
+                            warnings=res.warnings + [
+            f"the matches do not support this pose: {k} of {n} point matches "
+            f"are inliers ({100 * k / n:.0f} %, below {100 * self.min_inlier_ratio:.0f} %; "
+            "random matches reach a few percent)"])
+
     def _recommend(self, results: dict[str, MethodResult], warnings: list[str],
                    matches: PairMatches) -> PoseEstimate:
         chosen = recommended_order(self._model)
         order = [m for m in chosen if m in results]
-        notes = []
+        notes = [POSELIB_MISSING] if _measured_with_missing_poselib(self._model) else []
+        unsupported = any(r.info.get("unsupported") for r in results.values())
         for m in order:
             r = results[m]
+            if r.status == "ok" and m == "regression" and unsupported:
+                notes.append("regression not used: the matches support no solver's pose")
+                continue
             if r.status == "ok":
                 pose = replace(r, warnings=_unique(warnings + notes + r.warnings))
                 return PoseEstimate(pose, results, matches.num_points, matches.num_lines,

@@ -26,8 +26,9 @@ from strl_pyg.geometry import Pose
 __all__ = ["bootstrap_covariance", "MIN_BOOTSTRAP", "BOOTSTRAPPED"]
 
 #: The methods whose records carry first-order + bootstrap covariances (``guided``: the
-#: bootstrap of its chosen classical solve, on the matches that solve used).
-BOOTSTRAPPED = ("poselib", "opencv", "guided")
+#: bootstrap of its chosen classical solve, on the matches that solve used; ``fused``: the
+#: information-form covariance + the bootstrap of the classical estimate it starts from).
+BOOTSTRAPPED = ("poselib", "opencv", "guided", "fused")
 
 #: Fewest resamples that give a covariance (a 5x5 covariance from fewer is mostly noise).
 MIN_BOOTSTRAP = 3

@@ -107,6 +107,25 @@ def test_load_errors(tmp_path):
     bad.write_bytes(b"not a zip")
     with pytest.raises(ValueError, match="readable .npz"):
         PairMatches.load(bad)
+    # a text file, an empty file, a lone .npy: said as such (before: numpy's "pickled data"
+    # for all of them, which the error turned into "an object array")
+    text = tmp_path / "loadbad.py"
+    text.write_text("print(1)\n")
+    with pytest.raises(ValueError, match=r"not an \.npz archive: it starts with b'print\('"):
+        PairMatches.load(text)
+    empty = tmp_path / "empty.npz"
+    empty.write_bytes(b"")
+    with pytest.raises(ValueError, match=r"\(got an empty file\)"):
+        PairMatches.load(empty)
+    npy = tmp_path / "a.npy"
+    np.save(npy, np.zeros(3))
+    with pytest.raises(ValueError, match=r"\(got a single \.npy array\)"):
+        PairMatches.load(npy)
+    obj = tmp_path / "obj.npz"  # a real .npz holding a pickled (object) array
+    np.savez(obj, points0=np.array([{"a": 1}], dtype=object))
+    with pytest.raises(ValueError, match="object array") as err:
+        PairMatches.load(obj)
+    assert "allow_pickle" not in str(err.value)
 
 
 finite = st.floats(-1e4, 1e4, allow_nan=False)

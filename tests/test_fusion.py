@@ -235,3 +235,30 @@ def test_gate_fuses_a_consistent_network_pose(noisy_pair):
     f = fuse_poses(net, torch.full((7,), -8.0), classical, pair.matches)
     assert f.source == "fused" and f.info["gate"]["fused"] is True
     assert f.info["gate"]["d2"] <= GATE_CHI2
+
+
+def test_estimator_fusion_uses_the_checkpoints_inflation():
+    """``metadata["fusion_inflation"]`` (fitted by bench_pose --calibrate) multiplies the
+    regression's calibrated variance in the fused record; absent, it is 1."""
+    import copy
+
+    from strl_pyg.inference import PoseEstimator
+    from strl_pyg.model import StrLPose
+    from strl_pyg.pose_fusion import fuse_poses
+    from strl_pyg.synthetic import SceneConfig, generate_pair
+
+    pair = generate_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.5))
+    model = StrLPose.from_pretrained()
+    s_reg = model.metadata["calibration"]["regression"]
+    for k in (None, 8.0):
+        m = copy.deepcopy(model)
+        md = {key: v for key, v in m.metadata.items() if key != "fusion_inflation"}
+        m.metadata = md if k is None else {**md, "fusion_inflation": k}
+        est = PoseEstimator(m, methods=["regression", "opencv", "fused"], bootstrap=0)
+        recs = est.estimate(pair.matches).methods
+        scale = s_reg * (1.0 if k is None else k)
+        assert recs["fused"].info["network_variance_scale"] == pytest.approx(scale)
+        ref = fuse_poses(recs["regression"].raw, None, recs["opencv"].raw, pair.matches,
+                         network_scale=scale)
+        np.testing.assert_allclose(recs["fused"].T_0to1, ref.pose.matrix().numpy(),
+                                   rtol=0, atol=1e-12)

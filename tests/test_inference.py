@@ -352,6 +352,9 @@ def test_predict_text_says_status_method_and_warnings(pngs, capsys):
     out = capsys.readouterr().out
     assert code == 0 and re.search(r"pose: ok, from (poselib|opencv)", out)
     assert "warning: the images have different sizes" in out and "regression" in out
+    # the sigma line names the covariance it prints (before: always "1st order", also for
+    # the first-order + bootstrap ones)
+    assert "sigma (first-order + bootstrap (8), calibrated): rotation" in out
 
 
 # ----------------------------------------------------------------------------- README

@@ -75,3 +75,33 @@ def test_no_matches_is_degenerate(model):
     black = np.zeros((96, 128), np.uint8)
     est = estimate_recommended(model, black, black)
     assert est.status == "degenerate" and est.T_0to1 is None
+
+
+def test_without_poselib_opencv_takes_its_place_and_the_record_says_so(monkeypatch):
+    """Found by a newcomer trial: a plain `pip install -e .` has no PoseLib, and the shipped
+    order ['poselib', 'fused', ...] then recommended `fused` (measured with PoseLib as its base,
+    and within the noise of PoseLib on the calibration pairs) without a word."""
+    import dataclasses
+
+    from strl_pyg import inference
+    from strl_pyg.model import StrLPose
+    from strl_pyg.synthetic import SceneConfig, generate_pair
+
+    model = StrLPose.from_pretrained()
+    assert model.metadata["recommended_order"][0] == "poselib"
+    spec = inference.METHODS["poselib"]
+    monkeypatch.setitem(inference.METHODS, "poselib",
+                        dataclasses.replace(spec, available=lambda: False))
+    order = inference.recommended_order(model)
+    assert order[0] == "opencv" and "poselib" not in order and order.count("opencv") == 1
+    rest = [m for m in model.metadata["recommended_order"] if m not in ("poselib", "opencv")]
+    assert [m for m in order if m != "opencv"] == rest
+    pair = generate_pair(2_000_001, SceneConfig(kind="indoor", noise_px=0.5))
+    est = inference.PoseEstimator(model).estimate(pair.matches)
+    assert est.pose.status == "ok" and est.pose.method == "opencv"
+    assert inference.POSELIB_MISSING in est.pose.warnings
+    # an uncalibrated model (no measured order) falls back quietly, as before
+    plain = StrLPose(model.config)
+    assert inference.recommended_order(plain)[0] == "opencv"
+    est = inference.PoseEstimator(plain, methods=["opencv"]).estimate(pair.matches)
+    assert inference.POSELIB_MISSING not in est.pose.warnings

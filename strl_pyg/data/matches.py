@@ -324,6 +324,14 @@ def _load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"Expected a match file at '{path}' (got no such file)")
+    with open(path, "rb") as f:
+        head = f.read(6)
+    if not head.startswith(b"PK"):  # an .npz is a zip archive; numpy reads anything else
+        # as a pickle and would say so
+        what = "an empty file" if not head else (
+            "a single .npy array" if head.startswith(b"\x93NUMPY") else
+            f"a file that is not an .npz archive: it starts with {head!r}")
+        raise ValueError(f"Expected a readable .npz match file at '{path}' (got {what})")
     try:
         with np.load(path, allow_pickle=False) as npz:
             return {k: npz[k] for k in npz.files}

@@ -1,0 +1,65 @@
+"""A pose the matches do not support is not "ok" (found by a newcomer trial: 300 random point
+pairs gave status "ok" from PoseLib with 11 inliers), and PoseEstimator takes a checkpoint
+path (a wrong path was accepted and every network method failed with an AttributeError)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from strl_pyg.data.matches import PairMatches
+from strl_pyg.inference import PoseEstimator
+from strl_pyg.model import StrLPose
+from strl_pyg.synthetic import SceneConfig, generate_pair
+
+K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
+
+
+@pytest.fixture(scope="module")
+def model():
+    return StrLPose.from_pretrained()
+
+
+def _noise(n=300, seed=0):
+    rng = np.random.default_rng(seed)
+    pts = [rng.uniform([0, 0], [639, 479], size=(n, 2)) for _ in range(2)]
+    img = [rng.integers(0, 256, size=(480, 640), dtype=np.uint8) for _ in range(2)]
+    return PairMatches(pts[0], pts[1], K0=K, K1=K, image0=img[0], image1=img[1])
+
+
+def test_random_matches_get_no_confident_pose(model):
+    est = PoseEstimator(model).estimate(_noise())
+    assert est.pose.status == "failed" and est.pose.T_0to1 is None
+    for name in ("poselib", "opencv"):
+        if name in est.methods:
+            rec = est.methods[name]
+            assert rec.status == "failed" and rec.info.get("unsupported") is True
+            assert any("do not support" in w for w in rec.warnings)
+    # the network still answers by name, but it is not passed off as the recommended pose
+    assert est.methods["regression"].status == "ok"
+    assert any("regression not used" in w for w in est.pose.warnings)
+    # the check can be switched off: then the solver's pose comes back as before
+    off = PoseEstimator(model, methods=["opencv"], min_inlier_ratio=0).estimate(_noise())
+    assert off.methods["opencv"].status == "ok"
+
+
+def test_supported_pairs_keep_their_pose(model):
+    pair = generate_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.5,
+                                                outlier_fraction=0.5))
+    est = PoseEstimator(model, methods=["opencv", "regression"]).estimate(pair.matches)
+    assert est.methods["opencv"].status == "ok" and est.pose.method in ("opencv", "regression")
+    assert est.pose.status == "ok"
+    for bad in (-0.1, 1.0, "0.2"):
+        with pytest.raises(ValueError, match="Expected min_inlier_ratio"):
+            PoseEstimator(model, min_inlier_ratio=bad)
+
+
+def test_a_checkpoint_path_loads_and_a_wrong_one_says_so(tmp_path, model):
+    path = tmp_path / "m.pt"
+    model.save(path)
+    est = PoseEstimator(str(path), methods=["regression"])
+    assert isinstance(est.model, StrLPose)
+    with pytest.raises((FileNotFoundError, ValueError), match="nope.pt"):
+        PoseEstimator(tmp_path / "nope.pt")
+    with pytest.raises(TypeError, match="Expected a StrLPose, a checkpoint path or None"):
+        PoseEstimator(42)
