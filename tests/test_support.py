@@ -39,8 +39,24 @@ def test_random_matches_get_no_confident_pose(model):
     assert est.methods["regression"].status == "ok"
     assert any("regression not used" in w for w in est.pose.warnings)
     # the check can be switched off: then the solver's pose comes back as before
-    off = PoseEstimator(model, methods=["opencv"], min_inlier_ratio=0).estimate(_noise())
+    off = PoseEstimator(model, methods=["opencv"], min_inlier_ratio=0, min_inliers=0).estimate(
+        _noise())
     assert off.methods["opencv"].status == "ok"
+
+
+def test_few_random_matches_are_not_supported_either(model):
+    """Two unrelated images gave 32 matches and PoseLib 9 inliers (28 %, above the ratio):
+    its 5-point sample and a few chance agreements. The count floor catches it."""
+    few = _noise(n=32, seed=3)
+    plain = PoseEstimator(model, methods=["opencv"], min_inlier_ratio=0, min_inliers=0)
+    k = plain.estimate(few).methods["opencv"].num_inliers
+    assert k is not None and 5 <= k < 12
+    est = PoseEstimator(model, methods=["opencv"]).estimate(few)
+    assert est.pose.status == "failed"
+    assert any("fewer than 12" in w for w in est.methods["opencv"].warnings)
+    for bad in (-1, 2.5, True):
+        with pytest.raises(ValueError, match="Expected min_inliers"):
+            PoseEstimator(model, min_inliers=bad)
 
 
 def test_supported_pairs_keep_their_pose(model):
