@@ -203,6 +203,11 @@ def cmd_demo(args) -> int:
     print(f"recommended pose: {est.status}" + (f", from {est.pose.method}" if est.pose.method
                                                else "")
           + "".join(f"\nwarning: {w}" for w in est.warnings))
+    if est.pose.sigma is not None:
+        kind = est.pose.info.get("covariance", "")
+        print(f"recommended pose's sigma ({kind}): rotation "
+              f"{est.pose.sigma['rotation_deg']:.3f} deg, translation direction "
+              f"{est.pose.sigma['translation_deg']:.3f} deg")
     p_err, l_err = epipolar_residuals(matches, T_gt)
     out = Path(args.out)
     png = save_matches_png(out / "demo_matches.png", matches, point_inliers=p_err < 2.0,

@@ -268,7 +268,7 @@ class PoseEstimator:
                     first = str(err).splitlines()[0] if str(err) else ""
                     res = MethodResult(name, "failed",
                                        warnings=[f"{name} raised {type(err).__name__}: {first}"])
-            res = self._support(res, n)
+            res = self._support(res, matches)
             scale = calibration.get(name)
             if (scale is not None and name in BOOTSTRAPPED and res.covariance is not None
                     and fitted_boot != self.bootstrap):
@@ -303,11 +303,23 @@ class PoseEstimator:
                                 methods, 0, 0, None)
         return self.estimate(matches)
 
-    def _support(self, res: MethodResult, n: int) -> MethodResult:
-        """``res`` as ``"failed"`` when its inliers are below ``min_inlier_ratio`` of ``n``."""
-        k = res.num_inliers
-        if (res.status != "ok" or res.method not in SUPPORT_CHECKED or k is None or n <= 0
-                or not (k < self.min_inlier_ratio * n or k < self.min_inliers)):
+    def _support(self, res: MethodResult, matches: PairMatches) -> MethodResult:
+        """``res`` as ``"failed"`` when the point matches within the inlier threshold of its
+        pose (Sampson distance, every solver counted alike: OpenCV's own count is
+        ``recoverPose``'s cheirality mask, which drops distant points) are fewer than
+        ``min_inliers`` or ``min_inlier_ratio`` of them."""
+        n = matches.num_points
+        if (res.status != "ok" or res.method not in SUPPORT_CHECKED or res.T_0to1 is None
+                or n <= 0 or not matches.has_intrinsics):
+            return res
+        from strl_pyg.geometry import Pose
+        from strl_pyg.guided import _normalised, _sampson
+
+        pose = Pose.from_matrix(torch.as_tensor(res.T_0to1, dtype=torch.float64))
+        x0, x1, focal = _normalised(matches)
+        k = int((_sampson(pose.R, pose.t, x0, x1) < self.threshold_px / focal).sum())
+        res.info["support_inliers"] = k
+        if not (k < self.min_inlier_ratio * n or k < self.min_inliers):
             return res
         why = (f"below {100 * self.min_inlier_ratio:.0f} %" if k < self.min_inlier_ratio * n
                else f"fewer than {self.min_inliers}")

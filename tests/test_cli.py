@@ -36,6 +36,8 @@ def test_demo_prints_pose_and_writes_png(checkpoint, tmp_path, capsys):
     out = capsys.readouterr().out
     assert code == 0
     assert "Str-L Pose" in out and "OpenCV MAGSAC" in out and "predicted sigma" in out
+    # the recommended pose's own uncertainty too (before: only the network's)
+    assert "recommended pose: ok" in out and "recommended pose's sigma (" in out
     result = json.loads(out.strip().splitlines()[-1])
     assert len(result["prediction"]["quaternion"]) == 4
     # the classical baseline on front-end matches of a generated pair is accurate
