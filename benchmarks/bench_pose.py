@@ -18,8 +18,8 @@ the fraction of pairs whose 5-dof tangent error lies inside the 1-sigma and 2-si
 (``mixed_small``, seeds from 3,000,000), one covariance scale per method and writes them into
 the checkpoint: for the first-order + bootstrap covariances of PoseLib and OpenCV
 (:mod:`strl_pyg.pose_uncertainty`) such that 95.4 % of the Mahalanobis distances fall inside
-the 2-sigma region (guided too: its PoseLib solve is bootstrapped the same way); for the
-first-order ones (network, fused) such that 68.3 % fall
+the 2-sigma region (guided and fused too: they carry the bootstrap of their classical solve);
+for the network's own (regression, geometric head) such that 68.3 % fall
 inside the 1-sigma region (at 2 sigma the few gross failures would set their scale)
 (``metadata["calibration"]``); the evaluation then uses them. Before the fused scale, the
 fusion's network-variance inflation is chosen on the same pairs (:func:`fit_fusion_inflation`:
@@ -322,10 +322,12 @@ def targets_markdown(ratios: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def fit_calibration(estimator, pairs) -> tuple[dict[str, float], list[str], dict]:
-    """On the calibration pairs: per-method variance scale ``k`` such that 68.27 % of
-    ``d2 / k`` fall inside ``CHI2_5[1]`` (the 1-sigma region), and the methods ordered by
-    AUC@10 (then by median error), which becomes the checkpoint's recommended order."""
+def fit_calibration(estimator, pairs):
+    """On the calibration pairs: per-method variance scales (:func:`_fit_scales`: bootstrapped
+    covariances matched at the 2-sigma quantile, the network's own at the 1-sigma one), the
+    fusion's network-variance inflation (:func:`fit_fusion_inflation`), the fused scale from a
+    second pass with both in place, and the recommended order (:func:`recommended_order`).
+    Returns ``(scales, order, stats, order_evidence, {"inflation", "evidence"})``."""
     rows = run_set(estimator, pairs, None)
     scales = _fit_scales(estimator, rows, [m for m in estimator.method_names if m != "fused"])
     fusion = {"inflation": 1.0, "evidence": {}}
@@ -367,19 +369,21 @@ def fit_fusion_inflation(estimator, pairs, s_reg: float) -> tuple[float, dict]:
     from strl_pyg.pose_fusion import fuse_poses
     from strl_pyg.pose_methods import _have_poselib
 
-    base = "poselib" if _have_poselib() else "opencv"
+    classical = ("poselib", "opencv") if _have_poselib() else ("opencv",)
     model = estimator.model
     md = dict(model.metadata)
     model.metadata = {**md, "calibration": {"regression": s_reg}}
     try:
-        est = type(estimator)(model, methods=["regression", base], bootstrap=0)
+        est = type(estimator)(model, methods=["regression", *classical], bootstrap=0)
         solved = []
         for _, m, T in tqdm(pairs, desc="fusion inflation", leave=False):
             if m is None:
                 continue
             recs = est.estimate(m).methods
-            if recs["regression"].status == "ok" and recs[base].status == "ok":
-                solved.append((m, T, recs["regression"].raw, recs[base].raw))
+            # as the fused method: the first 'ok' classical estimate
+            cls = next((recs[c] for c in classical if recs[c].status == "ok"), None)
+            if recs["regression"].status == "ok" and cls is not None:
+                solved.append((m, T, recs["regression"].raw, cls.raw))
     finally:
         model.metadata = md
     evidence, chosen = {}, FUSION_INFLATIONS[-1]
@@ -388,6 +392,8 @@ def fit_fusion_inflation(estimator, pairs, s_reg: float) -> tuple[float, dict]:
         for m, T, net, cls in solved:
             f = fuse_poses(net, None, cls, m, threshold_px=estimator.threshold_px,
                            network_scale=s_reg * k)
+            if f.source == "network":  # too few inliers: the fused method reports "failed"
+                continue
             cls_e.append(errors(cls.pose.matrix().numpy(), T))
             fus_e.append(errors(f.pose.matrix().numpy(), T))
         cls_e = np.nan_to_num(np.asarray(cls_e), nan=180.0)

@@ -146,9 +146,9 @@ def _print_estimate(est, indent: str = "") -> None:
         label = METHOD_LABELS.get(pose.method, pose.method)
         print(f"{indent}pose: ok, from {pose.method} ({label}): {_fmt_pose(pose.T_0to1)}")
         if pose.sigma is not None:
-            kind = pose.info.get("covariance", "")
-            cal = " calibrated" if "calibration_scale" in pose.info else ""
-            print(f"{indent}  sigma ({kind + ',' if kind else ''}{cal or ' uncalibrated'}): "
+            kind = pose.info.get("covariance", "network log-variance")
+            cal = "calibrated" if "calibration_scale" in pose.info else "uncalibrated"
+            print(f"{indent}  sigma ({kind}, {cal}): "
                   f"rotation {pose.sigma['rotation_deg']:.3f} deg, "
                   f"translation direction {pose.sigma['translation_deg']:.3f} deg")
     else:
@@ -204,7 +204,7 @@ def cmd_demo(args) -> int:
                                                else "")
           + "".join(f"\nwarning: {w}" for w in est.warnings))
     if est.pose.sigma is not None:
-        kind = est.pose.info.get("covariance", "")
+        kind = est.pose.info.get("covariance", "network log-variance")
         print(f"recommended pose's sigma ({kind}): rotation "
               f"{est.pose.sigma['rotation_deg']:.3f} deg, translation direction "
               f"{est.pose.sigma['translation_deg']:.3f} deg")

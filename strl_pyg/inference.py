@@ -121,9 +121,11 @@ def recommended_order(model: torch.nn.Module | None) -> tuple[str, ...]:
     return order
 
 
-#: Defaults of :class:`PoseEstimator` ``min_inlier_ratio`` and ``min_inliers``.
-MIN_INLIER_RATIO = 0.2
+#: Defaults of :class:`PoseEstimator` ``min_inlier_ratio`` and ``min_inliers``, and the
+#: support band in units of the inlier threshold.
+MIN_INLIER_RATIO = 0.1
 MIN_SUPPORT_INLIERS = 12
+SUPPORT_BAND = 2.0
 #: The methods whose poses need that support (their inliers are counted on the point matches).
 SUPPORT_CHECKED = ("poselib", "opencv", "guided", "geometric", "fused")
 
@@ -171,15 +173,15 @@ class PoseEstimator:
             first order only. Their calibration scales apply only when the checkpoint's
             ``metadata["calibration_bootstrap"]`` (0 when absent) equals it; otherwise the
             record keeps the uncalibrated covariance and says so in ``warnings``.
-        min_inlier_ratio, min_inliers: a solver's pose (:data:`SUPPORT_CHECKED`) with fewer
-            inliers than this fraction of the point matches, or than this count, is
-            ``"failed"``: the matches do not support it (RANSAC finds a few percent of
-            "inliers" among random matches, and on a few dozen random matches its 5-point
-            sample plus a handful of chance agreements: 9 of 32 on two unrelated images); the
-            regression is then not used as the recommended pose either. Defaults 0.2 and 12
-            (a 5-point sample and 7 confirmations; on the held-out pairs of
-            ``benchmarks/bench_pose.py`` the right PoseLib solves had ratios >= 0.37 and one
-            had 11 inliers, the wrong ones mostly 6-15); ``0`` switches either off.
+        min_inlier_ratio, min_inliers: a solver's pose (:data:`SUPPORT_CHECKED`) is
+            ``"failed"`` when the matches do not support it: fewer of the point matches lie
+            within :data:`SUPPORT_BAND` x ``threshold_px`` of it (Sampson distance; the band
+            keeps correct poses of 2 px matches) than this fraction of them, or than
+            ``min(min_inliers, number of matches)`` (with fewer matches than that, every match
+            must agree). Random matches give RANSAC a few percent (11 of 300), and on a few
+            dozen its 5-point sample plus a handful (9 of 32 on two unrelated images). When no
+            checked solver is left ``"ok"`` for that reason, the regression is not used as the
+            recommended pose either. Defaults 0.1 and 12; ``0`` switches either off.
     """
 
     def __init__(self, model: Any = None, methods: Any = None,
@@ -317,17 +319,19 @@ class PoseEstimator:
 
         pose = Pose.from_matrix(torch.as_tensor(res.T_0to1, dtype=torch.float64))
         x0, x1, focal = _normalised(matches)
-        k = int((_sampson(pose.R, pose.t, x0, x1) < self.threshold_px / focal).sum())
+        band = SUPPORT_BAND * self.threshold_px
+        k = int((_sampson(pose.R, pose.t, x0, x1) < band / focal).sum())
         res.info["support_inliers"] = k
-        if not (k < self.min_inlier_ratio * n or k < self.min_inliers):
+        floor = min(self.min_inliers, n)
+        if not (k < self.min_inlier_ratio * n or k < floor):
             return res
         why = (f"below {100 * self.min_inlier_ratio:.0f} %" if k < self.min_inlier_ratio * n
-               else f"fewer than {self.min_inliers}")
+               else f"fewer than {floor}")
         return MethodResult(res.method, "failed", time_ms=res.time_ms, num_inliers=k,
                             raw=res.raw, info={**res.info, "unsupported": True},
                             warnings=res.warnings + [
-            f"the matches do not support this pose: {k} of {n} point matches "
-            f"are inliers ({100 * k / n:.0f} %, {why}; random matches give RANSAC a few "
+            f"the matches do not support this pose: {k} of {n} point matches are within "
+            f"{band:g} px of it ({100 * k / n:.0f} %, {why}; random matches give RANSAC a few "
             "percent, and a handful on few matches)"])
 
     def _recommend(self, results: dict[str, MethodResult], warnings: list[str],
@@ -335,7 +339,10 @@ class PoseEstimator:
         chosen = recommended_order(self._model)
         order = [m for m in chosen if m in results]
         notes = [POSELIB_MISSING] if _measured_with_missing_poselib(self._model) else []
-        unsupported = any(r.info.get("unsupported") for r in results.values())
+        # the regression stands in only while some solver's pose is supported or none was
+        # refused for lack of support
+        unsupported = any(r.info.get("unsupported") for r in results.values()) and not any(
+            r.status == "ok" for m, r in results.items() if m in SUPPORT_CHECKED)
         for m in order:
             r = results[m]
             if r.status == "ok" and m == "regression" and unsupported:
