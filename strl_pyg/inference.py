@@ -278,6 +278,12 @@ class PoseEstimator:
                     f"{name}: covariance not calibrated (the checkpoint's scale was fitted with "
                     f"bootstrap={fitted_boot}, this estimate used bootstrap={self.bootstrap})")
                 scale = None
+            if (scale is not None and name in ("guided", "fused") and res.covariance is not None
+                    and _measured_with_missing_poselib(model)):
+                res.warnings.append(
+                    f"{name}: covariance not calibrated (the checkpoint's scale was fitted with "
+                    "PoseLib as its classical base, which is not installed here)")
+                scale = None
             if scale is not None and res.covariance is not None:
                 res.covariance = res.covariance * scale
                 res.info["calibration_scale"] = scale

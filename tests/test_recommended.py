@@ -100,6 +100,14 @@ def test_without_poselib_opencv_takes_its_place_and_the_record_says_so(monkeypat
     est = inference.PoseEstimator(model).estimate(pair.matches)
     assert est.pose.status == "ok" and est.pose.method == "opencv"
     assert inference.POSELIB_MISSING in est.pose.warnings
+    # guided and fused run on OpenCV here: their PoseLib-fitted scales are not applied
+    for name in ("guided", "fused"):
+        rec = est.methods[name]
+        assert rec.status == "ok" and rec.covariance is not None
+        assert "calibration_scale" not in rec.info
+        assert any("PoseLib as its classical base" in w for w in rec.warnings)
+    assert est.methods["opencv"].info["calibration_scale"] == \
+        model.metadata["calibration"]["opencv"]
     # an uncalibrated model (no measured order) falls back quietly, as before
     plain = StrLPose(model.config)
     assert inference.recommended_order(plain)[0] == "opencv"
