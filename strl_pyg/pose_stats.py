@@ -147,7 +147,11 @@ def median_ratio_interval(a: Any, b: Any, level: float = 0.95, resamples: int = 
 
     idx = np.random.default_rng(seed).integers(0, x.size, size=(resamples, x.size))
     boot = ratio(np.median(x[idx], axis=1), np.median(y[idx], axis=1))
-    lo, hi = np.quantile(boot, [(1 - level) / 2, (1 + level) / 2])
+    if np.isfinite(boot).all():
+        lo, hi = np.quantile(boot, [(1 - level) / 2, (1 + level) / 2])
+    else:  # no interpolation between an infinite ratio and another (inf - inf)
+        lo = np.quantile(boot, (1 - level) / 2, method="lower")
+        hi = np.quantile(boot, (1 + level) / 2, method="higher")
     r = float(ratio(np.median(x), np.median(y)))
     return r, float(lo), float(hi)
 

@@ -138,7 +138,9 @@ def test_median_ratio_interval_brackets_the_ratio_and_is_paired():
     r, lo, hi = median_ratio_interval(noisy, b)
     assert lo < r < hi and hi - lo < 0.3
     assert median_ratio_interval(noisy, b) == median_ratio_interval(noisy, b)  # seeded
-    assert median_ratio_interval([1.0], [0.0])[0] == math.inf
+    assert median_ratio_interval([1.0], [0.0]) == (math.inf, math.inf, math.inf)  # no NaN
+    r, lo, hi = median_ratio_interval([1.0, 2.0, 3.0], [0.0, 1.0, 1.0])
+    assert r == 2.0 and lo <= r <= hi == math.inf and not math.isnan(lo)
     with pytest.raises(ValueError, match="one length"):
         median_ratio_interval([1.0, 2.0], [1.0])
     with pytest.raises(ValueError, match="finite"):
