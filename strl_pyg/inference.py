@@ -243,11 +243,10 @@ class PoseEstimator:
                           "translation is undefined")
             warnings.append(degenerate)
         ctx = MethodContext(self, {})
-        needs_model = any(m in ("regression", "geometric", "guided", "fused")
-                          for m in self.method_names)
-        # a model passed in calibrates the classical methods too, also when no network
-        # method runs (the default predict path: PoseLib only)
-        model = self.model if needs_model else self._model
+        # the model (the shipped one when None was given) calibrates the classical methods
+        # too, also when no network method runs (the default predict path: PoseLib only);
+        # before, PoseEstimator(methods=["poselib"]) gave uncalibrated sigmas without a word
+        model = self.model
         calibration = _calibration(model)
         md = getattr(model, "metadata", None) if model is not None else None
         fitted_boot = int(md.get("calibration_bootstrap", 0)) if isinstance(md, dict) else 0

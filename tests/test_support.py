@@ -104,3 +104,14 @@ def test_a_checkpoint_path_loads_and_a_wrong_one_says_so(tmp_path, model):
         PoseEstimator(tmp_path / "nope.pt")
     with pytest.raises(TypeError, match="Expected a StrLPose, a checkpoint path or None"):
         PoseEstimator(42)
+
+
+def test_classical_only_estimator_uses_the_shipped_calibration(model):
+    """Found while measuring KITTI: PoseEstimator(methods=["poselib"]) without a model gave
+    uncalibrated (4x too small) sigmas, silently; None means the shipped model, calibration
+    included."""
+    pair = generate_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.5))
+    alone = PoseEstimator(methods=["opencv"]).estimate(pair.matches).methods["opencv"]
+    given = PoseEstimator(model, methods=["opencv"]).estimate(pair.matches).methods["opencv"]
+    assert alone.info["calibration_scale"] == model.metadata["calibration"]["opencv"]
+    np.testing.assert_allclose(alone.covariance, given.covariance, rtol=1e-12)
