@@ -44,6 +44,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import sys
@@ -337,21 +338,28 @@ def fit_calibration(estimator, pairs):
         k, ev = fit_fusion_inflation(estimator, pairs, scales["regression"])
         fusion = {"inflation": k, "evidence": ev}
         model = estimator.model
-        md = dict(model.metadata)
-        model.metadata = {**md, "calibration": {"regression": scales["regression"]},
-                          "fusion_inflation": k}
-        try:
+        with _metadata(model, calibration={"regression": scales["regression"]},
+                       fusion_inflation=k):
             fused_rows = run_set(type(estimator)(model, methods=[
                 m for m in ("regression", "poselib", "opencv", "fused")
                 if m in estimator.method_names], bootstrap=estimator.bootstrap), pairs, None)
-        finally:
-            model.metadata = md
         scales.update(_fit_scales(estimator, fused_rows, ["fused"]))
         for row, fused in zip(rows, fused_rows, strict=True):
             row["methods"]["fused"] = fused["methods"].get("fused", {"status": "failed"})
     stats = {m: summarise(rows, m) for m in estimator.method_names}
     order, evidence = recommended_order(rows, stats)
     return scales, order, stats, evidence, fusion
+
+
+@contextlib.contextmanager
+def _metadata(model, **override):
+    """``model.metadata`` with ``override`` on top for the ``with`` block, then restored."""
+    saved = dict(model.metadata)
+    model.metadata = {**saved, **override}
+    try:
+        yield model
+    finally:
+        model.metadata = saved
 
 
 #: Candidate multipliers of the network's calibrated variance in the fusion.
@@ -371,9 +379,7 @@ def fit_fusion_inflation(estimator, pairs, s_reg: float) -> tuple[float, dict]:
 
     classical = ("poselib", "opencv") if _have_poselib() else ("opencv",)
     model = estimator.model
-    md = dict(model.metadata)
-    model.metadata = {**md, "calibration": {"regression": s_reg}}
-    try:
+    with _metadata(model, calibration={"regression": s_reg}):
         est = type(estimator)(model, methods=["regression", *classical], bootstrap=0)
         solved = []
         for _, m, T in tqdm(pairs, desc="fusion inflation", leave=False):
@@ -384,8 +390,6 @@ def fit_fusion_inflation(estimator, pairs, s_reg: float) -> tuple[float, dict]:
             cls = next((recs[c] for c in classical if recs[c].status == "ok"), None)
             if recs["regression"].status == "ok" and cls is not None:
                 solved.append((m, T, recs["regression"].raw, cls.raw))
-    finally:
-        model.metadata = md
     evidence, chosen = {}, FUSION_INFLATIONS[-1]
     for k in FUSION_INFLATIONS:
         cls_e, fus_e = [], []

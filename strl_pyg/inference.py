@@ -107,11 +107,7 @@ def recommended_order(model: torch.nn.Module | None) -> tuple[str, ...]:
     ``metadata["recommended_order"]`` (measured on held-out data when the checkpoint was
     calibrated, see ``benchmarks/bench_pose.py --calibrate``), else :data:`RECOMMENDED_ORDER`.
     Methods that are not installed are skipped when the estimate is made."""
-    md = getattr(model, "metadata", None) if model is not None else None
-    order = md.get("recommended_order") if isinstance(md, dict) else None
-    if not (isinstance(order, (list, tuple)) and order and all(isinstance(m, str) for m in order)):
-        order = RECOMMENDED_ORDER
-    order = tuple(order)
+    order = _stored_order(model) or RECOMMENDED_ORDER
     if "poselib" in order and not METHODS["poselib"].available():
         # measured with PoseLib, which fused and guided also start from: without it those are
         # other, unmeasured methods, so OpenCV (the remaining classical default) takes its place
@@ -136,11 +132,16 @@ POSELIB_MISSING = ("PoseLib is not installed: the recommended order was measured
                    "default)")
 
 
-def _measured_with_missing_poselib(model: torch.nn.Module | None) -> bool:
+def _stored_order(model: torch.nn.Module | None) -> tuple[str, ...]:
+    """The checkpoint's measured ``metadata["recommended_order"]`` (``()`` when absent)."""
     md = getattr(model, "metadata", None) if model is not None else None
     order = md.get("recommended_order") if isinstance(md, dict) else None
-    return (isinstance(order, (list, tuple)) and "poselib" in order
-            and not METHODS["poselib"].available())
+    ok = isinstance(order, (list, tuple)) and all(isinstance(m, str) for m in order)
+    return tuple(order) if ok else ()
+
+
+def _measured_with_missing_poselib(model: torch.nn.Module | None) -> bool:
+    return "poselib" in _stored_order(model) and not METHODS["poselib"].available()
 
 
 register_method("regression", _regression, needs_intrinsics=False)
@@ -160,9 +161,11 @@ class PoseEstimator:
     """Pose of one image pair by every registered method, with a recommended one.
 
     Args:
-        model: a :class:`~strl_pyg.model.StrLPose` (any dtype or device); ``None``: the shipped
-            model, :meth:`StrLPose.from_pretrained() <strl_pyg.model.StrLPose.from_pretrained>`,
-            loaded on first use.
+        model: a :class:`~strl_pyg.model.StrLPose` (any dtype or device), or a checkpoint
+            path; ``None``: the shipped model,
+            :meth:`StrLPose.from_pretrained() <strl_pyg.model.StrLPose.from_pretrained>`,
+            loaded on the first estimate (its metadata calibrates every method and gives the
+            recommended order, also when only classical methods run).
         methods: names from :data:`METHODS` to run (default: all installed ones).
         seed: resampling and RANSAC seed (same input, same result).
         threshold_px: inlier threshold of the classical solvers, pixels.
@@ -311,10 +314,10 @@ class PoseEstimator:
         return self.estimate(matches)
 
     def _support(self, res: MethodResult, matches: PairMatches) -> MethodResult:
-        """``res`` as ``"failed"`` when the point matches within the inlier threshold of its
-        pose (Sampson distance, every solver counted alike: OpenCV's own count is
-        ``recoverPose``'s cheirality mask, which drops distant points) are fewer than
-        ``min_inliers`` or ``min_inlier_ratio`` of them."""
+        """``res`` as ``"failed"`` when the point matches within :data:`SUPPORT_BAND` x
+        ``threshold_px`` of its pose (Sampson distance, every solver counted alike: OpenCV's
+        own count is ``recoverPose``'s cheirality mask, which drops distant points) are fewer
+        than ``min(min_inliers, n)`` or ``min_inlier_ratio`` of the ``n`` point matches."""
         n = matches.num_points
         if (res.status != "ok" or res.method not in SUPPORT_CHECKED or res.T_0to1 is None
                 or n <= 0 or not matches.has_intrinsics):

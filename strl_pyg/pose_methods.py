@@ -94,25 +94,19 @@ def _classical(name: str) -> MethodFn:
             cov = cov.numpy()
         except ValueError as err:
             warnings.append(f"{name}: no covariance ({err})")
-        n_boot, ms = ctx.estimator.bootstrap, res.time_ms
-        if cov is not None and n_boot:
+        rec = MethodResult(name, "ok", res.pose.matrix().numpy(), cov, warnings, res.time_ms,
+                           res.num_inliers, info=info, raw=res)
+        if cov is not None and ctx.estimator.bootstrap:
             # first order (noise around a right solution) + bootstrap (instability of the
             # solution itself), see strl_pyg.pose_uncertainty
             start = time.perf_counter()
-            boot = bootstrap_covariance(matches, res.pose, name, n_boot, thr, ctx.estimator.seed)
-            ms += (time.perf_counter() - start) * 1e3
-            ctx.cache[f"bootstrap_{name}"] = boot  # guided reuses it when it keeps this pose
-            if boot is None:
-                warnings.append(f"{name}: fewer than 3 of {n_boot} bootstrap resamples gave a "
-                                "pose; first-order covariance only")
-            else:
-                cov = cov + boot
-            info["covariance"] = "first-order" if boot is None else \
-                f"first-order + bootstrap ({n_boot})"
-        elif cov is not None:
-            info["covariance"] = "first-order"
-        return MethodResult(name, "ok", res.pose.matrix().numpy(), cov, warnings, ms,
-                            res.num_inliers, info=info, raw=res)
+            boot = bootstrap_covariance(matches, res.pose, name, ctx.estimator.bootstrap, thr,
+                                        ctx.estimator.seed)
+            rec.time_ms += (time.perf_counter() - start) * 1e3
+            ctx.cache[f"bootstrap_{name}"] = boot  # guided and fused reuse it
+        else:
+            boot = None
+        return _add_bootstrap(rec, boot, ctx.estimator.bootstrap, "first-order")
 
     return fn
 
@@ -202,7 +196,7 @@ def _guided(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     info = {"base": base, "candidate": res.info["candidate"], "refined": res.info["refined"]}
     rec = _with_covariance("guided", res.pose.matrix().numpy(), matches,
                            ctx.estimator.threshold_px, time_ms=ms, info=info, raw=res)
-    n_boot = ctx.estimator.bootstrap
+    boot, n_boot = None, ctx.estimator.bootstrap
     if rec.covariance is not None and n_boot:
         # the same bootstrap as the classical records, of the solve guided kept: on all the
         # matches (then it is the base method's own, computed once) or on the network's top
@@ -218,15 +212,24 @@ def _guided(matches: PairMatches, ctx: MethodContext) -> MethodResult:
             boot = bootstrap_covariance(sub, res.pose, base, n_boot,
                                         ctx.estimator.threshold_px, ctx.estimator.seed)
         rec.time_ms += (time.perf_counter() - start) * 1e3
-        if boot is None:
-            rec.warnings.append(f"guided: fewer than 3 of {n_boot} bootstrap resamples gave a "
-                                "pose; first-order covariance only")
-            info["covariance"] = "first-order"
-        else:
-            rec.covariance = rec.covariance + boot
-            info["covariance"] = f"first-order + bootstrap ({n_boot})"
-    elif rec.covariance is not None:
-        info["covariance"] = "first-order"
+    return _add_bootstrap(rec, boot, n_boot, "first-order")
+
+
+def _add_bootstrap(rec: MethodResult, boot: np.ndarray | None, n_boot: int, kind: str,
+                   source: str = "") -> MethodResult:
+    """``rec`` with the bootstrap term ``boot`` added to its covariance (if both exist) and
+    ``info["covariance"]`` saying which covariance it carries (``kind``, ``+ <source>bootstrap
+    (n)``); a warning when the bootstrap was asked for but gave too few poses."""
+    if rec.covariance is None:
+        return rec
+    if boot is not None:
+        rec.covariance = rec.covariance + boot
+        rec.info["covariance"] = f"{kind} + {source}bootstrap ({n_boot})"
+    else:
+        rec.info["covariance"] = kind
+        if n_boot:
+            rec.warnings.append(f"{rec.method}: fewer than 3 of {n_boot} bootstrap resamples "
+                                f"gave a pose; {kind} covariance only")
     return rec
 
 
@@ -255,20 +258,16 @@ def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:
             "sign_disagreement": f.info["sign_disagreement"], "used": f.source,
             "gate_d2": gate.get("d2"), "network_variance_scale": scale}
     warnings = [] if f.source == "fused" else [f"fused: {gate.get('reason')}"]
-    cov = f.covariance.numpy()
+    rec = MethodResult("fused", "ok", f.pose.matrix().numpy(), f.covariance.numpy(),
+                       warnings, time_ms=ms, num_inliers=f.info["num_inliers"], info=info,
+                       raw=f)
+    # the fused pose stays near the classical one and moves with it when the matches change:
+    # the classical bootstrap term (instability of the solve, which the information form
+    # cannot see) is added, as for the classical record itself (its warning, if any, is there)
     boot = ctx.cache.get(f"bootstrap_{cls.method}")
-    if boot is not None:
-        # the fused pose stays near the classical one and moves with it when the matches
-        # change: the classical bootstrap term (instability of the solve, which the
-        # information form cannot see) is added, as for the classical record itself
-        cov = cov + boot
-        info["covariance"] = (f"information form + {cls.method} bootstrap "
-                              f"({ctx.estimator.bootstrap})")
-    else:
-        info["covariance"] = "information form"
-    return MethodResult("fused", "ok", f.pose.matrix().numpy(), cov,
-                        warnings, time_ms=ms, num_inliers=f.info["num_inliers"], info=info,
-                        raw=f)
+    rec = _add_bootstrap(rec, boot, 0 if boot is None else ctx.estimator.bootstrap,
+                         "information form", f"{cls.method} ")
+    return rec
 
 
 def fusion_inflation(model: torch.nn.Module | None) -> float:

@@ -12,9 +12,10 @@ Uncertainty: ``covariance`` ``[5, 5]`` in the tangent parameters of
 ``R = exp([w]_x) R_hat``; translation direction ``d`` in rad on the unit sphere, basis
 :func:`~strl_pyg.geometry.tangent_basis` of ``t_hat``), and ``sigma``: its summary
 ``{"rotation_deg": sqrt(tr Cov_w), "translation_deg": sqrt(tr Cov_d)}`` (RMS angles, degrees).
-PoseLib's and OpenCV's are first order plus a bootstrap of the solver
-(:mod:`strl_pyg.pose_uncertainty`), the network's come from its predicted log-variances, the
-fused one from the information-form fusion; each is scaled by the checkpoint's calibration
+PoseLib's, OpenCV's and the guided one are first order plus a bootstrap of the classical solve
+(:mod:`strl_pyg.pose_uncertainty`), the fused one the information-form fusion plus the
+classical bootstrap, the network's come from its predicted log-variances
+(``info["covariance"]`` names which); each is scaled by the checkpoint's calibration
 (``info["calibration_scale"]``) where one applies.
 """
 

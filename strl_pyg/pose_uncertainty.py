@@ -8,9 +8,10 @@ little of the image, low texture) where several poses explain the inliers about 
 the estimate moves far when the matches change a little. The bootstrap measures exactly that:
 the solver is re-run on ``n`` resamples (with replacement) of the point matches and the
 covariance of the resampled poses, in the tangent chart of the estimate, is returned. The
-estimators' ``poselib`` / ``opencv`` records carry first-order + bootstrap covariances
-(:class:`strl_pyg.inference.PoseEstimator`, ``bootstrap=8``), calibrated with one scale per
-method (``benchmarks/bench_pose.py --calibrate``).
+estimators' ``poselib`` / ``opencv`` / ``guided`` records carry first-order + bootstrap
+covariances, the ``fused`` one information form + the classical bootstrap
+(:class:`strl_pyg.inference.PoseEstimator`, ``bootstrap=8``, :data:`BOOTSTRAPPED`), calibrated
+with one scale per method (``benchmarks/bench_pose.py --calibrate``).
 """
 
 from __future__ import annotations
