@@ -9,7 +9,7 @@ and argument errors return before torch is loaded.
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 from strl_pyg._dataclass import strict_from_dict
@@ -66,11 +66,18 @@ class TrainConfig:
     swap_prob: float = 0.5  # training pairs have their images exchanged with this probability
     init_from: str | None = None  # start from these weights (model.pt or last.pt); fine-tuning
     grad_clip: float | None = 10.0  # max gradient norm (None: off)
-    seed: int = 0
+    seed: int = 0  # model initialisation (and, unless data_seed is set, the data below)
+    # pairs, batch order and resampling (None: ``seed``); rows of an ablation share it so they
+    # train on the same pairs in the same order while ``seed`` varies the initialisation
+    data_seed: int | None = None
     out_dir: str = "runs/default"
     num_workers: int = 0  # data-loading processes
     device: str = "cpu"
     tensorboard: bool = True  # also log to TensorBoard when it is installed
+    # last.pt is also written every this many steps (0: off) and every this many minutes
+    # (0: off), besides every validation and on SIGINT / SIGTERM
+    checkpoint_every: int = 0
+    checkpoint_minutes: float = 10.0
     in_memory: bool = True  # keep generated / loaded graphs in memory after first access
     # Geometric head (model_overrides={"geometric": True}): strl_pyg.loss.GeometricLoss
     geo_threshold_px: float = 2.0  # inlier label threshold on the true Sampson distance
@@ -92,6 +99,14 @@ class TrainConfig:
             if self.scene_mix not in DISTRIBUTIONS:
                 raise ValueError(f"Expected scene_mix in {tuple(DISTRIBUTIONS)} "
                                  f"(got {self.scene_mix!r})")
+        if self.data_seed is not None and (not isinstance(self.data_seed, int)
+                                           or self.data_seed < 0):
+            raise ValueError(f"Expected a non-negative integer data_seed (got {self.data_seed!r})")
+        if not isinstance(self.checkpoint_every, int) or self.checkpoint_every < 0:
+            raise ValueError(f"Expected checkpoint_every >= 0 steps "
+                             f"(got {self.checkpoint_every!r})")
+        if not self.checkpoint_minutes >= 0:
+            raise ValueError(f"Expected checkpoint_minutes >= 0 (got {self.checkpoint_minutes!r})")
         for name in ("batch_size", "steps", "val_every", "train_pairs", "val_pairs", "kitti_k"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
@@ -103,6 +118,11 @@ class TrainConfig:
         if self.dataset != "synthetic" and not self.data_root:
             raise ValueError(f"Expected --data-root for dataset '{self.dataset}' (got none)")
 
+    @property
+    def resolved_data_seed(self) -> int:
+        """The seed of the data (pairs, batch order, resampling)."""
+        return self.seed if self.data_seed is None else self.data_seed
+
     def model_config(self):
         """The :class:`~strl_pyg.StrLPoseConfig` of this run: the ablation row ``model`` with
         ``model_overrides``; unless overridden, metric translation on KITTI and patch / image
@@ -110,6 +130,11 @@ class TrainConfig:
         from strl_pyg.model import StrLPoseConfig
 
         overrides = dict(self.model_overrides)
+        known = [f.name for f in fields(StrLPoseConfig)]
+        unknown = sorted(set(overrides) - set(known))
+        if unknown:
+            raise ValueError(f"Expected --set keys among the StrLPoseConfig fields "
+                             f"{', '.join(known)} (got {', '.join(unknown)})")
         if self.dataset == "kitti":
             overrides.setdefault("translation", "metric")
         channels = DATA_CHANNELS[self.dataset]
@@ -164,11 +189,22 @@ def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
                     help="probability of exchanging the two images of a training pair")
     ap.add_argument("--init-from", default=None,
                     help="start from these weights (model.pt or last.pt), e.g. to fine-tune")
-    ap.add_argument("--seed", type=int, default=d.seed)
+    ap.add_argument("--seed", type=int, default=d.seed,
+                    help="model initialisation (and the data, unless --data-seed is given)")
+    ap.add_argument("--data-seed", type=int, default=None,
+                    help="seed of the training pairs, batch order and resampling (default: "
+                         "--seed); ablation rows share it")
+    ap.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every,
+                    help="also write last.pt every this many steps (0: off)")
+    ap.add_argument("--checkpoint-minutes", type=float, default=d.checkpoint_minutes,
+                    help="also write last.pt every this many minutes (0: off); always on "
+                         "Ctrl-C / SIGTERM and at every validation")
     ap.add_argument("--workers", type=int, default=d.num_workers)
     ap.add_argument("--device", default=d.device)
     ap.add_argument("--out", default=d.out_dir, help="run folder (checkpoint, logs, curves)")
     ap.add_argument("--resume", action="store_true", help="continue from <out>/last.pt")
+    ap.add_argument("--overwrite", action="store_true",
+                    help="start afresh in an existing run folder (its checkpoint is replaced)")
     ap.add_argument("--no-tensorboard", action="store_true")
     ap.add_argument("--no-progress", action="store_true")
     return ap

@@ -142,8 +142,8 @@ def build_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
                 for j, (kind, n) in enumerate(zip(kinds, sizes, strict=True)) if n > 0
             ])
 
-        return part(cfg.train_pairs, cfg.seed * 10_000_000), part(
-            cfg.val_pairs, 1_000_000 + cfg.seed * 10_000_000)
+        return part(cfg.train_pairs, cfg.resolved_data_seed * 10_000_000), part(
+            cfg.val_pairs, 1_000_000 + cfg.resolved_data_seed * 10_000_000)
     keep = cfg.model_config().visual == "cnn"
     common = dict(cache_dir=cfg.cache_dir, patch_size=cfg.patch_size, keep_images=keep,
                   limit=cfg.limit, on_missing="skip")
@@ -172,8 +172,8 @@ def _mixed_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
     keep = cfg.model_config().visual == "cnn"
     kw = dict(matches="frontend", cache_dir=cfg.cache_dir) if cfg.matches == "frontend" else {}
     sets = []
-    for n, base in ((cfg.train_pairs, cfg.seed * 10_000_000),
-                    (cfg.val_pairs, 1_000_000 + cfg.seed * 10_000_000)):
+    for n, base in ((cfg.train_pairs, cfg.resolved_data_seed * 10_000_000),
+                    (cfg.val_pairs, 1_000_000 + cfg.resolved_data_seed * 10_000_000)):
         ds = D.SyntheticPairs(n, seed=base, scene_config=dist, patch_size=cfg.patch_size,
                               keep_images=keep, **kw)
         if kw:

@@ -14,6 +14,10 @@ name            kinds                   motions              image sizes (H, W) 
                                                              768x1024
 ``mixed_small`` all four                as ``mixed``         240x320, 192x640   cheap CPU
                                                                                 training
+``lines_small`` all four                as ``mixed``         240x320            low texture
+                                                                                0.35: the
+                                                                                ablation's
+                                                                                training mix
 ``driving``     street                  forward              370x1226           f 0.55-0.62 W,
                                                                                 KITTI-like
 ``indoor``      indoor                  forward, lateral,    480x640            f 0.8-1.0 W,
@@ -191,6 +195,11 @@ _EVAL = dict(sizes=((480, 640),), swap_prob=0.5)
 DISTRIBUTIONS: dict[str, SceneDistribution] = {
     "mixed": SceneDistribution("mixed"),
     "mixed_small": SceneDistribution("mixed_small", sizes=((240, 320), (192, 640))),
+    # the ablation study's training mix: point-poor low-texture scenes (structural edges, few
+    # corners) over twice as often as in mixed; one image size, so that the +R rows (a CNN
+    # over whole images) can batch their images
+    "lines_small": SceneDistribution("lines_small", sizes=((240, 320),),
+                                     low_texture_prob=0.35),
 }
 EVAL_DISTRIBUTIONS: dict[str, SceneDistribution] = {
     "driving": SceneDistribution("driving", kinds=("street",), motions=("forward",),
