@@ -3,7 +3,6 @@ named presets, and the dataset paths (ground truth and front end) over mixed ima
 
 from __future__ import annotations
 
-import hashlib
 import pickle
 from collections import Counter
 
@@ -39,25 +38,52 @@ def _angle_deg(T: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip((np.trace(T[:3, :3]) - 1) / 2, -1, 1))))
 
 
-def _digest(p) -> str:
-    m = hashlib.sha256()
-    for a in (p.image0, p.image1, p.K, p.T_0to1, p.matches.points0, p.matches.points1,
-              p.matches.lines0, p.matches.lines1):
-        m.update(np.ascontiguousarray(a).tobytes())
-    return m.hexdigest()[:16]
+# What a legacy config's pair must keep, measured with the generator before the new knobs
+# existed (the values equal those of commit 93ac487, whose SHA-256 digests they replace):
+# the digests hashed rendered pixels and goodFeaturesToTrack's corner picks, which depend on
+# OpenCV's CPU-specific (SIMD) code paths, so they failed on other CPUs. These checks compare
+# what matters with tolerances that a CPU change cannot break (a few pixels of one grey level,
+# a corner or two near the detector's threshold) and a real change can (another pose, scene,
+# texture or sampler moves them by far more).
+_LEGACY = [
+    (0, dict(kind="street", image_size=(96, 320)),
+     dict(points=494, lines=153, mean0=(171.12, 41.42), std0=(91.39, 23.73),
+          img=(126.03, 129.03), img_std=(53.84, 53.91), f=185.6, c=(159.5, 47.5),
+          T=[[0.99956, 0.0, -0.029658, 0.009374], [0.000239, 0.999967, 0.008072, -0.00125],
+             [0.029657, -0.008075, 0.999528, -1.012254]])),
+    (3, dict(kind="indoor", image_size=(96, 128)),
+     dict(points=184, lines=60, mean0=(59.03, 62.09), std0=(28.21, 23.06),
+          img=(70.7, 65.01), img_std=(47.48, 37.18), f=108.8, c=(63.5, 47.5),
+          T=[[0.992925, 0.056647, -0.104361, 0.127918], [-0.060355, 0.997641, -0.032722, -0.315139],
+             [0.102261, 0.038789, 0.994001, -0.230597]])),
+    (7, dict(kind="boxes", image_size=(96, 128), noise_px=0.5, outlier_fraction=0.2),
+     dict(points=285, lines=38, mean0=(64.86, 53.46), std0=(35.21, 23.61),
+          img=(144.66, 142.55), img_std=(48.38, 53.37), f=108.8, c=(63.5, 47.5),
+          T=[[0.999309, 0.016152, -0.033468, 0.170851], [-0.019152, 0.995635, -0.091349, -0.186897],
+             [0.031846, 0.091926, 0.995256, -0.318052]])),
+]
 
 
-@pytest.mark.parametrize(
-    "seed, kwargs, digest",
-    [  # computed with the generator before the new knobs existed (commit 93ac487)
-        (0, dict(kind="street", image_size=(96, 320)), "bbeab7707644b33e"),
-        (3, dict(kind="indoor", image_size=(96, 128)), "4c20c20e7559e2f8"),
-        (7, dict(kind="boxes", image_size=(96, 128), noise_px=0.5, outlier_fraction=0.2),
-         "2cc77a2676aa764c"),
-    ],
-)
-def test_legacy_configs_give_the_same_pairs_as_before(seed, kwargs, digest):
-    assert _digest(generate_pair(seed, SceneConfig(**kwargs))) == digest
+@pytest.mark.parametrize("seed, kwargs, ref", _LEGACY)
+def test_legacy_configs_give_the_same_pairs_as_before(seed, kwargs, ref):
+    p = generate_pair(seed, SceneConfig(**kwargs))
+    # pose and intrinsics are computed in closed form: equal to the printed precision
+    np.testing.assert_allclose(p.T_0to1[:3], ref["T"], atol=2e-6)
+    assert p.K[0, 0] == pytest.approx(ref["f"]) and p.K[1, 1] == pytest.approx(ref["f"])
+    np.testing.assert_allclose(p.K[:2, 2], ref["c"], atol=1e-9)
+    # images: mean and spread within 0.2 grey levels (a CPU change moves a few pixels by one)
+    for img, mean, std in zip((p.image0, p.image1), ref["img"], ref["img_std"], strict=True):
+        assert img.shape == tuple(kwargs["image_size"]) and img.dtype == np.uint8
+        assert float(img.mean()) == pytest.approx(mean, abs=0.2)
+        assert float(img.std()) == pytest.approx(std, abs=0.2)
+    # matches: counts within 2 % (corners near the detector threshold), where they lie within
+    # 2 px; exact ground truth is checked by test_every_kind_and_motion_has_exact_ground_truth
+    m = p.matches
+    assert abs(m.num_points - ref["points"]) <= max(2, 0.02 * ref["points"])
+    assert m.lines0 is not None and abs(len(m.lines0) - ref["lines"]) <= 2
+    pts = np.asarray(m.points0, dtype=np.float64)
+    np.testing.assert_allclose(pts.mean(0), ref["mean0"], atol=2.0)
+    np.testing.assert_allclose(pts.std(0), ref["std0"], atol=2.0)
 
 
 # Rotation bounds (deg) implied by the motion table of strl_pyg.synthetic.motion.
