@@ -32,6 +32,8 @@ import sys
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
 ROOT_DEFAULT = os.environ.get("STRL_ABLATION_ROOT",
                               str(Path.home() / ".cache" / "strl-pyg" / "ablation"))
 ROWS = ("baseline", "L", "LP", "R", "V", "V+W", "LP+R", "LP+V", "full")
@@ -110,6 +112,143 @@ def cmd_status(args: argparse.Namespace) -> int:
     return 0
 
 
+def _finished_runs(root: Path) -> list[tuple[str, int, Path]]:
+    return [(r, s, root / "runs" / run_name(r, s)) for r, s in PLAN
+            if run_step(root / "runs" / run_name(r, s)) >= STEPS]
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    """Scores every finished run (and PoseLib) on the evaluation sets, once per run."""
+    import ablation_eval as ae
+    import torch
+
+    from strl_pyg.model import StrLPose
+
+    torch.set_num_threads(args.threads)
+    root = Path(args.root)
+    sets = ae.all_sets(root / "eval_cache", quick=args.quick)
+    out = root / ("eval_quick" if args.quick else "eval")
+    ids = {k: [pid for pid, _, _ in v] for k, v in sets.items()}
+    ae.save_json(out / "sets.json", ids)
+    if not (out / "poselib.json").exists():
+        ae.save_json(out / "poselib.json", ae.poselib_errors(sets))
+    for row, seed, run in _finished_runs(root):
+        path = out / f"{run_name(row, seed)}.json"
+        if path.exists():
+            continue
+        model = StrLPose.load(run / "model.pt")
+        ae.save_json(path, ae.model_errors(model, sets))
+        print(f"{run_name(row, seed)}: scored on {len(sets)} sets", flush=True)
+    return 0
+
+
+def _cell(errs_by_seed: list[list], which: int) -> str:
+    import ablation_eval as ae
+
+    meds = [ae.median_interval(ae._rows(e)[which])[0] for e in errs_by_seed]
+    m, lo, hi = ae.median_interval(ae._rows(errs_by_seed[0])[which])
+    text = f"{m:.2f} [{lo:.2f}-{hi:.2f}]"
+    if len(meds) > 1:
+        text += f" (seeds {min(meds):.2f}-{max(meds):.2f})"
+    return text
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    """Table 3 of the paper for our runs, the paired comparisons and the training curves."""
+    import json
+
+    import ablation_eval as ae
+    from common import banner
+
+    root = Path(args.root)
+    ev = root / "eval"
+    sets = json.loads((ev / "sets.json").read_text())
+    poselib = json.loads((ev / "poselib.json").read_text())
+    runs = {}
+    for row, seed in PLAN:
+        path = ev / f"{run_name(row, seed)}.json"
+        if path.exists():
+            runs.setdefault(row, {})[seed] = json.loads(path.read_text())
+    names = list(sets)
+    lines = ["# The ablation (Table 3) in our implementation", "", "```", banner(), "```", "",
+             f"`python benchmarks/ablation.py eval && python benchmarks/ablation.py report`; "
+             f"runs: {', '.join(f'{r} ({len(v)} seed(s))' for r, v in runs.items())}. Median "
+             "rotation and translation-direction errors (deg) over the pairs where the method "
+             "gave a pose, [95 % bootstrap interval over pairs] of seed 0, (range of the "
+             "seeds' medians). Pairs per set: "
+             + ", ".join(f"{k} {len(v)}" for k, v in sets.items()) + ".", ""]
+    for which, label in ((0, "rotation"), (1, "translation direction")):
+        lines += [f"## Median {label} error (deg)", "",
+                  "| row | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
+        for row in ROWS:
+            if row not in runs:
+                continue
+            seeds = [runs[row][s] for s in sorted(runs[row])]
+            lines.append(f"| {row} | " + " | ".join(
+                _cell([e[n] for e in seeds], which) for n in names) + " |")
+        lines.append("| PoseLib | " + " | ".join(_cell([poselib[n]], which) for n in names)
+                     + " |")
+        lines.append("")
+    lines += ["## AUC@20 (%) of max(rotation, translation); no pose = 180 deg", "",
+              "| row | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
+    for row in ROWS:
+        if row in runs:
+            lines.append(f"| {row} | " + " | ".join(
+                f"{100 * ae.auc20(ae._rows(runs[row][min(runs[row])][n])[2]):.1f}"
+                for n in names) + " |")
+    lines.append("| PoseLib | " + " | ".join(
+        f"{100 * ae.auc20(ae._rows(poselib[n])[2]):.1f}" for n in names) + " |")
+    lines.append("")
+    lines += ["## Paired comparisons (seed 0): median ratio a / b [95 % paired bootstrap]", "",
+              "| a vs b | error | " + " | ".join(names) + " |",
+              "|---|---" + "|---" * len(names) + "|"]
+    for a, b in (("full", "baseline"), ("LP", "L")):
+        if a in runs and b in runs:
+            for which, label in ((0, "rot"), (1, "trans")):
+                cells = []
+                for n in names:
+                    r, lo, hi, k = ae.paired_ratio(runs[a][0][n], runs[b][0][n], which)
+                    cells.append(f"{r:.2f} [{lo:.2f}-{hi:.2f}]" if k else "-")
+                lines.append(f"| {a} vs {b} | {label} | " + " | ".join(cells) + " |")
+    out = Path(args.out)
+    out.write_text("\n".join(lines) + "\n")
+    print(f"wrote {out}")
+    plot_curves(root, Path(args.figure))
+    print(f"wrote {args.figure}")
+    return 0
+
+
+def plot_curves(root: Path, path: Path) -> None:
+    """Validation rotation / translation errors of the key rows (seed 0) over the steps."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import torch
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for row in ("baseline", "L", "LP", "V", "full"):
+        ckpt = root / "runs" / run_name(row, 0) / "last.pt"
+        if not ckpt.exists():
+            continue
+        hist = torch.load(ckpt, map_location="cpu", weights_only=True).get("history", [])
+        for ax, key in zip(axes, ("rot_err_deg", "trans_err_deg"), strict=True):
+            ax.plot([h["step"] for h in hist], [h[key] for h in hist], "o-", label=row)
+    for ax, title in zip(axes, ("validation rotation error (deg, mean)",
+                                "validation translation-direction error (deg, mean)"),
+                         strict=True):
+        ax.set_xlabel("training step (batch 16)")
+        ax.set_ylabel("degrees")
+        ax.set_title(title)
+        ax.grid(alpha=0.3)
+        ax.legend()
+    fig.suptitle("Ablation rows on the shared budget (lines_small, front-end matches)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -119,8 +258,16 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("--only", nargs="*", choices=ROWS, help="only these rows")
     t.add_argument("--threads", type=int, default=1, help="torch threads per run")
     sub.add_parser("status", help="steps done per run")
+    e = sub.add_parser("eval", help="score the finished runs and PoseLib on every set")
+    e.add_argument("--threads", type=int, default=1, help="torch threads")
+    e.add_argument("--quick", action="store_true", help="4 pairs per set (a smoke run)")
+    r = sub.add_parser("report", help="write the results table and the curves plot")
+    here = Path(__file__).resolve().parent
+    r.add_argument("--out", default=str(here / "results_ablation.md"))
+    r.add_argument("--figure", default=str(here / "figures" / "ablation_curves.png"))
     args = ap.parse_args(argv)
-    return {"train": cmd_train, "status": cmd_status}[args.command](args)
+    return {"train": cmd_train, "status": cmd_status, "eval": cmd_eval,
+            "report": cmd_report}[args.command](args)
 
 
 if __name__ == "__main__":

@@ -128,8 +128,20 @@ def plant_outliers(m, fraction: float, seed: int):
     return replace(m, points1=p1, info={**m.info, "planted_outliers": k})
 
 
-def kitti_pairs(gap: int, cache: Path):
-    from strl_pyg.frontend import match_images
+def _tag(config) -> str:
+    """Cache-key suffix of a non-default front-end configuration."""
+    if config is None:
+        return ""
+    import hashlib
+    import json
+    from dataclasses import asdict
+
+    text = json.dumps(asdict(config), sort_keys=True, default=repr)
+    return "_fe" + hashlib.sha1(text.encode()).hexdigest()[:8]
+
+
+def kitti_pairs(gap: int, cache: Path, config=None):
+    from strl_pyg.frontend import NoMatchesError, match_images
     from strl_pyg.geometry import Pose
 
     root = DATA / "kitti_odometry"
@@ -149,14 +161,17 @@ def kitti_pairs(gap: int, cache: Path):
         Ti = np.vstack([poses[i], [0, 0, 0, 1]])
         Tj = np.vstack([poses[j], [0, 0, 0, 1]])
         T = Pose.from_matrix(np.linalg.inv(np.linalg.inv(Ti) @ Tj)).matrix().numpy()
-        m = _cached(cache, f"kitti06_{i}_{j}", lambda i=i, j=j: match_images(
-            _read(seq / "image_0" / f"{i:06d}.png"), _read(seq / "image_0" / f"{j:06d}.png"),
-            K0=K, K1=K))
+        try:
+            m = _cached(cache, f"kitti06_{i}_{j}{_tag(config)}", lambda i=i, j=j: match_images(
+                _read(seq / "image_0" / f"{i:06d}.png"),
+                _read(seq / "image_0" / f"{j:06d}.png"), K0=K, K1=K, config=config))
+        except NoMatchesError:
+            m = None
         out.append((f"kitti06/{i}-{j}", m, T))
     return out
 
 
-def dino_pairs(cache: Path):
+def dino_pairs(cache: Path, config=None):
     from strl_pyg.data.datasets.middlebury import middlebury_pairs
     from strl_pyg.frontend import NoMatchesError, match_images
 
@@ -166,8 +181,9 @@ def dino_pairs(cache: Path):
     out = []
     for a, b, T in middlebury_pairs(root):
         try:
-            m = _cached(cache, f"dino_{a.path.stem}_{b.path.stem}", lambda a=a, b=b: match_images(
-                _read(a.path), _read(b.path), K0=a.K, K1=b.K))
+            m = _cached(cache, f"dino_{a.path.stem}_{b.path.stem}{_tag(config)}",
+                        lambda a=a, b=b: match_images(_read(a.path), _read(b.path), K0=a.K,
+                                                      K1=b.K, config=config))
         except NoMatchesError:
             print(f"  dino {a.name}-{b.name}: no matches")
             out.append((f"dino/{a.path.stem}-{b.path.stem}", None, T))
@@ -176,8 +192,8 @@ def dino_pairs(cache: Path):
     return out
 
 
-def demon_pairs(cache: Path):
-    from strl_pyg.frontend import match_images
+def demon_pairs(cache: Path, config=None):
+    from strl_pyg.frontend import NoMatchesError, match_images
 
     out = []
     for seq in sorted((DATA / "demon_deepsfm").glob("*/*/poses.txt")):
@@ -187,8 +203,11 @@ def demon_pairs(cache: Path):
         T0 = np.vstack([P[0], [0, 0, 0, 1]])
         T1 = np.vstack([P[1], [0, 0, 0, 1]])
         T = T1 @ np.linalg.inv(T0)
-        m = _cached(cache, f"demon_{d.name}", lambda d=d, K=K: match_images(
-            _read(d / "0000.jpg"), _read(d / "0001.jpg"), K0=K, K1=K))
+        try:
+            m = _cached(cache, f"demon_{d.name}{_tag(config)}", lambda d=d, K=K: match_images(
+                _read(d / "0000.jpg"), _read(d / "0001.jpg"), K0=K, K1=K, config=config))
+        except NoMatchesError:
+            m = None
         out.append((f"demon/{d.name}", m, T))
     return out
 
