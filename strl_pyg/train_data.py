@@ -6,6 +6,8 @@ step batch sampler (the batch of global step ``s`` is a pure function of ``(seed
 from __future__ import annotations
 
 import copy
+import warnings
+from pathlib import Path
 from typing import Any
 
 import torch
@@ -18,7 +20,8 @@ from strl_pyg.data.transforms import FixedSizeResample, RandomSwap
 from strl_pyg.geometry import Pose
 from strl_pyg.train_config import TrainConfig
 
-__all__ = ["build_datasets", "shuffle_point_matches", "StepBatchSampler", "unaugmented_poses"]
+__all__ = ["build_datasets", "check_sources", "shuffle_point_matches", "StepBatchSampler",
+           "unaugmented_poses"]
 
 
 class _InMemory(Dataset):
@@ -155,9 +158,58 @@ def build_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
     else:
         train = D.DeMoNFolder(cfg.data_root, split="train", **common)
         val = D.DeMoNFolder(cfg.data_root, split="test", **common)
+    # before any matching: a run must not train for hours and then have nothing to validate
+    check_sources(cfg, train, val)
     for ds in (train, val):
         ds.build_cache(num_workers=max(1, cfg.num_workers))
+    check_sources(cfg, train, val, matched=True)
     return train, val
+
+
+def _kitti_on_disk(root: Path, camera: str) -> list[str]:
+    seq_dir = root / "sequences"
+    if not seq_dir.is_dir():
+        return []
+    return sorted(p.name for p in seq_dir.iterdir() if (p / camera).is_dir())
+
+
+def check_sources(cfg: TrainConfig, train: Any, val: Any, matched: bool = False) -> None:
+    """Raises ``ValueError`` naming what is missing, and the flag that fixes it, when the
+    training or validation set of a real dataset holds no pair (sequences absent, no pairs
+    among the frames on disk, or, with ``matched``, every pair failed matching); warns when
+    KITTI validation sequences are also training sequences."""
+    flags = {"train": ("--train-sequences", cfg.train_sequences),
+             "validation": ("--val-sequences", cfg.val_sequences)}
+    for role, ds in (("train", train), ("validation", val)):
+        if (len(ds) if matched else ds.num_pairs) > 0:  # num_pairs: no cache touched
+            continue
+        if matched:
+            raise ValueError(
+                f"Expected {role} pairs that the front end can match (got none: all "
+                f"{ds.num_pairs} gave no matches; markers in '{ds.cache.dir}')")
+        if cfg.dataset == "kitti":
+            on_disk = _kitti_on_disk(Path(cfg.data_root), ds.camera)
+            asked = list(ds.sequences) + list(ds.missing_sequences)
+            why = (f"sequences {', '.join(ds.missing_sequences)} have no '{ds.camera}' folder "
+                   f"under '{Path(cfg.data_root) / 'sequences'}'" if ds.missing_sequences
+                   else f"no frames i, i + {cfg.kitti_k} both with images")
+            flag, given = flags[role]
+            default = "" if given else " (the standard split)"
+            raise ValueError(
+                f"Expected {role} pairs from KITTI sequences {', '.join(asked)}{default} (got "
+                f"none: {why}); pass {flag} with sequences that exist (here: "
+                f"{', '.join(on_disk) or 'none'}), e.g. {flag} {on_disk[-1] if on_disk else 'NN'}")
+        split = ds.split
+        why = (f"{len(ds.missing_sequences)} listed sequences absent, e.g. "
+               f"{ds.missing_sequences[:3]}" if ds.missing_sequences else "no sequences")
+        raise ValueError(f"Expected DeMoN {role} pairs under '{Path(cfg.data_root) / split}' "
+                         f"(got none: {why})")
+    if cfg.dataset == "kitti" and not matched:
+        both = sorted(set(train.sequences) & set(val.sequences))
+        if both:
+            warnings.warn(f"KITTI sequences {', '.join(both)} are in both the training and the "
+                          "validation set: validation measures training pairs; pass other "
+                          "--val-sequences for a held-out figure", UserWarning, stacklevel=3)
 
 
 def _mixed_datasets(cfg: TrainConfig) -> tuple[Any, Any]:

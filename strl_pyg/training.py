@@ -213,6 +213,9 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     if datasets is None:
         datasets = build_datasets(cfg)
     train_ds, val_ds = (_InMemory(d, cfg.in_memory) for d in datasets)
+    if len(val_ds) == 0:  # refused here, not at the first validation after training steps
+        raise ValueError("Expected a non-empty validation set (got 0 pairs): training "
+                         f"validates every {cfg.val_every} steps and at the end")
     collate = Collater(None)
     data_seed = cfg.resolved_data_seed
     sampler = StepBatchSampler(len(train_ds), cfg.batch_size, start_step, cfg.steps, data_seed,

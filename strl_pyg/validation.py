@@ -88,6 +88,8 @@ def evaluate_model(model: torch.nn.Module, loader, loss_fn: PoseLoss | None = No
             r, t = _errors(q0, t0, T_gt)
             t_rots.append(r.cpu())
             t_transs.append(t.cpu())
+    if not rots:
+        raise ValueError("Expected at least one validation batch (got an empty loader)")
     res = _summary(torch.cat(rots), torch.cat(transs), "")
     if losses:
         res["loss"] = float(np.mean(losses))
