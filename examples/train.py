@@ -12,7 +12,10 @@ Examples:
 
 All settings live in strl_pyg.train_config.TrainConfig; every run stores them in its
 checkpoint. The default model takes its patch channels from the data (generated scenes and
-KITTI are grey, DeMoN is RGB). Bad flags, an unwritable --out, a missing or refused checkpoint
+KITTI are grey, DeMoN is RGB); a grey model on DeMoN (`--set patch_features=1 --set
+image_channels=1`, e.g. to fine-tune the shipped weights with --init-from) reads its images as
+grey. Validation sources that do not exist (KITTI's default 09/10, --val-sequences) are an
+error before any training. Bad flags, an unwritable --out, a missing or refused checkpoint
 (all load with weights_only=True) end with one error line and exit code 2.
 """
 

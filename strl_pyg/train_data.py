@@ -20,8 +20,8 @@ from strl_pyg.data.transforms import FixedSizeResample, RandomSwap
 from strl_pyg.geometry import Pose
 from strl_pyg.train_config import TrainConfig
 
-__all__ = ["build_datasets", "check_sources", "shuffle_point_matches", "StepBatchSampler",
-           "unaugmented_poses"]
+__all__ = ["build_datasets", "check_sources", "check_graph_channels", "model_input_channels",
+           "shuffle_point_matches", "StepBatchSampler", "unaugmented_poses"]
 
 
 class _InMemory(Dataset):
@@ -147,9 +147,13 @@ def build_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
 
         return part(cfg.train_pairs, cfg.resolved_data_seed * 10_000_000), part(
             cfg.val_pairs, 1_000_000 + cfg.resolved_data_seed * 10_000_000)
-    keep = cfg.model_config().visual == "cnn"
+    model_cfg = cfg.model_config()
+    keep = model_cfg.visual == "cnn"
+    # the graphs' channels follow the model's (default: the data's, DATA_CHANNELS): a grey
+    # model, e.g. fine-tuning the shipped weights, reads colour data as grey
+    grey = model_input_channels(model_cfg, cfg.patch_size) == 1
     common = dict(cache_dir=cfg.cache_dir, patch_size=cfg.patch_size, keep_images=keep,
-                  limit=cfg.limit, on_missing="skip")
+                  limit=cfg.limit, on_missing="skip", grayscale=grey)
     if cfg.dataset == "kitti":
         train = D.KITTIOdometry(cfg.data_root, split="train", sequences=cfg.train_sequences,
                                 frame_gap=cfg.kitti_k, **common)
@@ -164,6 +168,38 @@ def build_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
         ds.build_cache(num_workers=max(1, cfg.num_workers))
     check_sources(cfg, train, val, matched=True)
     return train, val
+
+
+def model_input_channels(model_cfg: Any, patch_size: int) -> int | None:
+    """Image channels a model reads (``None``: no visual branch): ``image_channels`` for
+    ``visual="cnn"``, else ``patch_features / patch_size**2``."""
+    if model_cfg.visual is None:
+        return None
+    if model_cfg.visual == "cnn":
+        return model_cfg.image_channels
+    return model_cfg.patch_features // patch_size ** 2
+
+
+def check_graph_channels(model_cfg: Any, patch_size: int, graph: HeteroData) -> None:
+    """``ValueError`` before training when the data's patches (or images) do not have the
+    channels the model reads, naming the ``--set`` flags that fit the data."""
+    if model_cfg.visual is None:
+        return
+    store = graph[keys_.POINT]
+    if model_cfg.visual == "cnn":
+        img = graph[keys_.IMAGE0] if keys_.IMAGE0 in graph else None
+        got = None if img is None else int(img.shape[-3])
+        want, flag = model_cfg.image_channels, "image_channels"
+    else:
+        patch = store[keys_.PATCH0] if keys_.PATCH0 in store else None
+        got = None if patch is None else int(patch.shape[1])
+        want, flag = model_cfg.patch_features, "patch_features"
+    if got is not None and got != want:
+        c = got // patch_size ** 2 if flag == "patch_features" else got
+        raise ValueError(
+            f"Expected training graphs with the {want} {flag} the model reads (got {got}: "
+            f"{c}-channel images); pass --set patch_features={c * patch_size ** 2} "
+            f"--set image_channels={c}, or leave both unset to follow the data")
 
 
 def _kitti_on_disk(root: Path, camera: str) -> list[str]:

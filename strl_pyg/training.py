@@ -56,6 +56,7 @@ from strl_pyg.train_data import (
     _InMemory,
     _Resampled,
     build_datasets,
+    check_graph_channels,
     shuffle_point_matches,
     unaugmented_poses,
 )
@@ -216,6 +217,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     if len(val_ds) == 0:  # refused here, not at the first validation after training steps
         raise ValueError("Expected a non-empty validation set (got 0 pairs): training "
                          f"validates every {cfg.val_every} steps and at the end")
+    if len(train_ds):
+        check_graph_channels(model_cfg, cfg.patch_size, train_ds[0])
     collate = Collater(None)
     data_seed = cfg.resolved_data_seed
     sampler = StepBatchSampler(len(train_ds), cfg.batch_size, start_step, cfg.steps, data_seed,

@@ -160,13 +160,15 @@ def _config_dict(config: Any) -> Any:
 def _match_record(
     record: PairRecord, image_size: tuple[int, int] | None, grayscale: bool, config: Any
 ) -> PairMatches:
-    """Worker job: front-end matches of one pair, with K of the resized images."""
+    """Worker job: front-end matches of one pair, with K and the images as read and resized
+    (colour unless ``grayscale``; the front end attaches the grey copies it matched on, which
+    gave 1-channel patches for colour data such as DeMoN)."""
     from strl_pyg.frontend import match_images
 
     img0, img1, K0, K1 = load_pair_images(record, image_size, grayscale)
     matches = match_images(img0, img1, K0=K0, K1=K1, config=config)
     info = {**matches.info, PAIR_ID: record.pair_id, SUBSET: record.subset}
-    return replace(matches, K0=K0, K1=K1, info=info)
+    return replace(matches, K0=K0, K1=K1, info=info, image0=img0, image1=img1)
 
 
 def _no_match_errors() -> tuple[type[BaseException], ...]:
@@ -308,7 +310,8 @@ class PairDataset(CachedPairDataset):
         records: The pairs.
         cache_dir: Root of the match cache.
         image_size: ``(H, W)`` the images are resized to before matching (``None``: keep).
-        grayscale: Convert colour images to grey before matching.
+        grayscale: Read colour images as grey (matching is always on grey; this decides the
+            images kept with the matches, hence the channels of the graphs' patches).
         frontend_config: A ``FrontendConfig`` (default: its defaults); part of the cache key.
         patch_size: Odd patch side of the visual features (default: ``1``).
         keep_images: Store the images in each graph (:func:`build_pair_graph`).
@@ -360,6 +363,8 @@ class PairDataset(CachedPairDataset):
             "kind": self.kind,
             "image_size": self.image_size,
             "grayscale": self.grayscale,
+            # caches written before the images were kept as read hold grey copies
+            "images": "as_read",
             "frontend": _config_dict(self.frontend_config),
         }
 
