@@ -235,7 +235,9 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         out_dir.mkdir(parents=True, exist_ok=True)
     logger = TrainLogger(out_dir, rank == 0, cfg.tensorboard, start_step)
     if rank == 0:
-        (out_dir / "config.json").write_text(json.dumps(asdict(cfg), indent=2))
+        # what was used: "tensorboard" is false when it was asked for but is not installed
+        (out_dir / "config.json").write_text(
+            json.dumps({**asdict(cfg), "tensorboard": logger.tensorboard}, indent=2))
     result: dict[str, Any] = {"step": start_step, "checkpoint": str(ckpt_path)}
     step = start_step
     t_start, pairs_seen = time.perf_counter(), 0
@@ -389,7 +391,8 @@ def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
               f"kept '{last}' (model, optimiser, RNG, step); continue with the same command "
               f"and --resume", file=sys.stderr)
     if result.get("history"):
-        png = plot_history(result["history"], Path(cfg.out_dir) / "curves.png")
+        png = plot_history(result["history"], Path(cfg.out_dir) / "curves.png",
+                           log=Path(cfg.out_dir) / "log.csv")
         print(f"curves: {png}")
     keys = ("rot_err_deg", "trans_err_deg", "auc10", "trivial_rot_err_deg",
             "trivial_trans_err_deg", "pairs_per_s")

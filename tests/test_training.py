@@ -190,3 +190,36 @@ def test_training_flags_for_the_wider_distribution():
         TrainConfig(scene_mix="nope")
     with pytest.raises(ValueError, match="outlier_augment"):
         TrainConfig(outlier_augment=1.5)
+
+
+def _png_width(path) -> int:
+    return int.from_bytes(Path(path).read_bytes()[16:20], "big")
+
+
+def test_tensorboard_absent_is_said_once_and_recorded(tmp_path, monkeypatch):
+    import json
+    import warnings
+
+    monkeypatch.setitem(sys.modules, "torch.utils.tensorboard", None)  # import -> ImportError
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        train(tiny_config(tmp_path / "run", tensorboard=True, steps=2), progress=False)
+    said = [w for w in caught if "TensorBoard is not installed" in str(w.message)]
+    assert len(said) == 1 and "--no-tensorboard" in str(said[0].message)
+    config = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert config["tensorboard"] is False and not (tmp_path / "run" / "tb").exists()
+
+
+def test_curves_show_the_training_loss_beside_validation(tmp_path):
+    from strl_pyg.train_log import _train_pose_loss, read_log
+
+    result = train(tiny_config(tmp_path / "run"), progress=False)
+    log = read_log(tmp_path / "run" / "log.csv")
+    steps, loss = _train_pose_loss(log["train"])
+    assert steps == [1, 2, 3, 4] and all(h["loss"] > -1e9 for h in result["history"])
+    plain = plot_history(result["history"], tmp_path / "plain.png")
+    both = plot_history(result["history"], tmp_path / "both.png", log=tmp_path / "run" / "log.csv")
+    assert _png_width(both) > _png_width(plain)  # the extra loss panel
+    # the geometric head's loss is taken out: the validation loss is the pose loss alone
+    geo = {"loss": ([1, 2], [5.0, 4.0]), "geo_loss": ([1, 2], [2.0, 1.5])}
+    assert _train_pose_loss(geo) == ([1, 2], [3.0, 2.5])
