@@ -2,8 +2,11 @@
 
 Examples::
 
+    # held-out generated pairs, front-end matches on the rendered images (the default)
+    python examples/evaluate.py --dataset synthetic --num-pairs 60 --out out/syn
+    # the generator's exact matches, noised (without noise the classical methods score 0 deg)
     python examples/evaluate.py --checkpoint strl_pyg/weights/strl_pose_geometric.pt \\
-        --dataset synthetic --num-pairs 60 --noise-px 1 --outlier-fraction 0.3 --out out/syn
+        --matches ground_truth --noise-px 1 --outlier-fraction 0.3 --out out/syn_gt
     python examples/evaluate.py --checkpoint ckpt.pt --dataset demon --data-root DEMON_ROOT
     python examples/evaluate.py --checkpoint ckpt.pt --dataset kitti --data-root KITTI_ROOT \\
         --sequences 09 10 --out out/kitti

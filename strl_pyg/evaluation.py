@@ -252,8 +252,10 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_NON_NEGATIVE_INT, default=2_000_000,
                    help="synthetic: first held-out seed")
     p.add_argument("--kinds", nargs="+", default=list(LINE_SCENE_KINDS), choices=SCENE_KINDS)
-    p.add_argument("--matches", choices=("ground_truth", "frontend"), default="ground_truth",
-                   help="synthetic: generator matches or front-end matches")
+    p.add_argument("--matches", choices=("frontend", "ground_truth"), default="frontend",
+                   help="synthetic: front-end matches on the rendered images (as on real "
+                        "data) or the generator's exact matches (the classical methods then "
+                        "score ~0 deg without --noise-px / --outlier-fraction)")
     p.add_argument("--noise-px", type=_number(float, 0.0, "a finite number >= 0"), default=0.0,
                    help="synthetic match noise")
     p.add_argument("--outlier-fraction", type=_number(float, 0.0, "a fraction in [0, 1)", 1.0),
@@ -291,6 +293,12 @@ def _checked(args: argparse.Namespace) -> Path:
     except RuntimeError:
         raise _UsageError(f"Expected a torch device such as 'cpu' or 'cuda' for --device "
                           f"(got {args.device!r})") from None
+    from strl_pyg.training import check_device
+
+    try:  # before the checkpoint is mapped onto it (an absent device blamed the checkpoint)
+        check_device(args.device)
+    except ValueError as err:
+        raise _UsageError(one_line(err)) from None
     if args.out:
         from strl_pyg.io import check_output_dir
 

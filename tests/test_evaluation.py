@@ -220,3 +220,28 @@ def test_script_end_to_end_on_kitti_slice(kitti_root, tiny_checkpoint, tmp_path,
     png = out / "trajectory_KITTI_06.png"
     assert png.is_file() and png.read_bytes()[:4] == b"\x89PNG"
     assert "| KITTI/06 | fused_opencv |" in capsys.readouterr().out
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has a CUDA device")
+def test_evaluate_cuda_on_a_cpu_machine_says_the_device_is_unavailable(tiny_checkpoint, capsys):
+    """It blamed the checkpoint ('Expected a readable StrLPose checkpoint ... Attempting to
+    deserialize object on a CUDA device')."""
+    from strl_pyg import cli
+
+    argv = ["--checkpoint", str(tiny_checkpoint), "--device", "cuda"]
+    for run in (_script().main, lambda a: cli.main(["evaluate", *a])):
+        assert run(argv) == 2
+        err = _one_error_line(capsys, "--device")
+        assert "no CUDA device" in err and "checkpoint" not in err
+
+
+def test_evaluate_defaults_to_front_end_matches(tiny_checkpoint, capsys):
+    """Ground-truth matches (the former default) gave the classical methods 0.00 deg."""
+    from strl_pyg.evaluation import build_parser
+
+    assert build_parser().parse_args([]).matches == "frontend"
+    assert build_parser().parse_args(["--matches", "ground_truth"]).matches == "ground_truth"
+    assert _script().main(["--checkpoint", str(tiny_checkpoint), "--num-pairs", "1",
+                           "--kinds", "boxes", "--methods", "opencv", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "frontend" in out
