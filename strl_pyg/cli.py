@@ -6,7 +6,9 @@ Every error in the user's input ends with a one-line ``error: Expected ... (got 
 stderr and exit code 2 (no traceback): bad flags and values, missing files, folders given as
 files, undecodable images, bad intrinsics, empty or foreign match files, checkpoints that are
 corrupt or would need code to load (refused: all checkpoints load with ``weights_only=True``),
-and outputs that cannot be written (checked before any work).
+and outputs that cannot be written (checked before any work). ``predict`` exits with 0 for a
+pose with status ``ok``, 1 for no pose, 3 for an ``unreliable`` one (computed, not to use:
+see ``strl-pose predict --help``).
 
 Large images are downscaled for matching so that their longer side is at most ``--max-side``
 pixels (default :data:`MAX_SIDE`; ``0`` keeps the full resolution), with the intrinsics scaled
@@ -137,12 +139,26 @@ def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
 METHOD_LABELS = {"regression": "Str-L Pose", "opencv": "OpenCV MAGSAC", "poselib": "PoseLib",
                  "fused": "fused"}
 
+#: ``strl-pose predict``'s exit codes (also in its ``--help``).
+EXIT_CODES = {0: "a pose: status 'ok'",
+              1: "no pose: status 'degenerate' or 'failed'",
+              2: "an error in the input (one 'error: Expected ...' line on stderr)",
+              3: "no pose to use: status 'unreliable' (a pose was computed, but the "
+                 "intrinsics fail the input checks or its matches lie behind a camera: see the "
+                 "warnings; T_0to1 and sigma are null)",
+              130: "interrupted"}
+STATUS_EXIT = {"ok": 0, "degenerate": 1, "failed": 1, "unreliable": 3}
+
 
 def _print_estimate(est, indent: str = "") -> None:
     """The recommended pose in words: status, method, uncertainty, warnings; then each
     method's own result."""
     pose = est.pose
-    if pose.status == "ok":
+    if pose.status == "unreliable":
+        label = METHOD_LABELS.get(pose.method, pose.method)
+        print(f"{indent}pose: unreliable, no pose given (see the warnings); {pose.method} "
+              f"({label}) computed, not to use: {_fmt_pose(pose.info['unreliable_T_0to1'])}")
+    elif pose.status == "ok":
         label = METHOD_LABELS.get(pose.method, pose.method)
         print(f"{indent}pose: ok, from {pose.method} ({label}): {_fmt_pose(pose.T_0to1)}")
         if pose.sigma is not None:
@@ -158,6 +174,8 @@ def _print_estimate(est, indent: str = "") -> None:
     print(f"{indent}methods:")
     for name, r in est.methods.items():
         detail = _fmt_pose(r.T_0to1) if r.status == "ok" else "; ".join(r.warnings)
+        if r.status == "unreliable":
+            detail = "; ".join(r.info["unreliable"])
         extra = f", {r.num_inliers} inliers" if r.num_inliers is not None else ""
         print(f"{indent}  {name:<11} {r.status:<10} {detail}  ({r.time_ms:.1f} ms{extra})")
 
@@ -189,7 +207,7 @@ def cmd_demo(args) -> int:
     report = {}
     for name, r in est.methods.items():
         label = METHOD_LABELS.get(name, name)
-        if r.status != "ok":
+        if r.T_0to1 is None:
             print(f"{label:<14} {r.status:<10} {'-':>8} {'-':>8} {r.time_ms:7.1f}   "
                   f"{'; '.join(r.warnings)}")
             continue
@@ -203,7 +221,7 @@ def cmd_demo(args) -> int:
     print(f"recommended pose: {est.status}" + (f", from {est.pose.method}" if est.pose.method
                                                else "")
           + "".join(f"\nwarning: {w}" for w in est.warnings))
-    if est.pose.sigma is not None:
+    if est.pose.sigma is not None and est.status == "ok":
         kind = est.pose.info.get("covariance", "network log-variance")
         print(f"recommended pose's sigma ({kind}): rotation "
               f"{est.pose.sigma['rotation_deg']:.3f} deg, translation direction "
@@ -245,8 +263,9 @@ def cmd_match(args) -> int:
 def cmd_predict(args) -> int:
     """Pose of two images: the recommended ``"pose"`` record (:mod:`strl_pyg.inference`)
     and the own result of each method run (``--methods``; default: only the ones the
-    recommended pose needs, :mod:`strl_pyg.recommended`). Exit status 0 when the pose's status
-    is ``"ok"``, 1 when it is ``"degenerate"`` or ``"failed"`` (printed either way)."""
+    recommended pose needs, :mod:`strl_pyg.recommended`). Exit status (:data:`EXIT_CODES`)
+    0 when the pose's status is ``"ok"``, 1 when it is ``"degenerate"`` or ``"failed"``, 3
+    when it is ``"unreliable"`` (printed either way)."""
     inputs = read_pair(args)  # fail on bad files before any heavy work
     model = load_model(args.checkpoint)
     from strl_pyg.frontend import FrontendConfig
@@ -257,7 +276,7 @@ def cmd_predict(args) -> int:
     est = estimate_methods(model, img0, img1, K0, K1, FrontendConfig(detector=args.detector),
                            "regression" if args.no_baseline else args.methods,
                            bootstrap=args.bootstrap)
-    code = 0 if est.status == "ok" else 1
+    code = STATUS_EXIT[est.status]
     if args.json:
         print(json.dumps({**est.to_dict(), "translation_kind": model.config.translation,
                           "intrinsics": K0 is not None}))
@@ -386,7 +405,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_pair_args(p)
     p.add_argument("--out", required=True, help="output .npz (PairMatches.save keys)")
     p.add_argument("--png", default=None, help="also draw the matches to this PNG")
-    p = sub.add_parser("predict", help="relative pose of two images")
+    p = sub.add_parser("predict", help="relative pose of two images",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog="exit codes:\n" + "\n".join(
+                           f"  {k:<4} {v}" for k, v in EXIT_CODES.items()))
     _add_pair_args(p)
     p.add_argument("--checkpoint", default=None, help="default: the shipped weights")
     p.add_argument("--json", action="store_true", help="print JSON only")

@@ -5,11 +5,17 @@ on the same :class:`~strl_pyg.data.PairMatches` and picks the recommended pose: 
 method of :data:`RECOMMENDED_ORDER` whose status is ``"ok"`` (PoseLib when installed, else
 OpenCV, else the network's regression). All poses are ``T_0to1`` (``X1 = R X0 + t``).
 
-Statuses (:data:`STATUSES`): ``"ok"`` (a pose), ``"degenerate"`` (the input does not
-determine the pose: fewer point matches than the solvers need (:data:`MIN_POINTS`), or zero
-parallax (identical images): no pose is given), ``"failed"`` (the method found no pose, e.g.
-RANSAC returned no model; never replaced by an identity pose). A pose exists only with
-``"ok"``.
+Statuses (:data:`STATUSES`, :mod:`strl_pyg.pose_record`): ``"ok"`` (a pose),
+``"unreliable"`` (a pose was computed but must not be used, so none is given: the intrinsics
+fail the input checks (:func:`intrinsics_problems`: principal point outside the image, focal
+length out of range, a normalised K with pixel points, one K for two image sizes), or more
+than 10 % of the matches that fit its epipolar geometry lie behind a camera
+(:data:`CHEIRALITY_MIN`); the reasons are in its warnings, the computed pose in
+``info["unreliable_T_0to1"]``), ``"degenerate"`` (the input does not determine the pose: fewer
+point matches than the solvers need (:data:`MIN_POINTS`), or zero parallax (identical
+images): no pose is given), ``"failed"`` (the method found no pose, e.g. RANSAC returned no
+model, or the matches do not support it; never replaced by an identity pose). A pose exists
+only with ``"ok"``.
 
 The work is split by concern, and every name below is importable from here:
 
@@ -43,10 +49,12 @@ from strl_pyg.baselines import (
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.pose_input import (
     FOCAL_RANGE,
+    NORMALISED_K_MAX,  # noqa: F401  (importable from here like the module's other names)
     ZERO_PARALLAX_FRACTION,
     ZERO_PARALLAX_PX,
     forward_pose,
     input_warnings,
+    intrinsics_problems,
     prepare_graph,
     prepare_matches,
     zero_parallax,
@@ -124,6 +132,17 @@ MIN_SUPPORT_INLIERS = 12
 SUPPORT_BAND = 2.0
 #: The methods whose poses need that support (their inliers are counted on the point matches).
 SUPPORT_CHECKED = ("poselib", "opencv", "guided", "geometric", "fused")
+#: Of the point matches within the support band of a checked pose, at least this fraction must
+#: triangulate in front of both cameras, else the pose is ``"unreliable"``. The Sampson
+#: distance cannot tell ``t`` from ``-t`` (nor a twisted decomposition): on the 47 dino pairs
+#: the geometric head's refined pose had up to 86 of 142 band matches behind a camera (149 deg
+#: wrong) and PoseLib's 28 of 28 once (177 deg wrong); right poses measured 0.98-1.0 (KITTI 06,
+#: generated scenes, dino). :class:`PoseEstimator` ``min_in_front``.
+CHEIRALITY_MIN = 0.9
+
+#: Why every pose is ``"unreliable"`` when :func:`intrinsics_problems` finds any (followed by
+#: them in the method records; the recommended pose lists them once, as input warnings).
+BAD_INTRINSICS = "computed with intrinsics that fail the input checks"
 
 #: Added to the recommended pose's warnings when the order was measured with PoseLib and it is
 #: not installed here.
@@ -166,10 +185,14 @@ class PoseEstimator:
             :meth:`StrLPose.from_pretrained() <strl_pyg.model.StrLPose.from_pretrained>`,
             loaded on the first estimate (its metadata calibrates every method and gives the
             recommended order, also when only classical methods run).
-        methods: names from :data:`METHODS` to run (default: all installed ones).
+        methods: names from :data:`METHODS` to run (default: all installed ones); one name
+            as a ``str`` is one method.
         seed: resampling and RANSAC seed (same input, same result).
         threshold_px: inlier threshold of the classical solvers, pixels.
-        device: where the network runs (default: the model's device).
+        device: where the network runs: the model is moved there (``model.to(device)``,
+            in place); default: the model's device. A device this machine does not have
+            (``"cuda"`` without CUDA) is a ``ValueError`` here, not a failure of every network
+            method later.
         raise_errors: re-raise a method's exception instead of recording ``"failed"``.
         bootstrap: resamples of the point matches behind the ``poselib`` / ``opencv``
             covariances (first order + bootstrap, :mod:`strl_pyg.pose_uncertainty`); ``0``:
@@ -184,14 +207,20 @@ class PoseEstimator:
             must agree). Random matches give RANSAC a few percent (11 of 300), and on a few
             dozen its 5-point sample plus a handful (9 of 32 on two unrelated images). When no
             checked solver is left ``"ok"`` for that reason, the regression is not used as the
-            recommended pose either. Defaults 0.1 and 12; ``0`` switches either off.
+            recommended pose either. Defaults 0.1 and 12; ``0`` switches either off. Only
+            matches in front of both cameras count (as in the solvers' own counts).
+        min_in_front: a checked pose is ``"unreliable"`` when fewer than this fraction of the
+            point matches within the support band lie in front of both cameras (its sign or
+            decomposition is wrong; default :data:`CHEIRALITY_MIN`, ``0`` = off). Every pose
+            is ``"unreliable"`` when the intrinsics fail :func:`intrinsics_problems`.
     """
 
     def __init__(self, model: Any = None, methods: Any = None,
                  seed: int = 0, threshold_px: float = 1.0, device: Any = None,
                  raise_errors: bool = False, bootstrap: int = 8,
                  min_inlier_ratio: float = MIN_INLIER_RATIO,
-                 min_inliers: int = MIN_SUPPORT_INLIERS) -> None:
+                 min_inliers: int = MIN_SUPPORT_INLIERS,
+                 min_in_front: float = CHEIRALITY_MIN) -> None:
         if isinstance(model, (str, os.PathLike)):  # a checkpoint path, as --checkpoint takes
             from strl_pyg.model import StrLPose
 
@@ -203,8 +232,14 @@ class PoseEstimator:
             raise ValueError(f"Expected min_inlier_ratio in [0, 1) (got {min_inlier_ratio!r})")
         if isinstance(min_inliers, bool) or not isinstance(min_inliers, int) or min_inliers < 0:
             raise ValueError(f"Expected min_inliers as an integer >= 0 (got {min_inliers!r})")
+        if not (isinstance(min_in_front, (int, float)) and not isinstance(min_in_front, bool)
+                and 0 <= min_in_front <= 1):
+            raise ValueError(f"Expected min_in_front in [0, 1] (got {min_in_front!r})")
+        self.min_in_front = float(min_in_front)
         self.min_inlier_ratio = float(min_inlier_ratio)
         self.min_inliers = min_inliers
+        if isinstance(methods, str):  # one method by name (tuple("poselib") spelt letters)
+            methods = (methods,)
         names = tuple(methods) if methods is not None else tuple(
             n for n, s in METHODS.items() if s.available())
         unknown = [n for n in names if n not in METHODS]
@@ -222,7 +257,10 @@ class PoseEstimator:
         self.method_names = names
         self.bootstrap = bootstrap
         self._model = model
-        self.seed, self.threshold_px, self.device = int(seed), float(threshold_px), device
+        self.seed, self.threshold_px = int(seed), float(threshold_px)
+        self.device = _check_device(device)
+        if self.device is not None and self._model is not None:
+            self._model = self._model.to(self.device)
         self.raise_errors = raise_errors
 
     @property
@@ -231,6 +269,8 @@ class PoseEstimator:
             from strl_pyg.model import StrLPose
 
             self._model = StrLPose.from_pretrained()
+            if self.device is not None:
+                self._model = self._model.to(self.device)
         return self._model
 
     def estimate(self, matches: PairMatches) -> PoseEstimate:
@@ -270,7 +310,7 @@ class PoseEstimator:
                     if self.raise_errors:
                         raise
                     first = str(err).splitlines()[0] if str(err) else ""
-                    res = MethodResult(name, "failed",
+                    res = MethodResult(name, "failed", info={"raised": type(err).__name__},
                                        warnings=[f"{name} raised {type(err).__name__}: {first}"])
             res = self._support(res, matches)
             scale = calibration.get(name)
@@ -290,6 +330,12 @@ class PoseEstimator:
                 res.covariance = res.covariance * scale
                 res.info["calibration_scale"] = scale
             ctx.results[name] = res
+        problems = intrinsics_problems(matches.image_size0, matches.image_size1, matches.K0,
+                                       matches.K1)
+        if problems:  # every method reads K (the network normalises its coordinates by it)
+            why = f"{BAD_INTRINSICS}: " + "; ".join(problems)
+            for name, res in ctx.results.items():
+                ctx.results[name] = res.unreliable([why])
         return self._recommend(ctx.results, warnings, matches)
 
     def estimate_images(self, image0: np.ndarray, image1: np.ndarray, K0: Any = None,
@@ -316,56 +362,111 @@ class PoseEstimator:
     def _support(self, res: MethodResult, matches: PairMatches) -> MethodResult:
         """``res`` as ``"failed"`` when the point matches within :data:`SUPPORT_BAND` x
         ``threshold_px`` of its pose (Sampson distance, every solver counted alike: OpenCV's
-        own count is ``recoverPose``'s cheirality mask, which drops distant points) are fewer
-        than ``min(min_inliers, n)`` or ``min_inlier_ratio`` of the ``n`` point matches."""
+        own count is ``recoverPose``'s cheirality mask, which drops distant points) and in
+        front of both cameras are fewer than ``min(min_inliers, n)`` or ``min_inlier_ratio``
+        of the ``n`` point matches; as ``"unreliable"`` when fewer than
+        ``min_in_front`` of the matches within the band lie in front of both cameras."""
         n = matches.num_points
         if (res.status != "ok" or res.method not in SUPPORT_CHECKED or res.T_0to1 is None
                 or n <= 0 or not matches.has_intrinsics):
             return res
+        from strl_pyg.essential import _depths
         from strl_pyg.geometry import Pose
         from strl_pyg.guided import _normalised, _sampson
 
         pose = Pose.from_matrix(torch.as_tensor(res.T_0to1, dtype=torch.float64))
         x0, x1, focal = _normalised(matches)
         band = SUPPORT_BAND * self.threshold_px
-        k = int((_sampson(pose.R, pose.t, x0, x1) < band / focal).sum())
+        near = _sampson(pose.R, pose.t, x0, x1) < band / focal
+        z0, z1 = _depths(pose.R[None], pose.t[None], x0[None], x1[None])
+        front = near & (z0[0] > 0) & (z1[0] > 0)
+        k, m = int(front.sum()), int(near.sum())
         res.info["support_inliers"] = k
+        res.info["behind_camera"] = m - k
         floor = min(self.min_inliers, n)
         if not (k < self.min_inlier_ratio * n or k < floor):
+            if m and k < self.min_in_front * m:
+                return res.unreliable([
+                    f"{m - k} of the {m} point matches that fit its epipolar geometry lie "
+                    f"behind a camera (more than {100 * (1 - self.min_in_front):.0f} %): the "
+                    "sign of t or the decomposition is likely wrong"])
             return res
         why = (f"below {100 * self.min_inlier_ratio:.0f} %" if k < self.min_inlier_ratio * n
                else f"fewer than {floor}")
+        behind = f"; {m - k} more lie behind a camera" if m > k else ""
         return MethodResult(res.method, "failed", time_ms=res.time_ms, num_inliers=k,
                             raw=res.raw, info={**res.info, "unsupported": True},
                             warnings=res.warnings + [
             f"the matches do not support this pose: {k} of {n} point matches are within "
-            f"{band:g} px of it ({100 * k / n:.0f} %, {why}; random matches give RANSAC a few "
-            "percent, and a handful on few matches)"])
+            f"{band:g} px of it and in front of both cameras ({100 * k / n:.0f} %, {why}"
+            f"{behind}; random matches give RANSAC a few percent, and a handful on few "
+            "matches)"])
 
     def _recommend(self, results: dict[str, MethodResult], warnings: list[str],
                    matches: PairMatches) -> PoseEstimate:
+        """The first ``"ok"`` method of the recommended order; without one, the first
+        ``"unreliable"`` one (no pose to use either, but the reason and the computed pose);
+        else ``"degenerate"`` or ``"failed"``.
+        The pose's warnings say why the earlier methods were passed over and which methods
+        could not run at all (an exception: e.g. the network on a device it cannot use)."""
         chosen = recommended_order(self._model)
         order = [m for m in chosen if m in results]
         notes = [POSELIB_MISSING] if _measured_with_missing_poselib(self._model) else []
+        raised = [m for m, r in results.items() if r.info.get("raised")]
+        notes += [f"{m} could not run: {'; '.join(results[m].warnings)}" for m in raised]
         # the regression stands in only while some solver's pose is supported or none was
         # refused for lack of support
         unsupported = any(r.info.get("unsupported") for r in results.values()) and not any(
             r.status == "ok" for m, r in results.items() if m in SUPPORT_CHECKED)
+        fallback = None  # (record, notes so far) of the first "unreliable" pose
         for m in order:
             r = results[m]
-            if r.status == "ok" and m == "regression" and unsupported:
+            if r.status in ("ok", "unreliable") and m == "regression" and unsupported:
                 notes.append("regression not used: the matches support no solver's pose")
                 continue
             if r.status == "ok":
                 pose = replace(r, warnings=_unique(warnings + notes + r.warnings))
                 return PoseEstimate(pose, results, matches.num_points, matches.num_lines,
                                     matches)
+            if r.status == "unreliable" and fallback is None:
+                fallback = (r, list(notes))
             reasons = [w for w in r.warnings if w not in warnings]
-            if reasons:
+            if reasons and m not in raised:
                 notes.append(f"{m} {r.status}: {'; '.join(reasons)}")
+        if fallback is not None:
+            r, before = fallback
+            own = [f"{BAD_INTRINSICS} (the warnings on K above)"
+                   if w.startswith(f"{BAD_INTRINSICS}: ") else w for w in r.warnings]
+            pose = replace(r, warnings=_unique(warnings + before + own))
+            return PoseEstimate(pose, results, matches.num_points, matches.num_lines, matches)
         if not order:
             notes.append(f"none of the recommended methods {chosen} was run")
         status = "degenerate" if any(results[m].status == "degenerate" for m in order) \
             else "failed"
         pose = MethodResult(None, status, warnings=_unique(warnings + notes))
         return PoseEstimate(pose, results, matches.num_points, matches.num_lines, matches)
+
+
+def _check_device(device: Any) -> torch.device | None:
+    """``device`` as a ``torch.device`` (``None`` stays ``None``); ``ValueError`` for a name
+    torch does not know or a device this machine does not have."""
+    if device is None:
+        return None
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError):
+        raise ValueError(f"Expected a torch device such as 'cpu' or 'cuda' (got {device!r})"
+                         ) from None
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            raise ValueError(f"Expected a device this machine has (got {device!r}: CUDA is not "
+                             "available here); use device='cpu', or None for the model's own")
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise ValueError(f"Expected a CUDA device index below {torch.cuda.device_count()} "
+                             f"(got {device!r})")
+    elif dev.type == "mps" and not torch.backends.mps.is_available():
+        raise ValueError(f"Expected a device this machine has (got {device!r}: MPS is not "
+                         "available here); use device='cpu', or None for the model's own")
+    elif dev.type == "meta":
+        raise ValueError(f"Expected a device that holds data (got {device!r})")
+    return dev

@@ -1,5 +1,6 @@
 """What goes into :mod:`strl_pyg.inference`: the network's input graph and forward pass, and
-the checks of a pair's matches and intrinsics that turn into warnings or ``"degenerate"``.
+the checks of a pair's matches and intrinsics that turn into warnings, ``"unreliable"`` or
+``"degenerate"``.
 
 The network's input follows what its checkpoint stores (:attr:`StrLPose.metadata
 <strl_pyg.model.StrLPose.metadata>`): images converted to grey or RGB, patch size,
@@ -19,8 +20,9 @@ import torch
 from strl_pyg.data.matches import PairMatches
 
 __all__ = [
-    "ZERO_PARALLAX_PX", "ZERO_PARALLAX_FRACTION", "FOCAL_RANGE", "prepare_matches",
-    "prepare_graph", "forward_pose", "input_warnings", "zero_parallax",
+    "ZERO_PARALLAX_PX", "ZERO_PARALLAX_FRACTION", "FOCAL_RANGE", "NORMALISED_K_MAX",
+    "prepare_matches", "prepare_graph", "forward_pose", "input_warnings",
+    "intrinsics_problems", "zero_parallax",
 ]
 
 #: Zero parallax: at least this fraction of the point matches moved less than this many
@@ -127,18 +129,25 @@ def forward_pose(model: torch.nn.Module, data: Any, device: Any = None):
 
 
 # ----------------------------------------------------------------------------- input checks
-def input_warnings(size0: Any, size1: Any, K0: Any, K1: Any) -> list[str]:
-    """Warnings about intrinsics that do not fit the images: one K for images of different
-    sizes; a principal point outside the image; a focal length outside :data:`FOCAL_RANGE`
-    times the width; no intrinsics at all."""
+#: A K whose focal lengths are at most this and whose principal point lies within this of
+#: the origin looks normalised (by the image width or size) rather than in pixels.
+NORMALISED_K_MAX = 10.0
+
+
+def intrinsics_problems(size0: Any, size1: Any, K0: Any, K1: Any) -> list[str]:
+    """Why the intrinsics do not fit the images (``[]`` when they do, or when there are
+    none): one K for images of different sizes; a principal point outside the image (with a
+    hint when ``cx`` and ``cy`` look swapped); a normalised K (focal lengths and principal
+    point of at most :data:`NORMALISED_K_MAX`) with pixel coordinates; a focal length outside
+    :data:`FOCAL_RANGE` times the width. Sizes are ``(H, W)``; every pose computed with such
+    intrinsics is ``"unreliable"`` (:class:`~strl_pyg.inference.PoseEstimator`)."""
     if K0 is None or K1 is None:
-        return ["no intrinsics (K0, K1): the network's coordinates are normalised by the image "
-                "size and the classical solvers cannot run"]
+        return []
     out = []
     (h0, w0), (h1, w1) = (tuple(int(v) for v in s) for s in (size0, size1))
     if (h0, w0) != (h1, w1) and np.allclose(K0, K1):
-        out.append(f"the images have different sizes ({w0}x{h0} and {w1}x{h1} px) but one K: "
-                   "pass each image's own intrinsics (K0, K1); the pose is likely wrong")
+        out.append(f"the images have different sizes ({h0}x{w0} and {h1}x{w1} px, H x W) but "
+                   "one K: pass each image's own intrinsics (K0, K1); the pose is likely wrong")
     lo, hi = FOCAL_RANGE
     same = (h0, w0) == (h1, w1) and np.allclose(K0, K1)
     for name, K, (h, w) in ((("K" if same else "K0"), K0, (h0, w0)), ("K1", K1, (h1, w1))):
@@ -146,14 +155,34 @@ def input_warnings(size0: Any, size1: Any, K0: Any, K1: Any) -> list[str]:
             break
         K = np.asarray(K, dtype=np.float64)
         cx, cy, fx, fy = K[0, 2], K[1, 2], K[0, 0], K[1, 1]
+        size = f"{h}x{w} px (H x W)"
+        if max(abs(fx), abs(fy), abs(cx), abs(cy)) <= NORMALISED_K_MAX and w > 4 * \
+                NORMALISED_K_MAX:
+            out.append(f"{name} looks normalised (fx={fx:.4g}, fy={fy:.4g}, cx={cx:.4g}, "
+                       f"cy={cy:.4g}) but the points are pixels of a {size} image: pass K in "
+                       "pixels (a K normalised by the image size: multiply row 0 by W and row 1 "
+                       "by H)")
+            continue
         if not (-0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5):
-            out.append(f"{name}: principal point ({cx:.1f}, {cy:.1f}) lies outside the {w}x{h} "
-                       "image: is K for this image, in pixels?")
+            swapped = -0.5 <= cy <= w - 0.5 and -0.5 <= cx <= h - 0.5
+            hint = (f": cx and cy look swapped (cx is the column, at most {w - 0.5:g} here)"
+                    if swapped else ": is K for this image, in pixels?")
+            out.append(f"{name}: principal point (cx={cx:.1f}, cy={cy:.1f}) lies outside the "
+                       f"{size} image{hint}")
         if not (lo * w <= fx <= hi * w and lo * w <= fy <= hi * w):
             out.append(f"{name}: focal length (fx={fx:.4g}, fy={fy:.4g} px) is outside "
                        f"{lo:g}-{hi:g}x the image width ({w} px): is K for this image, in "
                        "pixels?")
     return out
+
+
+def input_warnings(size0: Any, size1: Any, K0: Any, K1: Any) -> list[str]:
+    """Warnings about the intrinsics: none at all (the classical solvers cannot run), or
+    :func:`intrinsics_problems`."""
+    if K0 is None or K1 is None:
+        return ["no intrinsics (K0, K1): the network's coordinates are normalised by the image "
+                "size and the classical solvers cannot run"]
+    return intrinsics_problems(size0, size1, K0, K1)
 
 
 def zero_parallax(matches: PairMatches) -> bool:

@@ -2,10 +2,16 @@
 and a pair's estimate (:class:`PoseEstimate`: the recommended pose and every method's), both
 JSON-ready through ``to_dict``. All poses are ``T_0to1`` (``X1 = R X0 + t``).
 
-Statuses (:data:`STATUSES`): ``"ok"`` (a pose), ``"degenerate"`` (the input does not
-determine the pose: fewer point matches than the solvers need, or zero parallax (identical
-images): no pose is given), ``"failed"`` (the method found no pose, e.g. RANSAC returned no
-model; never replaced by an identity pose). A pose exists only with ``"ok"``.
+Statuses (:data:`STATUSES`): ``"ok"`` (a pose), ``"unreliable"`` (a pose was computed but
+must not be used: the intrinsics fail the input checks, or many of the matches that fit its
+epipolar geometry lie behind a camera; the reasons are in ``warnings`` and
+``info["unreliable"]``, the computed pose, for inspection only, in
+``info["unreliable_T_0to1"]``), ``"degenerate"`` (the input does not determine the pose:
+fewer point matches than the solvers need, or zero parallax (identical images): no pose is
+given), ``"failed"`` (the method found no pose, e.g. RANSAC returned no model, or the matches
+do not support it; never replaced by an identity pose). A pose (``T_0to1``, ``covariance``,
+``sigma``) exists only with ``"ok"``: a script that reads ``T_0to1`` or ``sigma`` without
+the status gets ``None`` for any other.
 
 Uncertainty: ``covariance`` ``[5, 5]`` in the tangent parameters of
 :mod:`strl_pyg.pose_fusion` around the method's own pose (rotation increment ``w`` in rad,
@@ -32,7 +38,7 @@ from strl_pyg.data.matches import PairMatches
 
 __all__ = ["STATUSES", "MethodResult", "PoseEstimate"]
 
-STATUSES = ("ok", "degenerate", "failed")
+STATUSES = ("ok", "unreliable", "degenerate", "failed")
 
 
 @dataclass
@@ -73,6 +79,19 @@ class MethodResult:
             self.T_0to1 = T
         else:
             self.T_0to1 = self.covariance = None
+
+    def unreliable(self, reasons: list[str]) -> MethodResult:
+        """This record as ``"unreliable"`` (from ``"ok"``; an ``"unreliable"`` one gets the
+        further reasons; any other is returned unchanged): no ``T_0to1`` nor covariance, the
+        pose moved to ``info["unreliable_T_0to1"]``, ``reasons`` added to ``warnings`` and to
+        ``info["unreliable"]``."""
+        if self.status not in ("ok", "unreliable") or not reasons:
+            return self
+        info = {**self.info, "unreliable": list(self.info.get("unreliable", [])) + reasons}
+        if self.status == "ok":
+            info["unreliable_T_0to1"] = self.T_0to1
+        return MethodResult(self.method, "unreliable", None, None, self.warnings + reasons,
+                            self.time_ms, self.num_inliers, info, self.raw)
 
     @property
     def sigma(self) -> dict[str, float] | None:

@@ -5,8 +5,10 @@ then picks the recommended pose: the first ``"ok"`` method of the checkpoint's r
 order (:func:`~strl_pyg.inference.recommended_order`). :func:`estimate_recommended` gives the
 same recommended pose but runs the methods of that order one at a time, stopping at the first
 ``"ok"`` one (with the methods it needs: ``fused`` reads ``regression`` and a classical
-estimate, ``guided`` reuses the classical one), and matches line segments only once a method
-that reads them (the network's) is about to run: the classical solvers use points only.
+estimate, ``guided`` reuses the classical one; or at the first ``"unreliable"`` one when the
+intrinsics fail the input checks: every later pose would be too), and matches line segments
+only once a method that reads them (the network's) is about to run: the classical solvers use
+points only.
 
 Same pose: every method is deterministic in the matches and the seed, the point matches do not
 depend on whether lines are matched (``filter_points`` off), and a method's result depends only
@@ -63,6 +65,7 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
     """
     from strl_pyg.frontend import FrontendConfig, NoMatchesError, match_images
     from strl_pyg.inference import METHODS, PoseEstimator, recommended_order
+    from strl_pyg.pose_input import intrinsics_problems
 
     cfg = frontend_config if frontend_config is not None else FrontendConfig()
     if not isinstance(cfg, FrontendConfig):
@@ -84,9 +87,13 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
             except NoMatchesError:  # the estimator's own "degenerate" record
                 return PoseEstimator(model, methods=run, **estimator_kw).estimate_images(
                     image0, image1, K0, K1, dataclasses.replace(cfg, lines=lines))
-        est = PoseEstimator(model, methods=run, **estimator_kw).estimate(matches[lines])
+        m = matches[lines]
+        est = PoseEstimator(model, methods=run, **estimator_kw).estimate(m)
         if est.methods[name].status == "ok":
             break
+        if (est.pose.status == "unreliable" and est.pose.method == name
+                and intrinsics_problems(m.image_size0, m.image_size1, m.K0, m.K1)):
+            break  # every method reads the same K: the later ones are "unreliable" too
     return est
 
 

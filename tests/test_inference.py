@@ -213,6 +213,7 @@ def test_one_K_for_images_of_different_sizes_warns(pair):
     est = PoseEstimator(methods=("opencv",))
     one_K = est.estimate_images(pair.image0, big, K0=pair.K)
     assert any("different sizes" in w for w in one_K.warnings)
+    assert one_K.status == "unreliable"  # was "ok" with a tight sigma
     S = np.diag([2.0, 2.0, 1.0])
     S[:2, 2] = 0.5  # x' = 2 (x + 0.5) - 0.5
     own = est.estimate_images(pair.image0, big, K0=pair.K, K1=S @ pair.K)
@@ -305,6 +306,14 @@ def test_method_results_hold_a_pose_only_when_ok():
         MethodResult("x", "ok", None)
     with pytest.raises(ValueError, match="Expected status"):
         MethodResult("x", "fine", np.eye(4))
+    # "unreliable": no pose either; the computed one stays in info, for inspection only
+    assert MethodResult("x", "unreliable", np.eye(4), np.eye(5)).sigma is None
+    marked = MethodResult("x", "ok", np.eye(4), np.eye(5)).unreliable(["why"])
+    assert marked.status == "unreliable" and marked.T_0to1 is None and marked.sigma is None
+    assert marked.info["unreliable"] == ["why"] and "why" in marked.warnings
+    np.testing.assert_array_equal(marked.info["unreliable_T_0to1"], np.eye(4))
+    again = marked.unreliable(["and this"])
+    assert again.info["unreliable"] == ["why", "and this"] and "unreliable_T_0to1" in again.info
 
 
 def test_to_dict_is_json_with_the_documented_keys(estimate):
@@ -351,8 +360,12 @@ def test_predict_text_says_status_method_and_warnings(pngs, capsys):
     code = cli.main(["predict", str(d / "a.png"), str(d / "big.png"), "--K", K,
                      "--methods", "all"])
     out = capsys.readouterr().out
-    assert code == 0 and re.search(r"pose: ok, from (poselib|opencv)", out)
+    # one K for two image sizes: a pose to look at, not to use (exit code 3)
+    assert code == 3 and re.search(r"pose: unreliable, no pose given .* (poselib|opencv) ", out)
     assert "warning: the images have different sizes" in out and "regression" in out
+    code = cli.main(["predict", str(d / "a.png"), str(d / "b.png"), "--K", K])
+    out = capsys.readouterr().out
+    assert code == 0 and re.search(r"pose: ok, from (poselib|opencv)", out)
     # the sigma line names the covariance it prints (before: always "1st order", also for
     # the first-order + bootstrap ones)
     assert "sigma (first-order + bootstrap (8), calibrated): rotation" in out
