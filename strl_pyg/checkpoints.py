@@ -8,7 +8,8 @@ executed) and checked for their keys and version before use. Model files (``mode
 shipped weights) hold ``format``, ``version``, ``config``, ``metadata`` and ``state_dict``;
 training checkpoints hold ``version`` (:data:`CHECKPOINT_VERSION`), ``train_config``,
 ``model_config``, ``model``, ``optimizer``, ``step``, ``rng``, ``history`` and ``trivial_T``.
-:func:`init_weights` reads either into a model.
+:func:`init_weights` reads either into a model; :func:`load_training_model` builds the model
+of a training checkpoint (the run's ``model.pt`` is the same model with its metadata).
 
 Importing this module loads neither torch nor the model (the command line's ``--help`` and
 its defaults use :func:`default_checkpoint`).
@@ -35,11 +36,16 @@ __all__ = [
     "rng_state",
     "set_rng_state",
     "init_weights",
+    "load_training_model",
+    "TRAINING_KEYS",
 ]
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 DEFAULT_WEIGHTS = WEIGHTS_DIR / "strl_pose_geometric.pt"
 CHECKPOINT_VERSION = 2  # 2: every value loads with torch.load(weights_only=True)
+#: The keys every training checkpoint (``last.pt``) holds.
+TRAINING_KEYS = frozenset({"version", "train_config", "model_config", "model", "optimizer",
+                           "step"})
 
 
 def default_checkpoint() -> Path:
@@ -96,7 +102,7 @@ def load_checkpoint(path: str | os.PathLike) -> dict[str, Any]:
                                   f"{CHECKPOINT_VERSION} cannot be continued: start from that "
                                   "run's model.pt with --init-from") from None
         raise
-    need = {"version", "train_config", "model_config", "model", "optimizer", "step"}
+    need = TRAINING_KEYS
     if not isinstance(state, dict) or not need <= set(state):
         got = sorted(state) if isinstance(state, dict) else type(state).__name__
         raise ValueError(f"Expected a training checkpoint with keys {sorted(need)} in '{path}' "
@@ -132,26 +138,77 @@ def set_rng_state(state: dict[str, Any]) -> None:
     random.setstate((version, tuple(internal), gauss))
 
 
+def load_training_model(path: str | os.PathLike):
+    """The :class:`~strl_pyg.model.StrLPose` of a training checkpoint (``last.pt``): its
+    ``model_config`` and ``model`` weights, in eval mode, with default metadata (the run's
+    ``model.pt``, written when the run finishes, also holds the training metadata)."""
+    from strl_pyg.model import StrLPose, StrLPoseConfig
+
+    path = Path(path)
+    state = load_checkpoint(path)
+    model = StrLPose(StrLPoseConfig.from_dict(state["model_config"]))
+    problems = _mismatch(model, state["model"], None)
+    if problems:
+        raise ValueError(f"Expected weights matching the checkpoint's model_config in "
+                         f"'{path}' (got {problems})")
+    model.load_state_dict(state["model"], strict=True)
+    return model.eval()
+
+
+def _mismatch(model: Any, state: dict[str, Any], saved_config: dict[str, Any] | None,
+              allow_missing: tuple[str, ...] = (), shown: int = 3) -> str:
+    """What keeps ``state`` out of ``model`` (``""`` when nothing): mis-shaped, missing and
+    unexpected keys (the first ``shown`` of each, version-1 names upgraded) and the config
+    fields in which ``saved_config`` differs from the model's."""
+    from strl_pyg.model import upgrade_key
+
+    own = model.state_dict()
+    given = {upgrade_key(k): v for k, v in state.items()}
+
+    def first(keys: list[str]) -> str:
+        return ", ".join(keys[:shown]) + (f", ... ({len(keys)} in all)" if len(keys) > shown
+                                          else "")
+
+    shapes = [f"{k} {list(given[k].shape)} vs {list(v.shape)}"
+              for k, v in own.items() if k in given and hasattr(given[k], "shape")
+              and tuple(given[k].shape) != tuple(v.shape)]
+    missing = [k for k in own if k not in given and not k.startswith(allow_missing)]
+    unexpected = [k for k in given if k not in own]
+    parts = [f"{what} keys {first(keys)}" for what, keys in (
+        ("mis-shaped (file vs model)", shapes), ("missing", missing),
+        ("unexpected", unexpected)) if keys]
+    if parts and isinstance(saved_config, dict):
+        mine = model.config.to_dict()
+        diff = [f"{k} {saved_config[k]!r} vs {mine[k]!r}" for k in mine
+                if k in saved_config and saved_config[k] != mine[k]]
+        if diff:
+            parts.insert(0, "config fields (file vs model) " + ", ".join(diff))
+    return "; ".join(parts)
+
+
 def init_weights(model: Any, path: str | os.PathLike) -> None:
     """Loads the weights of a model checkpoint (``model.pt``) or training checkpoint
-    (``last.pt``) into ``model``; the architectures must match. Both load with
-    ``weights_only=True`` (a file that would run code is refused)."""
+    (``last.pt``) into ``model``; the architectures must match (else a ``ValueError`` naming
+    the first mis-shaped, missing and unexpected keys and the config fields that differ).
+    Both load with ``weights_only=True`` (a file that would run code is refused)."""
     from strl_pyg.model import StrLPose
 
     path = Path(path)
     payload = safe_torch_load(path, "weights file (model.pt or last.pt)")
     if isinstance(payload, dict) and "format" in payload:
         state = StrLPose.load(path).state_dict()
+        saved_config = payload.get("config")
     else:
-        state = load_checkpoint(path)["model"]
+        ckpt = load_checkpoint(path)
+        state, saved_config = ckpt["model"], ckpt.get("model_config")
     # A model that adds the geometric head may start from regression-only weights: the new
     # head's parameters are the only ones allowed to be missing.
+    problems = _mismatch(model, state, saved_config, allow_missing=("inlier_head.",))
+    if problems:
+        raise ValueError(f"Expected weights matching this run's model config in '{path}' "
+                         f"(got {problems})")
     try:
-        missing, unexpected = model.load_state_dict(state, strict=False)
+        model.load_state_dict(state, strict=False)
     except RuntimeError as err:
         raise ValueError(f"Expected weights matching this run's model config in '{path}' "
                          f"(got {str(err).splitlines()[0]})") from err
-    missing = [k for k in missing if not k.startswith("inlier_head.")]
-    if missing or unexpected:
-        raise ValueError(f"Expected weights matching this run's model config in '{path}' "
-                         f"(got missing keys {missing[:5]}, unexpected keys {unexpected[:5]})")

@@ -8,7 +8,8 @@ files, undecodable images, bad intrinsics, empty or foreign match files, checkpo
 corrupt or would need code to load (refused: all checkpoints load with ``weights_only=True``),
 and outputs that cannot be written (checked before any work). ``predict`` exits with 0 for a
 pose with status ``ok``, 1 for no pose, 3 for an ``unreliable`` one (computed, not to use:
-see ``strl-pose predict --help``).
+see ``strl-pose predict --help``); output cut short by a closed stdout (``| head``) ends
+quietly with 141.
 
 Large images are downscaled for matching so that their longer side is at most ``--max-side``
 pixels (default :data:`MAX_SIDE`; ``0`` keeps the full resolution), with the intrinsics scaled
@@ -135,9 +136,11 @@ def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-#: Names of the methods in text output.
-METHOD_LABELS = {"regression": "Str-L Pose", "opencv": "OpenCV MAGSAC", "poselib": "PoseLib",
-                 "fused": "fused"}
+#: What each method is, beside its registry name (the one name the output uses for it).
+METHOD_LABELS = {"regression": "the network's pose head", "opencv": "OpenCV MAGSAC",
+                 "poselib": "PoseLib", "fused": "network + classical, information form",
+                 "geometric": "the network's weighted eight-point", "guided": "network-guided "
+                 "classical solve"}
 
 #: ``strl-pose predict``'s exit codes (also in its ``--help``).
 EXIT_CODES = {0: "a pose: status 'ok'",
@@ -146,7 +149,8 @@ EXIT_CODES = {0: "a pose: status 'ok'",
               3: "no pose to use: status 'unreliable' (a pose was computed, but the "
                  "intrinsics fail the input checks or its matches lie behind a camera: see the "
                  "warnings; T_0to1 and sigma are null)",
-              130: "interrupted"}
+              130: "interrupted",
+              141: "stdout closed early (e.g. '| head'): output stopped quietly"}
 STATUS_EXIT = {"ok": 0, "degenerate": 1, "failed": 1, "unreliable": 3}
 
 
@@ -192,7 +196,7 @@ def cmd_demo(args) -> int:
     model = load_model(args.checkpoint)
     pair = generate_pair(args.seed, SceneConfig(kind=args.kind))
     print(f"generated pair: kind={args.kind}, seed={args.seed}, "
-          f"{pair.image0.shape[1]}x{pair.image0.shape[0]} px (held out from training)")
+          f"{pair.image0.shape[0]}x{pair.image0.shape[1]} px (H x W; held out from training)")
     matches = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K)
     tm = matches.info.get("timings_ms", {})
     print(f"front end: {matches.num_points} points, {matches.num_lines} lines "
@@ -205,18 +209,17 @@ def cmd_demo(args) -> int:
     print(f"\n{'method':<14} {'status':<10} {'rot err':>8} {'t err':>8} {'ms':>7}   pose")
     print(f"{'ground truth':<14} {'':<10} {0.0:8.3f} {0.0:8.3f} {'-':>7}   {_fmt_pose(T_gt)}")
     report = {}
-    for name, r in est.methods.items():
-        label = METHOD_LABELS.get(name, name)
+    for name, r in est.methods.items():  # registry names: one method, one name
         if r.T_0to1 is None:
-            print(f"{label:<14} {r.status:<10} {'-':>8} {'-':>8} {r.time_ms:7.1f}   "
+            print(f"{name:<14} {r.status:<10} {'-':>8} {'-':>8} {r.time_ms:7.1f}   "
                   f"{'; '.join(r.warnings)}")
             continue
         rot, tr = _pose_errors(r.T_0to1, T_gt)
-        print(f"{label:<14} {r.status:<10} {rot:8.3f} {tr:8.3f} {r.time_ms:7.1f}   "
+        print(f"{name:<14} {r.status:<10} {rot:8.3f} {tr:8.3f} {r.time_ms:7.1f}   "
               f"{_fmt_pose(r.T_0to1)}")
-        report[label] = {"rot_err_deg": rot, "trans_err_deg": tr}
+        report[name] = {"rot_err_deg": rot, "trans_err_deg": tr, "status": r.status}
     s = pred["sigma"]
-    print(f"\npredicted sigma (Str-L Pose): quaternion {np.array2string(s[:4], precision=4)}, "
+    print(f"\npredicted sigma (regression): quaternion {np.array2string(s[:4], precision=4)}, "
           f"translation {np.array2string(s[4:], precision=4)}")
     print(f"recommended pose: {est.status}" + (f", from {est.pose.method}" if est.pose.method
                                                else "")
@@ -243,12 +246,22 @@ def _match(inputs, args):
     return match_images(img0, img1, K0=K0, K1=K1, config=FrontendConfig(detector=args.detector))
 
 
-def cmd_match(args) -> int:
+def _check_file_arg(path: str, flag: str, example: str) -> None:
+    """An output file flag's value: a folder (existing, or ending in '/') is refused with the
+    file name to add (``Path('out/')`` is ``out``: it used to become a file named ``out``)."""
     from strl_pyg.io import check_output_file
 
-    check_output_file(args.out, "a file path for --out")  # before any work
+    if path.endswith(("/", os.sep)) or Path(path).is_dir():
+        name = str(Path(path) / example)
+        raise UsageError(f"Expected a file path for {flag} (got '{path}', which names a folder; "
+                         f"e.g. '{name}')")
+    check_output_file(path, f"a file path for {flag}")
+
+
+def cmd_match(args) -> int:
+    _check_file_arg(args.out, "--out", "matches.npz")  # before any work
     if args.png:
-        check_output_file(args.png, "a file path for --png")
+        _check_file_arg(args.png, "--png", "matches.png")
     inputs = read_pair(args)
     from strl_pyg.viz.matches import save_matches_png
 
@@ -440,13 +453,31 @@ def _report(err: BaseException) -> int:
     return 2
 
 
+def _stdout_closed() -> int:
+    """Exit code 141 (128 + SIGPIPE, as a Unix tool killed by it) after stdout was closed;
+    stdout is pointed at /dev/null so the interpreter's final flush stays quiet too."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):  # no real file descriptor (captured output)
+        pass
+    return 141
+
+
 def run_guarded(fn, *args) -> int:
     """Runs ``fn(*args)`` and returns its exit code; a user error (bad flag or value, bad or
     missing file, unwritable output, refused checkpoint: ``UsageError``, ``OSError``, or a
     library ``ValueError`` / ``TypeError`` / ``KeyError`` saying "Expected ...") is printed as
-    one ``error: ...`` line on stderr and gives exit code 2, never a traceback."""
+    one ``error: ...`` line on stderr and gives exit code 2, never a traceback; a closed
+    stdout (``| head``) ends quietly with 141."""
     try:
-        return int(fn(*args) or 0)
+        try:
+            return int(fn(*args) or 0)
+        finally:  # a closed pipe shows here (also after --help's SystemExit), not at exit
+            sys.stdout.flush()
+    except BrokenPipeError:  # '| head' closed stdout: not the user's path, nothing to say
+        return _stdout_closed()
     except (UsageError, OSError) as err:  # bad flags, missing / unwritable paths
         return _report(err)
     except (ValueError, TypeError, KeyError) as err:  # the library's "Expected ... (got ...)"

@@ -182,7 +182,8 @@ def read_pair(args) -> PairInputs:
     inputs.original, inputs.scales = (img0, img1, K0, K1), (s0, s1)
     if inputs.downscaled:
         print(f"note: images downscaled for matching to at most {max_side} px "
-              f"({img0.shape[1]}x{img0.shape[0]} -> {small0.shape[1]}x{small0.shape[0]}); "
+              f"({img0.shape[0]}x{img0.shape[1]} -> {small0.shape[0]}x{small0.shape[1]} px, "
+              "H x W); "
               "--max-side 0 keeps the full resolution", file=sys.stderr)
     return inputs
 

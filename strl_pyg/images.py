@@ -4,7 +4,8 @@ check of in-memory images.
 Every image the package reads (the command line's inputs, the datasets' files and HDF5
 groups) goes through :func:`decode_image`, so all of them follow one set of rules:
 
-* 8-bit images as they are, 16-bit ones scaled to 8 bits (``v / 257``, truncated); any other
+* 8-bit images as they are, 16-bit ones scaled to 8 bits (:func:`to_uint8`: ``v // 257``,
+  so 65535 -> 255; a 12-bit image in a 16-bit file comes out dark, 4095 -> 15); any other
   depth (float or 32-bit TIFF, EXR) is refused;
 * an alpha channel is dropped; grey + alpha becomes grey;
 * colour comes back as RGB ``(H, W, 3)`` (OpenCV decodes BGR), grey as ``(H, W)``;
@@ -14,7 +15,8 @@ Every in-memory image the package is given (:class:`~strl_pyg.data.PairMatches` 
 front end's inputs) goes through :func:`check_image`, so all of them follow one set of rules too:
 
 * a numpy array or a torch tensor (anything else is a ``TypeError``);
-* dtype uint8, or float32 / float64 with finite values in ``[0, 1]``;
+* dtype uint8, uint16 (scaled to uint8 as a 16-bit file is: :func:`to_uint8`), or float32 /
+  float64 with finite values in ``[0, 1]``;
 * shape ``(H, W)``, ``(H, W, 1)`` (becomes ``(H, W)``) or RGB ``(H, W, 3)``, not empty, both
   sides at least ``min_side`` pixels.
 
@@ -34,12 +36,20 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["decode_image", "read_image_file", "check_image", "FRONTEND_MIN_SIDE"]
+__all__ = ["decode_image", "read_image_file", "check_image", "to_uint8", "FRONTEND_MIN_SIDE"]
 
 #: Smallest side (pixels) of an image the front end matches: SIFT's and LSD's smallest scales.
 FRONTEND_MIN_SIDE = 16
 
-_DTYPES = (np.uint8, np.float32, np.float64)
+_DTYPES = (np.uint8, np.uint16, np.float32, np.float64)
+
+
+def to_uint8(img: np.ndarray) -> np.ndarray:
+    """A uint16 image as uint8, ``v // 257`` (0 -> 0, 65535 -> 255; the one 16-bit rule of
+    files and arrays alike); other dtypes unchanged."""
+    if img.dtype == np.uint16:
+        return (img // 257).astype(np.uint8)
+    return img
 
 
 def decode_image(buf: np.ndarray, name: str, grayscale: bool = False) -> np.ndarray:
@@ -52,8 +62,7 @@ def decode_image(buf: np.ndarray, name: str, grayscale: bool = False) -> np.ndar
     if img is None or img.size == 0:
         raise ValueError(f"Expected a decodable image at '{name}' (got bytes OpenCV cannot "
                          "decode)")
-    if img.dtype == np.uint16:
-        img = (img / 257).astype(np.uint8)
+    img = to_uint8(img)
     if img.dtype != np.uint8:
         raise ValueError(f"Expected an 8- or 16-bit image at '{name}' (got dtype {img.dtype})")
     if img.ndim == 3 and img.shape[2] == 4:
@@ -85,7 +94,8 @@ def check_image(value: Any, name: str, *, grayscale: bool = False, min_side: int
 
     Args:
         value: numpy array or torch tensor, ``(H, W)``, ``(H, W, 1)`` or RGB ``(H, W, 3)``;
-            uint8, or float32/float64 in ``[0, 1]``.
+            uint8, uint16 (returned as uint8, :func:`to_uint8`), or float32/float64 in
+            ``[0, 1]``.
         name: the argument's name in error messages.
         grayscale: return grey uint8 ``(H, W)`` (C-contiguous): floats scaled by 255 and
             rounded, RGB converted with OpenCV's BT.601 weights. ``False``: the image as given,
@@ -104,7 +114,8 @@ def check_image(value: Any, name: str, *, grayscale: bool = False, min_side: int
                         f"(got {type(value).__name__})")
     img = value
     if img.dtype not in _DTYPES:
-        raise TypeError(f"Expected '{name}' of dtype uint8, float32 or float64 (got {img.dtype})")
+        raise TypeError(f"Expected '{name}' of dtype uint8, float32 or float64, or uint16 "
+                        f"(got {img.dtype})")
     if not (img.ndim == 2 or (img.ndim == 3 and img.shape[2] in (1, 3))):
         raise ValueError(f"Expected '{name}' of shape (H, W) or (H, W, 1|3) "
                          f"(got {tuple(img.shape)})")
@@ -113,6 +124,7 @@ def check_image(value: Any, name: str, *, grayscale: bool = False, min_side: int
     if min(img.shape[:2]) < min_side:
         raise ValueError(f"Expected '{name}' of at least {min_side}x{min_side} pixels "
                          f"(got {tuple(img.shape[:2])})")
+    img = to_uint8(img)
     if img.dtype != np.uint8:
         if not np.isfinite(img).all():
             raise ValueError(f"Expected float '{name}' with finite values in [0, 1] "

@@ -72,6 +72,25 @@ def upgrade_key(key: str) -> str:
     return key
 
 
+def _what_checkpoint(payload: Any, path: Path) -> str:
+    """What a file that is not a model checkpoint holds, for :meth:`StrLPose.load`'s error:
+    a training checkpoint gets the way to its model."""
+    if not isinstance(payload, dict):
+        return type(payload).__name__
+    if "format" in payload:
+        return f"format {payload['format']!r}"
+    # a few of strl_pyg.checkpoints.TRAINING_KEYS (not imported: that layer is above this one)
+    if {"model_config", "model", "optimizer", "step"} <= set(payload):
+        model_pt = path.parent / "model.pt"
+        where = (f"'{model_pt}' (the same run's model)" if model_pt.is_file()
+                 else "the run's model.pt (written when training finishes)")
+        return (f"a training checkpoint (last.pt format, step {payload.get('step')!r}): pass "
+                f"{where}, or build its model with "
+                f"strl_pyg.checkpoints.load_training_model('{path}')")
+    keys = sorted(str(k) for k in payload)
+    return f"a dict with keys {keys[:8]}" + (" ..." if len(keys) > 8 else "")
+
+
 def _upgrade_legacy_keys(module, state_dict, prefix, local_metadata, strict, missing_keys,
                          unexpected_keys, error_msgs) -> None:
     """``load_state_dict`` pre-hook of :class:`StrLPose`: renames version-1 keys in place
@@ -359,8 +378,8 @@ class StrLPose(nn.Module):
         # weights_only=True: a file that would run code is refused (io.UnsafeFileError)
         payload = safe_torch_load(path, "StrLPose checkpoint", map_location)
         if not isinstance(payload, dict) or payload.get("format") != cls._FORMAT:
-            got = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
-            raise ValueError(f"Expected a '{cls._FORMAT}' checkpoint at {path} (got {got!r})")
+            raise ValueError(f"Expected a '{cls._FORMAT}' checkpoint at {path} (got "
+                             f"{_what_checkpoint(payload, path)})")
         if payload.get("version") not in cls._READABLE_VERSIONS:
             raise ValueError(f"Expected checkpoint version in {cls._READABLE_VERSIONS} "
                              f"(got {payload.get('version')!r})")

@@ -113,7 +113,7 @@ def test_predict_exits_3_for_an_unreliable_pose_and_help_names_the_codes(pair, t
     with pytest.raises(SystemExit):
         cli.main(["predict", "--help"])
     help_text = capsys.readouterr().out
-    for code in ("0 ", "1 ", "2 ", "3 "):
+    for code in ("0 ", "1 ", "2 ", "3 ", "141"):
         assert f"\n  {code}" in help_text, help_text
     assert "'unreliable'" in help_text
 

@@ -35,13 +35,16 @@ def test_demo_prints_pose_and_writes_png(checkpoint, tmp_path, capsys):
     code = cli.main(["demo", "--checkpoint", checkpoint, "--out", str(tmp_path), "--json"])
     out = capsys.readouterr().out
     assert code == 0
-    assert "Str-L Pose" in out and "OpenCV MAGSAC" in out and "predicted sigma" in out
+    # one method, one name: the registry's (before: "Str-L Pose" for the regression)
+    assert "Str-L Pose" not in out and "\nregression " in out and "\nopencv " in out
+    assert "predicted sigma (regression)" in out
+    assert "192x640 px (H x W" in out  # sizes as (H, W), like the rest of the package
     # the recommended pose's own uncertainty too (before: only the network's)
     assert "recommended pose: ok" in out and "recommended pose's sigma (" in out
     result = json.loads(out.strip().splitlines()[-1])
     assert len(result["prediction"]["quaternion"]) == 4
     # the classical baseline on front-end matches of a generated pair is accurate
-    assert result["errors"]["OpenCV MAGSAC"]["rot_err_deg"] < 1.0
+    assert result["errors"]["opencv"]["rot_err_deg"] < 1.0
     png = tmp_path / "demo_matches.png"
     img = cv2.imread(str(png))
     assert img is not None and img.shape[0] > 100 and img.std() > 5
