@@ -122,7 +122,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     import ablation_eval as ae
     import torch
 
-    from strl_pyg.model import StrLPose
+    from strl_pyg.model.strl_pose import StrLPose
 
     torch.set_num_threads(args.threads)
     root = Path(args.root)

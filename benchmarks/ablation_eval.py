@@ -91,7 +91,7 @@ def _errors(T_est: np.ndarray, T_gt: np.ndarray) -> tuple[float, float]:
 
 def poselib_errors(sets: dict[str, list]) -> dict[str, list]:
     """PoseLib on every pair: ``[rot, trans]`` in degrees or ``None`` where it gives no pose."""
-    from strl_pyg.baselines import estimate_relative_pose
+    from strl_pyg.estimation.classical import estimate_relative_pose
 
     out = {}
     for name, pairs in sets.items():
@@ -110,7 +110,7 @@ def model_errors(model: Any, sets: dict[str, list]) -> dict[str, list]:
     """The regression head on every pair (``None`` where the pair has no matches)."""
     import torch
 
-    from strl_pyg.pose_input import forward_pose, prepare_graph
+    from strl_pyg.inference.inputs import forward_pose, prepare_graph
 
     out = {}
     with torch.inference_mode():
@@ -128,7 +128,7 @@ def model_errors(model: Any, sets: dict[str, list]) -> dict[str, list]:
 
 
 def save_json(path: Path, obj: Any) -> None:
-    from strl_pyg.io import atomic_open
+    from strl_pyg.utils.io import atomic_open
 
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_open(path, "w") as f:
@@ -155,7 +155,7 @@ def median_interval(x: np.ndarray, resamples: int = 2000, seed: int = 0) -> tupl
 
 
 def auc20(worst: np.ndarray) -> float:
-    from strl_pyg.metrics import pose_auc
+    from strl_pyg.metrics.two_view import pose_auc
 
     return float(pose_auc(worst, (20.0,))[0])
 
@@ -163,7 +163,7 @@ def auc20(worst: np.ndarray) -> float:
 def paired_ratio(a: list, b: list, which: int) -> tuple[float, float, float, int]:
     """median(a) / median(b) of rotation (0) or translation (1) errors on the pairs where
     both gave a pose, with its paired-bootstrap interval, and the number of such pairs."""
-    from strl_pyg.pose_stats import median_ratio_interval
+    from strl_pyg.metrics.stats import median_ratio_interval
 
     keep = [i for i, (x, y) in enumerate(zip(a, b, strict=True))
             if x is not None and y is not None]

@@ -21,10 +21,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import banner  # noqa: E402
 
-from strl_pyg.baselines import estimate_relative_pose  # noqa: E402
 from strl_pyg.data.matches import PairMatches  # noqa: E402
+from strl_pyg.estimation.classical import estimate_relative_pose  # noqa: E402
 from strl_pyg.geometry import Pose, quaternion_to_rotation  # noqa: E402
-from strl_pyg.metrics import pose_auc, relative_pose_error  # noqa: E402
+from strl_pyg.metrics.two_view import pose_auc, relative_pose_error  # noqa: E402
 
 H, W = 480, 640
 

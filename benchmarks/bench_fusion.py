@@ -19,23 +19,23 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import banner  # noqa: E402
-
-from strl_pyg.baselines import estimate_relative_pose  # noqa: E402
-from strl_pyg.evaluation import (  # noqa: E402
-    EvalReport,
-    PairResult,
-    pair_result,
-    predict_pose,
-    synthetic_eval_pairs,
-)
 from strl_pyg.fusion import (  # noqa: E402
     classical_covariance,
     fuse_poses,
     pose_to_tangent,
     tangent_basis,
 )
+
+from strl_pyg.estimation.classical import estimate_relative_pose  # noqa: E402
+from strl_pyg.evaluation.run import (  # noqa: E402
+    EvalReport,
+    PairResult,
+    pair_result,
+    predict_pose,
+    synthetic_eval_pairs,
+)
 from strl_pyg.geometry import Pose  # noqa: E402
-from strl_pyg.model import StrLPose  # noqa: E402
+from strl_pyg.model.strl_pose import StrLPose  # noqa: E402
 
 DEFAULT_CKPT = Path(__file__).resolve().parents[1] / "strl_pyg" / "weights" / (
     "strl_pose_synthetic.pt")

@@ -1,6 +1,6 @@
 """Can the gated fusion be made to never hurt? Variants of ``fuse_poses`` on the same matches.
 
-The fusion (:func:`strl_pyg.pose_fusion.fuse_poses`) combines the network's regression pose with
+The fusion (:func:`strl_pyg.estimation.fuse_poses`) combines the network's regression pose with
 PoseLib's estimate. Issue 10 asks that it never be worse than PoseLib by more than 5 % in median
 on any set. This benchmark runs the network and PoseLib once per pair (the matches of
 ``bench_pose.py``, same cache), then re-fuses offline with:
@@ -39,7 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_pose as bp  # noqa: E402
 from common import banner  # noqa: E402
 
-from strl_pyg.pose_stats import median_ratio_interval  # noqa: E402
+from strl_pyg.metrics.stats import median_ratio_interval  # noqa: E402
 
 
 def _sets(cache: Path, calib_pairs: int, per_set: int = 30) -> dict:
@@ -66,8 +66,8 @@ def _sets(cache: Path, calib_pairs: int, per_set: int = 30) -> dict:
 
 
 def _raw(model, sets: dict) -> dict:
-    from strl_pyg.baselines import estimate_relative_pose
-    from strl_pyg.pose_input import forward_pose, prepare_graph
+    from strl_pyg.estimation.classical import estimate_relative_pose
+    from strl_pyg.inference.inputs import forward_pose, prepare_graph
 
     out = {}
     for name, pairs in sets.items():
@@ -83,8 +83,9 @@ def _raw(model, sets: dict) -> dict:
 
 
 def _variant(raw: dict, scale: float, inflation: float, tau: float | None) -> dict:
-    from strl_pyg.guided import _normalised, msac_cost
-    from strl_pyg.pose_fusion import fuse_poses
+    from strl_pyg.estimation.classical import normalised_matches
+    from strl_pyg.estimation.fusion import fuse_poses
+    from strl_pyg.estimation.guided import msac_cost
 
     res = {}
     for name, rows in raw.items():
@@ -94,7 +95,7 @@ def _variant(raw: dict, scale: float, inflation: float, tau: float | None) -> di
                            inflation=inflation)
             keep = f.source == "fused"
             if keep and tau is not None:
-                x0, x1, focal = _normalised(m)
+                x0, x1, focal = normalised_matches(m)
                 d = msac_cost(f.pose, x0, x1, 1.0 / focal) - msac_cost(cls.pose, x0, x1,
                                                                        1.0 / focal)
                 keep = d <= tau * (f.info["sigma_px"] / focal) ** 2
@@ -127,7 +128,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="benchmarks/results_fusion_gate.md")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
-    from strl_pyg.model import StrLPose
+    from strl_pyg.model.strl_pose import StrLPose
 
     model = StrLPose.load(args.checkpoint) if args.checkpoint else StrLPose.from_pretrained()
     model.eval()
@@ -157,7 +158,7 @@ def main(argv=None) -> int:
             f"{time.perf_counter() - t0:.0f} s. Each cell: change of the median rotation / "
             "translation-direction error of the fused pose against PoseLib's (negative = "
             "better) with its 95 % paired-bootstrap interval over the pairs "
-            "(strl_pyg.pose_stats.median_ratio_interval), and in brackets the pairs where the "
+            "(strl_pyg.metrics.stats.median_ratio_interval), and in brackets the pairs where the "
             "fused pose was used. The last column: the worst change over the evaluation sets, "
             "and the largest lower bound of an interval (above +5 %: a set where the fusion "
             "is worse beyond the sampling noise of its median).\n\n"

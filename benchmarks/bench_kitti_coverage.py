@@ -42,8 +42,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="benchmarks/results_kitti_coverage.md")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
-    from strl_pyg.inference import PoseEstimator
-    from strl_pyg.pose_stats import coverage_interval
+    from strl_pyg.inference.estimator import PoseEstimator
+    from strl_pyg.metrics.stats import coverage_interval
 
     est = PoseEstimator(methods=["poselib"])
     t0 = time.perf_counter()

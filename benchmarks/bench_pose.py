@@ -17,7 +17,7 @@ the fraction of pairs whose 5-dof tangent error lies inside the 1-sigma and 2-si
 ``--calibrate`` first fits, on a separate held-out split of the training distribution
 (``mixed_small``, seeds from 3,000,000), one covariance scale per method and writes them into
 the checkpoint: for the first-order + bootstrap covariances of PoseLib and OpenCV
-(:mod:`strl_pyg.pose_uncertainty`) such that 95.4 % of the Mahalanobis distances fall inside
+(:mod:`strl_pyg.estimation.uncertainty`) such that 95.4 % of the Mahalanobis distances fall inside
 the 2-sigma region (guided and fused too: they carry the bootstrap of their classical solve);
 for the network's own (regression, geometric head) such that 68.3 % fall
 inside the 1-sigma region (at 2 sigma the few gross failures would set their scale)
@@ -31,9 +31,9 @@ best classical one only if it beats it beyond the sampling noise (:func:`recomme
 the evidence goes into ``metadata["recommended_evidence"]``).
 
 Coverage cells carry the 95 % Wilson interval of the 2-sigma fraction
-(:func:`strl_pyg.pose_stats.coverage_interval`: 30 of 30 pairs is (89-100)); a last table gives
+(:func:`strl_pyg.metrics.stats.coverage_interval`: 30 of 30 pairs is (89-100)); a last table gives
 the ratios of median errors behind issue 10's targets with 95 % paired-bootstrap intervals
-(:func:`strl_pyg.pose_stats.median_ratio_interval`).
+(:func:`strl_pyg.metrics.stats.median_ratio_interval`).
 
 Usage::
 
@@ -58,8 +58,8 @@ from tqdm.auto import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import banner  # noqa: E402
 
-from strl_pyg.pose_stats import coverage_interval, median_ratio_interval  # noqa: E402
-from strl_pyg.pose_uncertainty import BOOTSTRAPPED  # noqa: E402
+from strl_pyg.estimation.uncertainty import BOOTSTRAPPED  # noqa: E402
+from strl_pyg.metrics.stats import coverage_interval, median_ratio_interval  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data"
@@ -148,7 +148,7 @@ def kitti_pairs(gap: int, cache: Path, config=None):
     seq = root / "sequences" / "06"
     if not seq.is_dir():
         return []
-    from strl_pyg.cli import read_intrinsics
+    from strl_pyg.cli.commands import read_intrinsics
 
     K = read_intrinsics(str(seq / "calib.txt"))
     poses = np.loadtxt(root / "poses" / "06.txt").reshape(-1, 3, 4)
@@ -172,7 +172,7 @@ def kitti_pairs(gap: int, cache: Path, config=None):
 
 
 def dino_pairs(cache: Path, config=None):
-    from strl_pyg.data.datasets.middlebury import middlebury_pairs
+    from strl_pyg.datasets.middlebury import middlebury_pairs
     from strl_pyg.frontend import NoMatchesError, match_images
 
     root = DATA / "middlebury_dino"
@@ -216,8 +216,8 @@ def demon_pairs(cache: Path, config=None):
 def tangent_error(T_est: np.ndarray, T_gt: np.ndarray) -> np.ndarray:
     """5-dof error (rotation vector, translation direction on the sphere) of ``T_est`` in the
     chart of :mod:`strl_pyg.fusion` around the estimate."""
+    from strl_pyg.estimation.fusion import pose_to_tangent
     from strl_pyg.geometry import Pose, tangent_basis
-    from strl_pyg.pose_fusion import pose_to_tangent
 
     est = Pose.from_matrix(torch.as_tensor(T_est, dtype=torch.float64))
     gt = Pose.from_matrix(torch.as_tensor(T_gt, dtype=torch.float64))
@@ -226,7 +226,7 @@ def tangent_error(T_est: np.ndarray, T_gt: np.ndarray) -> np.ndarray:
 
 
 def errors(T_est, T_gt) -> tuple[float, float]:
-    from strl_pyg.metrics import relative_pose_error
+    from strl_pyg.metrics.two_view import relative_pose_error
 
     r, t = relative_pose_error(np.asarray(T_est)[None], np.asarray(T_gt)[None])
     return float(r[0]), float(t[0])
@@ -261,7 +261,7 @@ def run_set(estimator, pairs, mean_T, progress=True):
 
 
 def summarise(rows, method: str) -> dict:
-    from strl_pyg.metrics import pose_auc
+    from strl_pyg.metrics.two_view import pose_auc
 
     rot, trans, worst, d2, fails = [], [], [], [], 0
     for row in rows:
@@ -311,7 +311,7 @@ TARGETS = (("recommended", "poselib"), ("guided", "poselib"), ("fused", "poselib
 def target_ratios(rows) -> dict:
     """Per target of :data:`TARGETS`: ``(n, rotation (ratio, low, high), translation (...))``
     of the median errors on the pairs both methods solved, with 95 % paired-bootstrap
-    intervals (:func:`strl_pyg.pose_stats.median_ratio_interval`)."""
+    intervals (:func:`strl_pyg.metrics.stats.median_ratio_interval`)."""
     out = {}
     for a, b in TARGETS:
         ea, eb = paired_errors(rows, a, b)
@@ -393,10 +393,10 @@ def fit_fusion_inflation(estimator, pairs, s_reg: float) -> tuple[float, dict]:
     here beyond the sampling noise); the largest when none is. The fused pose does not depend
     on the bootstrap covariance, so the pairs are solved once without it.
     Returns ``(k, {k: [rot ratio, low, high, trans ratio, low, high]})``."""
-    from strl_pyg.pose_fusion import fuse_poses
-    from strl_pyg.pose_methods import _have_poselib
+    from strl_pyg.estimation.classical import have_poselib
+    from strl_pyg.estimation.fusion import fuse_poses
 
-    classical = ("poselib", "opencv") if _have_poselib() else ("opencv",)
+    classical = ("poselib", "opencv") if have_poselib() else ("opencv",)
     model = estimator.model
     with _metadata(model, calibration={"regression": s_reg}):
         est = type(estimator)(model, methods=["regression", *classical], bootstrap=0)
@@ -444,10 +444,10 @@ def recommended_order(rows, stats) -> tuple[list[str], dict]:
     """Methods by AUC@10 on the calibration pairs (then by median error), except that a
     method ranked above the best classical one (PoseLib, else OpenCV) stays there only if its
     AUC@10 is higher beyond the sampling noise: the 95 % paired-bootstrap interval of the
-    difference (:func:`strl_pyg.pose_stats.auc_difference_interval`) lies above 0. The others
+    difference (:func:`strl_pyg.metrics.stats.auc_difference_interval`) lies above 0. The others
     move just behind it, in their order: the classical estimate is the default a learned
     method has to beat measurably. Returns ``(order, {method: (diff, low, high)})``."""
-    from strl_pyg.pose_stats import auc_difference_interval
+    from strl_pyg.metrics.stats import auc_difference_interval
 
     order = sorted(stats, key=lambda m: (-stats[m]["auc10"],
                                          max(stats[m]["rot_med"], stats[m]["trans_med"])))
@@ -545,8 +545,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
     print(banner())
-    from strl_pyg.inference import PoseEstimator
-    from strl_pyg.model import StrLPose
+    from strl_pyg.inference.estimator import PoseEstimator
+    from strl_pyg.model.strl_pose import StrLPose
 
     model = StrLPose.load(args.checkpoint) if args.checkpoint else StrLPose.from_pretrained()
     model.eval()
@@ -602,7 +602,7 @@ def main(argv=None) -> int:
     mean_T = None
     if args.train_checkpoint:
         from strl_pyg.geometry import Pose
-        from strl_pyg.training import load_checkpoint, mean_pose
+        from strl_pyg.training.loop import load_checkpoint, mean_pose
 
         st = load_checkpoint(args.train_checkpoint)
         q, t = mean_pose(st["trivial_T"], model.config.translation)

@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 from common import banner  # noqa: E402
 
 from strl_pyg import frontend as fe  # noqa: E402
-from strl_pyg.images import read_image_file  # noqa: E402
+from strl_pyg.utils.images import read_image_file  # noqa: E402
 
 
 def _median_ms(fn, repeat: int) -> tuple[float, object]:
@@ -94,7 +94,7 @@ def _pairs(data: Path):
 def _stages(img0, img1, K, model, repeat: int) -> dict[str, float]:
     """Median ms of each stage of the predict path, called one by one."""
     from strl_pyg.frontend.lines import candidate_pairs, line_descriptor_scores
-    from strl_pyg.inference import PoseEstimator, forward_pose, prepare_graph
+    from strl_pyg.inference.estimator import PoseEstimator, forward_pose, prepare_graph
 
     cfg = fe.FrontendConfig()
     t = {}
@@ -137,7 +137,7 @@ def _stages(img0, img1, K, model, repeat: int) -> dict[str, float]:
 
 def _end_to_end(img0, img1, K, model, repeat: int) -> dict[str, float]:
     from strl_pyg.frontend import FrontendConfig
-    from strl_pyg.recommended import estimate_methods
+    from strl_pyg.inference.recommended import estimate_methods
 
     out = {}
     for label, methods, boot in (
@@ -160,7 +160,7 @@ def main() -> None:
     args = ap.parse_args()
     import torch
 
-    from strl_pyg.model import StrLPose
+    from strl_pyg.model.strl_pose import StrLPose
 
     lines = ["# Predict-path profile (`benchmarks/bench_predict.py`)", "",
              "    nice -n 15 .venv/bin/python benchmarks/bench_predict.py "

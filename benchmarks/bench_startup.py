@@ -29,8 +29,9 @@ import time
 from pathlib import Path
 
 CASES = {
-    "strl-pose --help": ["-m", "strl_pyg.cli", "--help"],
-    "strl-pose bench --repeat x (argument error)": ["-m", "strl_pyg.cli", "bench", "--repeat",
+    "strl-pose --help": ["-m", "strl_pyg.cli.commands", "--help"],
+    "strl-pose bench --repeat x (argument error)": ["-m", "strl_pyg.cli.commands", "bench",
+                                                    "--repeat",
                                                     "x"],
     "import strl_pyg": ["-c", "import strl_pyg"],
     "import torch (reference)": ["-c", "import torch"],
@@ -64,7 +65,7 @@ def wall_times(args: list[str], repeat: int) -> list[float]:
 
 
 def torch_after_help() -> bool:
-    code = ("import sys, contextlib, io\nfrom strl_pyg.cli import main\n"
+    code = ("import sys, contextlib, io\nfrom strl_pyg.cli.commands import main\n"
             "with contextlib.redirect_stdout(io.StringIO()):\n"
             "    try:\n        main(['--help'])\n    except SystemExit:\n        pass\n"
             "print('torch' in sys.modules)")

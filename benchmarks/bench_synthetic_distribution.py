@@ -23,7 +23,7 @@ from collections import defaultdict
 import cv2
 import numpy as np
 
-from strl_pyg.data.datasets import SyntheticPairs
+from strl_pyg.datasets import SyntheticPairs
 from strl_pyg.frontend import epipolar_residuals, match_images
 from strl_pyg.synthetic import SCENE_KINDS, generate_pair, scene_distribution
 from strl_pyg.synthetic.distributions import DEFAULT_SIZES

@@ -12,14 +12,14 @@ Examples::
         --sequences 09 10 --out out/kitti
 
 Writes ``results.md``, ``results.json`` and trajectory PNGs (KITTI) to ``--out`` and prints
-the table. All logic lives in :mod:`strl_pyg.evaluation`.
+the table. All logic lives in :mod:`strl_pyg.evaluation.run`.
 """
 
 from __future__ import annotations
 
 import sys
 
-from strl_pyg.evaluation import main
+from strl_pyg.evaluation.run import main
 
 if __name__ == "__main__":
     sys.exit(main())

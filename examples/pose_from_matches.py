@@ -40,7 +40,7 @@ import numpy as np
 
 
 def _parser() -> argparse.ArgumentParser:
-    from strl_pyg.checkpoints import default_checkpoint
+    from strl_pyg.training.checkpoints import default_checkpoint
 
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -58,7 +58,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def _read_file_matches(args, ap):
     """The matches of ``--npz`` with the sizes, images and K of the flags."""
-    from strl_pyg.cli_inputs import read_image_file, read_intrinsics
+    from strl_pyg.cli.inputs import read_image_file, read_intrinsics
     from strl_pyg.data import load_external_matches
 
     if (args.image0 is None) != (args.image1 is None):
@@ -92,8 +92,8 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     from strl_pyg import StrLPose
-    from strl_pyg.baselines import BASELINE_METHODS, estimate_relative_pose
-    from strl_pyg.inference import forward_pose, prepare_graph
+    from strl_pyg.estimation.classical import BASELINE_METHODS, estimate_relative_pose
+    from strl_pyg.inference.estimator import forward_pose, prepare_graph
 
     if args.npz:
         matches, T_gt = _read_file_matches(args, ap), None

@@ -10,7 +10,7 @@ Examples:
     # KITTI odometry (official layout), 2 processes with DistributedDataParallel
     torchrun --nproc_per_node 2 examples/train.py --dataset kitti --data-root /data/kitti
 
-All settings live in strl_pyg.train_config.TrainConfig; every run stores them in its
+All settings live in strl_pyg.training.config.TrainConfig; every run stores them in its
 checkpoint. The default model takes its patch channels from the data (generated scenes and
 KITTI are grey, DeMoN is RGB); a grey model on DeMoN (`--set patch_features=1 --set
 image_channels=1`, e.g. to fine-tune the shipped weights with --init-from) reads its images as
@@ -24,13 +24,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-from strl_pyg.cli import check_train_files, run_guarded
-from strl_pyg.train_config import add_train_arguments
+from strl_pyg.cli.commands import check_train_files, run_guarded
+from strl_pyg.training.config import add_train_arguments
 
 
 def _run(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
     check_train_files(args)  # before torch is imported
-    from strl_pyg.training import run_from_args
+    from strl_pyg.training.loop import run_from_args
 
     return run_from_args(args, ap)
 

@@ -12,9 +12,12 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from strl_pyg._lazy import lazy_exports
+from strl_pyg import _compat
+from strl_pyg.utils.lazy import lazy_exports
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"
+
+_compat.install()  # old module paths (0.2.x) import with a DeprecationWarning
 
 __all__ = [
     "PairMatches",
@@ -41,4 +44,4 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
     from strl_pyg.data.graph import build_pair_graph
     from strl_pyg.data.matches import PairMatches
     from strl_pyg.geometry import Pose
-    from strl_pyg.model import ABLATIONS, PoseOutput, StrLPose, StrLPoseConfig
+    from strl_pyg.model.strl_pose import ABLATIONS, PoseOutput, StrLPose, StrLPoseConfig

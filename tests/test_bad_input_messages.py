@@ -14,16 +14,16 @@ import numpy as np
 import pytest
 
 from strl_pyg import cli
-from strl_pyg.checkpoints import (
+from strl_pyg.inference.estimator import PoseEstimator
+from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
+from strl_pyg.synthetic import generate_pair
+from strl_pyg.training.checkpoints import (
     CHECKPOINT_VERSION,
     init_weights,
     load_training_model,
     save_checkpoint,
 )
-from strl_pyg.images import check_image, read_image_file
-from strl_pyg.inference import PoseEstimator
-from strl_pyg.model import StrLPose, StrLPoseConfig
-from strl_pyg.synthetic import generate_pair
+from strl_pyg.utils.images import check_image, read_image_file
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -117,7 +117,7 @@ def test_a_closed_stdout_ends_quietly(tmp_path):
     k = f"{K[0, 0]},{K[1, 1]},{K[0, 2]},{K[1, 2]}"
     for extra in (["--json"], []):
         proc = subprocess.Popen(
-            [sys.executable, "-m", "strl_pyg.cli", "predict", str(tmp_path / "a.png"),
+            [sys.executable, "-m", "strl_pyg.cli.commands", "predict", str(tmp_path / "a.png"),
              str(tmp_path / "b.png"), "--K", k, "--bootstrap", "0", *extra],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO)
         proc.stdout.close()  # the reader is gone before anything is written

@@ -5,8 +5,8 @@ import cv2
 import numpy as np
 import pytest
 
-from strl_pyg.baselines import BaselineResult, estimate_relative_pose
 from strl_pyg.data.matches import PairMatches
+from strl_pyg.estimation.classical import BaselineResult, estimate_relative_pose
 from strl_pyg.geometry import (
     Pose,
     essential_from_pose,
@@ -15,7 +15,7 @@ from strl_pyg.geometry import (
     relative_pose_from_c2w,
     sampson_error,
 )
-from strl_pyg.metrics import relative_pose_error
+from strl_pyg.metrics.two_view import relative_pose_error
 
 METHODS = ("opencv", "poselib")
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from strl_pyg.data import PairMatches
-from strl_pyg.data.datasets import MatchCache, PairFailedError, cache_key, fingerprint_hash
+from strl_pyg.datasets import MatchCache, PairFailedError, cache_key, fingerprint_hash
 
 TESTS_DIR = Path(__file__).resolve().parent
 REPO = TESTS_DIR.parent
@@ -141,7 +141,7 @@ _KILL_SCRIPT = """
 import sys
 sys.path.insert(0, {tests!r})
 from test_cache import _keys, fake_match, FakeNoMatches
-from strl_pyg.data.datasets import MatchCache
+from strl_pyg.datasets import MatchCache
 cache = MatchCache({root!r}, {{"test": 1}})
 n = {n}
 cache.build(_keys(n), [(i, 0.15) for i in range(n)], fake_match,

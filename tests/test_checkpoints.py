@@ -12,9 +12,8 @@ import pytest
 import torch
 
 from strl_pyg import cli
-from strl_pyg.io import UnsafeFileError, one_line, safe_torch_load
-from strl_pyg.model import StrLPose, StrLPoseConfig
-from strl_pyg.training import (
+from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
+from strl_pyg.training.loop import (
     CHECKPOINT_VERSION,
     _init_weights,
     _rng_state,
@@ -22,6 +21,7 @@ from strl_pyg.training import (
     load_checkpoint,
     save_checkpoint,
 )
+from strl_pyg.utils.io import UnsafeFileError, one_line, safe_torch_load
 
 REPO = Path(__file__).resolve().parents[1]
 UNSAFE_ADVICE = ("weights_only", "allow_pickle", "safe_globals", "trust the source")

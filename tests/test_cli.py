@@ -8,7 +8,7 @@ import pytest
 
 from strl_pyg import cli
 from strl_pyg.geometry import Pose
-from strl_pyg.metrics import rotation_error_deg
+from strl_pyg.metrics.two_view import rotation_error_deg
 
 
 @pytest.fixture(scope="module")
@@ -17,7 +17,7 @@ def checkpoint(tmp_path_factory):
     plumbing is what these tests check; the shipped model's accuracy is in the README)."""
     if cli.DEFAULT_WEIGHTS.is_file():
         return str(cli.DEFAULT_WEIGHTS)
-    from strl_pyg.model import StrLPose, StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
 
     path = tmp_path_factory.mktemp("ckpt") / "tiny.pt"
     StrLPose(StrLPoseConfig(hidden=32, layers=1, heads=2, patch_features=1)).save(path)
@@ -138,7 +138,7 @@ def test_console_script_entry_point_help():
 
 
 def test_bench_prints_a_timing_table(tmp_path, capsys):
-    from strl_pyg.model import StrLPose, StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
 
     ckpt = tmp_path / "tiny.pt"
     StrLPose(StrLPoseConfig(hidden=32, layers=1, heads=2, patch_features=1)).save(ckpt)
@@ -161,7 +161,7 @@ def _run_python(code: str) -> tuple[str, float]:
     return proc.stdout, time.perf_counter() - t0
 
 
-HEAVY = ("torch", "torch_geometric", "cv2", "kornia", "strl_pyg.training")
+HEAVY = ("torch", "torch_geometric", "cv2", "kornia", "strl_pyg.training.loop")
 
 
 @pytest.mark.parametrize("argv, code", [
@@ -171,7 +171,7 @@ HEAVY = ("torch", "torch_geometric", "cv2", "kornia", "strl_pyg.training")
 ])
 def test_help_and_argument_errors_do_not_import_torch(argv, code):
     out, seconds = _run_python(
-        "import contextlib, io, sys\nfrom strl_pyg.cli import main\n"
+        "import contextlib, io, sys\nfrom strl_pyg.cli.commands import main\n"
         "err = io.StringIO()\n"
         "with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):\n"
         f"    try:\n        rc = main({argv!r})\n    except SystemExit as e:\n"
@@ -191,13 +191,13 @@ def test_import_strl_pyg_is_light_and_names_resolve_lazily():
         "print(StrLPose.__module__, PairMatches.__module__, datasets.__name__, keys.__name__)")
     first, second = out.splitlines()
     assert first == "[]"
-    assert second == ("strl_pyg.model strl_pyg.data.matches strl_pyg.data.datasets "
+    assert second == ("strl_pyg.model.strl_pose strl_pyg.data.matches strl_pyg.datasets "
                       "strl_pyg.data.keys")
 
 
 def test_train_choices_match_the_model_ablations():
-    from strl_pyg.model import ABLATIONS
-    from strl_pyg.train_config import ABLATION_NAMES
+    from strl_pyg.model.strl_pose import ABLATIONS
+    from strl_pyg.training.config import ABLATION_NAMES
 
     assert tuple(ABLATIONS) == ABLATION_NAMES
 
@@ -257,7 +257,7 @@ def test_unwritable_out_folder(tmp_path, capsys, no_frontend):
 
 
 def test_atomic_writer_names_the_target_not_a_temporary(tmp_path):
-    from strl_pyg.io import atomic_open
+    from strl_pyg.utils.io import atomic_open
 
     (tmp_path / "file").write_text("x")
     with pytest.raises(OSError, match="Expected to write") as exc:
@@ -349,9 +349,9 @@ def test_default_train_config_model_accepts_its_default_data():
 
     from torch_geometric.loader.dataloader import Collater
 
-    from strl_pyg.model import StrLPose
-    from strl_pyg.train_config import DATA_CHANNELS, TrainConfig
-    from strl_pyg.training import build_datasets
+    from strl_pyg.model.strl_pose import StrLPose
+    from strl_pyg.training.config import DATA_CHANNELS, TrainConfig
+    from strl_pyg.training.loop import build_datasets
 
     cfg = replace(TrainConfig(), train_pairs=1, val_pairs=1)
     g = build_datasets(cfg)[0][0]

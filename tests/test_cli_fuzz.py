@@ -38,7 +38,7 @@ class _Planted:
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     """Paths of every kind the fuzz draws from, keyed by kind."""
-    from strl_pyg.model import StrLPose, StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
 
     d = tmp_path_factory.mktemp("fuzz")
     rng = np.random.default_rng(0)
@@ -81,9 +81,9 @@ def files(tmp_path_factory):
 def stubs(files):
     """Replaces the long-running parts (training loop, evaluation pairs, pair generation)
     with fast stand-ins for the duration of the module."""
-    import strl_pyg.evaluation as evaluation
+    import strl_pyg.evaluation.run as evaluation
     import strl_pyg.synthetic as synthetic
-    import strl_pyg.training as training
+    import strl_pyg.training.loop as training
 
     real_generate = synthetic.generate_pair
 

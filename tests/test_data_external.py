@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 import torch
 
-from strl_pyg.data.external import (
+from strl_pyg.data.external.formats import (
     FORMATS,
     MatchFormatError,
     detect_format,
     from_lightglue,
     load_external_matches,
 )
-from strl_pyg.data.external_hloc import load_hloc_matches
+from strl_pyg.data.external.hloc import load_hloc_matches
 from strl_pyg.data.matches import PairMatches
 
 H, W = 120, 160  # not square: a swapped (W, H) shows

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from strl_pyg.model_config import StrLPoseConfig
-from strl_pyg.train_config import TrainConfig
+from strl_pyg.model.config import StrLPoseConfig
+from strl_pyg.training.config import TrainConfig
 
 
 @pytest.mark.parametrize("cls", [StrLPoseConfig, TrainConfig])

@@ -19,7 +19,8 @@ import torch
 from torch_geometric.loader import DataLoader
 
 from strl_pyg.data import keys as K
-from strl_pyg.data.datasets import (
+from strl_pyg.data.transforms import FixedSizeResample
+from strl_pyg.datasets import (
     PAIR_ID,
     SUBSET,
     DeMoNFolder,
@@ -36,7 +37,6 @@ from strl_pyg.data.datasets import (
     read_kitti_poses,
     scale_intrinsics,
 )
-from strl_pyg.data.transforms import FixedSizeResample
 from strl_pyg.geometry import (
     essential_from_pose,
     fundamental_from_essential,

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from strl_pyg.data.datasets.middlebury import middlebury_pairs, read_middlebury_parameters
+from strl_pyg.datasets.middlebury import middlebury_pairs, read_middlebury_parameters
 
 DINO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "middlebury_dino"
 

@@ -5,8 +5,8 @@
 - Every other ``python`` block compiles, and the names it imports from ``strl_pyg`` exist.
 - Every ``strl-pose ...``, ``python examples/*.py ...`` and ``python benchmarks/*.py ...``
   command (fenced shell blocks and inline code) names an existing subcommand or script and
-  uses only ``--flags`` that its parser knows: ``strl_pyg.cli.build_parser()`` (and
-  ``strl_pyg.evaluation.build_parser()`` for ``evaluate``), or the script's ``--help``.
+  uses only ``--flags`` that its parser knows: ``strl_pyg.cli.commands.build_parser()`` (and
+  ``strl_pyg.evaluation.run.build_parser()`` for ``evaluate``), or the script's ``--help``.
 - Every relative link points at an existing file, and its ``#anchor`` at a heading there.
 - Every dotted ``strl_pyg.x.y`` name and every ``strl_pyg/``, ``examples/``, ``benchmarks/``,
   ``tests/`` or ``docs/`` path in inline code exists.
@@ -195,7 +195,7 @@ def page_commands(page: Page) -> list[Command]:
 @functools.cache
 def strl_pose_flags() -> dict[str | None, set[str]]:
     """``{subcommand: option strings}`` of ``strl-pose``; ``None``: the top-level parser."""
-    from strl_pyg.cli import build_parser
+    from strl_pyg.cli.commands import build_parser
 
     def options(p: argparse.ArgumentParser) -> set[str]:
         return {s for a in p._actions for s in a.option_strings}
@@ -206,7 +206,7 @@ def strl_pose_flags() -> dict[str | None, set[str]]:
         if isinstance(action, argparse._SubParsersAction):
             for name, sub in action.choices.items():
                 table[name] = options(sub)
-    from strl_pyg.evaluation import build_parser as evaluate_parser
+    from strl_pyg.evaluation.run import build_parser as evaluate_parser
 
     table["evaluate"] = options(evaluate_parser(prog="strl-pose evaluate"))
     return table
@@ -420,5 +420,6 @@ def test_the_checks_catch_a_renamed_flag_a_bad_subcommand_and_a_broken_link(tmp_
     links = "\n".join(link_errors(page))
     assert "missing file: nowhere.md" in links and "missing heading #nope" in links
     assert "#a-heading" not in links
-    assert resolve_dotted("strl_pyg.fusion") and resolve_dotted("strl_pyg.inference.NoSuchName")
-    assert resolve_dotted("strl_pyg.inference.PoseEstimator") is None
+    assert resolve_dotted("strl_pyg.fusion")
+    assert resolve_dotted("strl_pyg.inference.estimator.NoSuchName")
+    assert resolve_dotted("strl_pyg.inference.estimator.PoseEstimator") is None

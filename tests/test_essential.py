@@ -1,10 +1,12 @@
-"""Weighted essential-matrix solve, pose recovery and refinement (strl_pyg.essential)."""
+"""Weighted essential-matrix solve, pose recovery and refinement (strl_pyg.geometry.essential)."""
 
 import pytest
 import torch
 from torch.autograd import gradcheck
 
-from strl_pyg.essential import (
+from strl_pyg.geometry import essential_from_pose
+from strl_pyg.geometry import so3_exp as _so3_exp
+from strl_pyg.geometry.essential import (
     DEGENERATE,
     OK,
     decompose_essential,
@@ -12,9 +14,7 @@ from strl_pyg.essential import (
     sampson_sq,
     weighted_essential,
 )
-from strl_pyg.geometry import essential_from_pose
-from strl_pyg.geometry import so3_exp as _so3_exp
-from strl_pyg.metrics import rotation_error_deg, translation_angle_error_deg
+from strl_pyg.metrics.two_view import rotation_error_deg, translation_angle_error_deg
 
 
 def _scene(B=3, N=100, seed=0):

@@ -1,4 +1,4 @@
-"""Tests of strl_pyg.evaluation and examples/evaluate.py."""
+"""Tests of strl_pyg.evaluation.run and examples/evaluate.py."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 
-from strl_pyg.evaluation import (
+from strl_pyg.evaluation.run import (
     EvalPair,
     EvalReport,
     PairResult,
@@ -21,7 +21,7 @@ from strl_pyg.evaluation import (
     evaluate_pairs,
     synthetic_eval_pairs,
 )
-from strl_pyg.model import StrLPose, StrLPoseConfig
+from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -57,8 +57,8 @@ def test_report_rows_columns_and_classical_accuracy(synthetic_report):
         assert list(per) == list(rep.methods)
     keys = {"n", "failures", "rot_mean", "rot_median", "trans_mean", "trans_median", "auc5",
             "auc10", "auc20", "time_ms"}
-    assert set(summary["all"]["strl"]) == keys
-    assert summary["all"]["strl"]["n"] == 4
+    assert set(summary["all"]["regression"]) == keys
+    assert summary["all"]["regression"]["n"] == 4
     # noise-free generated matches: the classical estimates are essentially exact
     for m in ("opencv", "poselib"):
         if m in rep.methods:
@@ -66,8 +66,10 @@ def test_report_rows_columns_and_classical_accuracy(synthetic_report):
             assert s["failures"] == 0 and s["rot_mean"] < 1.0 and s["trans_mean"] < 1.0
             assert s["auc5"] > 0.8
     # an untrained network is far off; the fusion follows the exact classical estimate
-    assert summary["all"]["strl"]["rot_mean"] > 1.0
-    assert summary["all"]["fused_opencv"]["rot_mean"] < 1.0
+    assert summary["all"]["regression"]["rot_mean"] > 1.0
+    assert summary["all"]["fused"]["rot_mean"] < 1.0
+    # the tiny model has no geometric head: the registry's geometric / guided say so (failed)
+    assert summary["all"]["geometric"]["failures"] == 4
 
 
 def test_markdown_and_json_render(synthetic_report, tmp_path):
@@ -116,7 +118,7 @@ def test_evaluate_pairs_rejects_bad_arguments(tiny_checkpoint):
     with pytest.raises(ValueError, match="Expected methods"):
         evaluate_pairs(None, [], methods=("magic",))
     with pytest.raises(ValueError, match="Expected a model"):
-        evaluate_pairs(None, [], methods=("strl",))
+        evaluate_pairs(None, [], methods=("regression",))
     with pytest.raises(ValueError, match="Expected intrinsics"):
         from strl_pyg.data.matches import PairMatches
 
@@ -176,9 +178,9 @@ def test_evaluate_refuses_a_corrupt_checkpoint_in_one_line(tmp_path, capsys):
 
 
 def test_split_modules_are_re_exported():
-    import strl_pyg.eval_pairs as pairs
-    import strl_pyg.eval_report as report
-    import strl_pyg.evaluation as evaluation
+    import strl_pyg.evaluation.pairs as pairs
+    import strl_pyg.evaluation.report as report
+    import strl_pyg.evaluation.run as evaluation
 
     for mod in (pairs, report):
         for name in mod.__all__:
@@ -187,9 +189,9 @@ def test_split_modules_are_re_exported():
 
 
 def test_names_imported_here_before_the_split_still_resolve():
-    """0.1.x code did ``from strl_pyg.evaluation import pose_auc`` (the module imported it);
+    """0.1.x code did ``from strl_pyg.evaluation.run import pose_auc`` (the module imported it);
     after the 0.2 split those names had gone from the module (AttributeError)."""
-    import strl_pyg.evaluation as evaluation
+    import strl_pyg.evaluation.run as evaluation
     from strl_pyg import metrics
 
     for name in ("integrate_relative_poses", "kitti_odometry_errors", "kitti_odometry_summary",
@@ -198,7 +200,7 @@ def test_names_imported_here_before_the_split_still_resolve():
 
 
 def test_python_dash_m_runs_the_command_line(tmp_path):
-    res = subprocess.run([sys.executable, "-m", "strl_pyg.evaluation", "--checkpoint",
+    res = subprocess.run([sys.executable, "-m", "strl_pyg.evaluation.run", "--checkpoint",
                           str(tmp_path / "nope.pt")], capture_output=True, text=True,
                          cwd=REPO, timeout=300)
     assert res.returncode == 2 and res.stdout == ""
@@ -214,14 +216,14 @@ def test_script_end_to_end_on_kitti_slice(kitti_root, tiny_checkpoint, tmp_path,
         "--checkpoint", str(tiny_checkpoint), "--dataset", "kitti",
         "--data-root", str(kitti_root), "--sequences", "06", "--limit", "2",
         "--cache-dir", str(tmp_path / "cache"), "--out", str(out), "--no-progress",
-        "--methods", "strl", "opencv", "fused_opencv",
+        "--methods", "regression", "opencv", "fused",
     ])
     assert rc == 0
     md = (out / "results.md").read_text()
     assert "| KITTI/06 | opencv | 2 |" in md and "RMSE rot deg" in md
     png = out / "trajectory_KITTI_06.png"
     assert png.is_file() and png.read_bytes()[:4] == b"\x89PNG"
-    assert "| KITTI/06 | fused_opencv |" in capsys.readouterr().out
+    assert "| KITTI/06 | fused |" in capsys.readouterr().out
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has a CUDA device")
@@ -239,7 +241,7 @@ def test_evaluate_cuda_on_a_cpu_machine_says_the_device_is_unavailable(tiny_chec
 
 def test_evaluate_defaults_to_front_end_matches(tiny_checkpoint, capsys):
     """Ground-truth matches (the former default) gave the classical methods 0.00 deg."""
-    from strl_pyg.evaluation import build_parser
+    from strl_pyg.evaluation.run import build_parser
 
     assert build_parser().parse_args([]).matches == "frontend"
     assert build_parser().parse_args(["--matches", "ground_truth"]).matches == "ground_truth"
@@ -247,3 +249,47 @@ def test_evaluate_defaults_to_front_end_matches(tiny_checkpoint, capsys):
                            "--kinds", "boxes", "--methods", "opencv", "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert "frontend" in out
+
+
+def test_evaluate_runs_the_registry_and_scores_what_pose_estimator_gives(tiny_checkpoint):
+    """Before, evaluate had its own runner (strl, opencv, poselib, fused_opencv,
+    fused_poselib) and could not score the geometric head or the guided method; now it runs
+    PoseEstimator's registry by the same names, so the numbers are the estimator's."""
+    from strl_pyg.inference import PoseEstimator
+    from strl_pyg.metrics import relative_pose_error
+
+    model = StrLPose.load(tiny_checkpoint)
+    pairs = synthetic_eval_pairs(3, seed=2_000_010, kinds=("boxes",), progress=False)
+    rep = evaluate_pairs(model, pairs, methods=["geometric,guided", "opencv"], progress=False)
+    assert rep.methods == ("geometric", "guided", "opencv")
+    est = PoseEstimator(model, methods=["geometric", "guided", "opencv"], bootstrap=0)
+    for pair in pairs:
+        e = est.estimate(pair.matches)
+        for r in (r for r in rep.results if r.pair_id == pair.pair_id):
+            m = e.methods[r.method]
+            assert r.success == (m.status == "ok"), (r.method, m.status)
+            if r.success:
+                rot, tr = relative_pose_error(m.T_0to1[None], pair.T_0to1[None])
+                assert r.rot_err == pytest.approx(float(rot[0]), abs=1e-9)
+                assert r.trans_err == pytest.approx(float(tr[0]), abs=1e-9)
+
+
+def test_old_method_names_are_accepted_with_a_warning():
+    from strl_pyg.evaluation import resolve_methods
+
+    with pytest.warns(DeprecationWarning, match="'strl' is now called 'regression'"):
+        assert resolve_methods(["strl", "opencv"], object()) == ("regression", "opencv")
+    with pytest.warns(DeprecationWarning, match="'fused_opencv' is now called 'fused'"):
+        assert resolve_methods("fused_opencv,poselib", object()) == ("fused", "poselib")
+    with pytest.raises(ValueError, match="Expected methods from"):
+        resolve_methods(["magic"], object())
+
+
+def test_command_line_takes_comma_separated_registry_names(tiny_checkpoint, capsys):
+    rc = _script().main(["--checkpoint", str(tiny_checkpoint), "--num-pairs", "2",
+                         "--kinds", "boxes", "--methods", "geometric,guided,opencv",
+                         "--no-progress"])
+    assert rc == 0
+    out = capsys.readouterr().out
+    for name in ("geometric", "guided", "opencv"):
+        assert f"| {name} |" in out

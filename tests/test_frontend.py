@@ -131,7 +131,7 @@ def test_bad_images(img, exc, match):
 )
 def test_one_image_check_for_frontend_and_pair_matches(img):
     """The front end and PairMatches refuse the same images with the same message (one
-    check, strl_pyg.images.check_image); they differ only by the front end's 16 px minimum."""
+    check, strl_pyg.utils.images.check_image); they differ only by the front end's 16 px minimum."""
     good = generate_pair(0, SceneConfig(kind="boxes", image_size=(64, 96))).image0
     with pytest.raises((TypeError, ValueError)) as fe:
         match_images(img, good)

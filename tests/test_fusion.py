@@ -1,4 +1,4 @@
-"""Tests of strl_pyg.pose_fusion on generated pairs with known poses."""
+"""Tests of strl_pyg.estimation.fusion on generated pairs with known poses."""
 
 from __future__ import annotations
 
@@ -8,10 +8,8 @@ import numpy as np
 import pytest
 import torch
 
-from strl_pyg.baselines import BaselineResult, estimate_relative_pose
-from strl_pyg.geometry import Pose, essential_from_pose, normalize_points, sampson_error
-from strl_pyg.metrics import relative_pose_error
-from strl_pyg.pose_fusion import (
+from strl_pyg.estimation.classical import BaselineResult, estimate_relative_pose
+from strl_pyg.estimation.fusion import (
     GATE_CHI2,
     MIN_INLIERS,
     FusedPose,
@@ -29,6 +27,8 @@ from strl_pyg.pose_fusion import (
     tangent_to_pose,
     truncated_sigma,
 )
+from strl_pyg.geometry import Pose, essential_from_pose, normalize_points, sampson_error
+from strl_pyg.metrics.two_view import relative_pose_error
 from strl_pyg.synthetic import SceneConfig, generate_pair
 
 
@@ -242,9 +242,9 @@ def test_estimator_fusion_uses_the_checkpoints_inflation():
     regression's calibrated variance in the fused record; absent, it is 1."""
     import copy
 
-    from strl_pyg.inference import PoseEstimator
-    from strl_pyg.model import StrLPose
-    from strl_pyg.pose_fusion import fuse_poses
+    from strl_pyg.estimation.fusion import fuse_poses
+    from strl_pyg.inference.estimator import PoseEstimator
+    from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.synthetic import SceneConfig, generate_pair
 
     pair = generate_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.5))

@@ -1,5 +1,5 @@
 """SO(3) / sphere maps and the one signed Sampson residual (strl_pyg.geometry), the
-deprecated aliases of moved modules, and the one image reader (strl_pyg.images)."""
+deprecated aliases of moved modules, and the one image reader (strl_pyg.utils.images)."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from strl_pyg.geometry import (
 F64 = torch.float64
 
 
-def _old_batched_basis(t):  # the former strl_pyg.essential._basis, as a reference
+def _old_batched_basis(t):  # the former strl_pyg.geometry.essential._basis, as a reference
     helper = torch.zeros_like(t)
     helper[torch.arange(t.shape[0]), t.abs().argmin(-1)] = 1.0
     b1 = torch.linalg.cross(t, helper)
@@ -76,7 +76,7 @@ def test_moved_modules_keep_their_old_import_paths():
         warnings.simplefilter("always")
         old = importlib.import_module("strl_pyg.fusion")
     assert any(issubclass(w.category, DeprecationWarning) for w in caught)
-    import strl_pyg.pose_fusion as new
+    import strl_pyg.estimation.fusion as new
 
     assert old.fuse_poses is new.fuse_poses and old.so3_exp is so3_exp
     from strl_pyg.synthetic import match_quality, metrics
@@ -90,8 +90,8 @@ def test_moved_modules_keep_their_old_import_paths():
 
 def test_one_image_reader_for_the_cli_and_the_datasets(tmp_path):
     cv2 = pytest.importorskip("cv2")
-    from strl_pyg.cli_inputs import UsageError, read_image_file
-    from strl_pyg.data.datasets import read_image
+    from strl_pyg.cli.inputs import UsageError, read_image_file
+    from strl_pyg.datasets import read_image
 
     rgb = np.random.default_rng(0).integers(0, 256, (20, 30, 3), dtype=np.uint8)
     path = tmp_path / "a.png"

@@ -22,7 +22,7 @@ from strl_pyg.data import (
     save_graph,
 )
 from strl_pyg.data import keys as K
-from strl_pyg.model import StrLPose
+from strl_pyg.model.strl_pose import StrLPose
 
 
 def _with_legacy_cross(g):

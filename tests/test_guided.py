@@ -1,18 +1,19 @@
-"""Network-guided robust estimation (strl_pyg.guided) and the geometric head of the model."""
+"""Network-guided robust estimation (strl_pyg.estimation.guided) and the geometric head of the
+model."""
 
 import numpy as np
 import pytest
 import torch
 
-from strl_pyg.baselines import estimate_relative_pose
 from strl_pyg.data import build_pair_graph
 from strl_pyg.data.transforms import FixedSizeResample
+from strl_pyg.estimation.classical import estimate_relative_pose, normalised_matches
+from strl_pyg.estimation.guided import guided_estimate, msac_cost
 from strl_pyg.frontend import epipolar_residuals
-from strl_pyg.guided import _normalised, guided_estimate, msac_cost
-from strl_pyg.loss import GeometricLoss
-from strl_pyg.metrics import relative_pose_error
-from strl_pyg.model import ABLATIONS, StrLPose, StrLPoseConfig
+from strl_pyg.metrics.two_view import relative_pose_error
+from strl_pyg.model.strl_pose import ABLATIONS, StrLPose, StrLPoseConfig
 from strl_pyg.synthetic import SceneConfig, generate_pair
+from strl_pyg.training.loss import GeometricLoss
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +30,7 @@ def test_guided_never_scores_worse_than_the_classical_estimate(outlier_pair, wei
     w = {"uniform": np.ones(m.num_points), "oracle": 0.05 + 0.9 * inl,
          "adversarial": 0.05 + 0.9 * ~inl}[weights]
     g = guided_estimate(m, w, "opencv", classical=base)
-    x0, x1, f = _normalised(m)
+    x0, x1, f = normalised_matches(m)
     assert g.success and g.method == "guided_opencv"
     assert msac_cost(g.pose, x0, x1, 1.0 / f) <= msac_cost(base.pose, x0, x1, 1.0 / f) + 1e-12
     assert g.info["candidate"] in ("all", "top", "prosac")
@@ -152,7 +153,7 @@ def test_guided_refinement_weightings_never_raise_the_msac_cost(outlier_pair, we
     w = np.random.default_rng(0).random(m.num_points)
     g = guided_estimate(m, w, "opencv", classical=base, refine_iterations=10,
                         refine_weighting=weighting)
-    x0, x1, f = _normalised(m)
+    x0, x1, f = normalised_matches(m)
     assert msac_cost(g.pose, x0, x1, 1.0 / f) <= msac_cost(base.pose, x0, x1, 1.0 / f) + 1e-12
     with pytest.raises(ValueError, match="refine_weighting"):
         guided_estimate(m, w, "opencv", classical=base, refine_iterations=10,
@@ -162,7 +163,7 @@ def test_guided_refinement_weightings_never_raise_the_msac_cost(outlier_pair, we
 def test_guided_without_any_hypothesis_reports_failure(outlier_pair):
     """No classical pose, too few matches for a 'top' subset and no PROSAC (PoseLib): an
     explicit failure with the identity pose and no inliers, never a confident pose."""
-    from strl_pyg.baselines import BaselineResult
+    from strl_pyg.estimation.classical import BaselineResult
     from strl_pyg.geometry import Pose
 
     pm = outlier_pair[0].matches.select(point_index=np.arange(8))

@@ -1,4 +1,5 @@
-"""The inference API (strl_pyg.inference): one call from matches or images to a pose record
+"""The inference API (strl_pyg.inference.estimator): one call from matches or images to a pose
+record
 with a status, every method by name, checkpoint metadata, dtypes, and ``strl-pose predict``."""
 
 import json
@@ -15,18 +16,18 @@ import pytest
 import torch
 
 from strl_pyg import cli, inference, pose_methods
-from strl_pyg.baselines import BaselineResult
 from strl_pyg.data import PairMatches
+from strl_pyg.estimation.classical import BaselineResult
 from strl_pyg.geometry import Pose
-from strl_pyg.inference import (
+from strl_pyg.inference.estimator import (
     METHODS,
     MethodResult,
     PoseEstimator,
     forward_pose,
     prepare_graph,
 )
-from strl_pyg.metrics import relative_pose_error
-from strl_pyg.model import StrLPose, StrLPoseConfig
+from strl_pyg.metrics.two_view import relative_pose_error
+from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
 from strl_pyg.synthetic import generate_pair
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -121,7 +122,7 @@ def test_the_graph_follows_the_stored_resample_counts(pair):
     g = prepare_graph(pair.matches, m)
     assert g["point"].num_nodes == 50 and g["endpoint"].num_nodes == 40
     assert g["point"].patch0.shape == (50, 1)  # grey patches, as the checkpoint stores
-    from strl_pyg.evaluation import predict_pose
+    from strl_pyg.evaluation.run import predict_pose
 
     out = predict_pose(m, pair.matches, resample="model")
     ref = forward_pose(m, g)
@@ -181,7 +182,7 @@ def test_a_failed_classical_solver_is_failed_and_not_used(model, pair, monkeypat
         n = matches.num_points
         return BaselineResult(Pose.identity(), np.zeros(n, bool), 1.0, method, False)
 
-    import strl_pyg.guided as guided
+    import strl_pyg.estimation.guided as guided
 
     monkeypatch.setattr(pose_methods, "estimate_relative_pose", no_model)
     monkeypatch.setattr(guided, "estimate_relative_pose", no_model)

@@ -1,6 +1,6 @@
 import pytest
 
-from strl_pyg.io import _umask, atomic_open
+from strl_pyg.utils.io import _umask, atomic_open
 
 
 def test_atomic_open_writes_and_replaces(tmp_path):

@@ -1,11 +1,19 @@
-"""Package layering: the lower layers import without OpenCV and kornia, and the modules of
-``strl_pyg`` import each other without cycles and only downwards at module level.
+"""Package layering: one floor per folder of ``strl_pyg``, imports that only go down.
 
-Layers, lowest first: geometry -> data (containers, graphs) -> nn (layers) -> model (and the
-losses, metrics and the differentiable solver it uses) -> front end / generated scenes /
-datasets / classical baselines -> training / evaluation / inference / fusion -> cli.
-Imports inside functions (the lazy ones that keep heavy dependencies at the edges) and under
-``if TYPE_CHECKING:`` are not module-level imports and are ignored.
+The rule, checked on every import of a package module by another (at module level and inside
+functions alike; ``if TYPE_CHECKING:`` imports are exempt, as are imports of third-party
+modules, which stay lazy so that ``strl-pose --help`` is torch-free):
+
+- a folder imports only itself and folders on lower floors; folders on one floor never import
+  each other;
+- the lazy faces count too: a name a package ``__init__`` exports by string is an import of
+  the module that defines it;
+- no module-level import cycle;
+- no ``from x import _name`` across folders (what two folders share is public, in the lower);
+- no module over :data:`MAX_LINES` lines.
+
+The root holds only the lazy face ``__init__.py`` and ``_compat.py`` (the table of old module
+paths), both above every folder. Each rule has a planted violation below to show it can fail.
 """
 
 from __future__ import annotations
@@ -14,121 +22,140 @@ import ast
 import os
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "strl_pyg"
+MAX_LINES = 450
 
-#: Layer of each module (prefix match, longest first); lower never imports higher.
-LAYERS: dict[str, int] = {
-    "strl_pyg._lazy": 0,
-    "strl_pyg._dataclass": 0,
-    "strl_pyg.pose_uncertainty": 5,
-    "strl_pyg.io": 0,
-    "strl_pyg.images": 1,
-    "strl_pyg.geometry": 0,
-    "strl_pyg.data": 1,
-    "strl_pyg.nn": 2,
-    "strl_pyg.model": 3,
-    "strl_pyg.model_config": 3,
-    "strl_pyg.model_inputs": 3,
-    "strl_pyg.loss": 3,
-    "strl_pyg.metrics": 3,
-    "strl_pyg.odometry": 3,
-    "strl_pyg.pose_stats": 3,
-    "strl_pyg.trajectory": 3,
-    "strl_pyg.essential": 3,
-    "strl_pyg.frontend": 4,
-    "strl_pyg.synthetic": 4,
-    "strl_pyg.data.datasets": 4,
-    "strl_pyg.baselines": 4,
-    "strl_pyg.train_config": 5,
-    "strl_pyg.train_data": 5,
-    "strl_pyg.train_log": 5,
-    "strl_pyg.validation": 5,
-    "strl_pyg.checkpoints": 5,
-    "strl_pyg.training": 5,
-    "strl_pyg.evaluation": 5,
-    "strl_pyg.eval_pairs": 5,
-    "strl_pyg.eval_report": 5,
-    "strl_pyg.inference": 5,
-    "strl_pyg.pose_record": 5,
-    "strl_pyg.pose_input": 5,
-    "strl_pyg.pose_methods": 5,
-    "strl_pyg.pose_fusion": 5,
-    "strl_pyg.fusion": 5,
-    "strl_pyg.guided": 5,
-    "strl_pyg.recommended": 5,
-    "strl_pyg.viz": 5,
-    "strl_pyg.cli_inputs": 6,
-    "strl_pyg.cli": 6,
-    "strl_pyg": 7,  # the package itself only re-exports, lazily
+#: Floor of each folder of strl_pyg, lowest first. A folder imports only lower floors.
+FLOORS: dict[str, int] = {
+    "utils": 0,       # lazy faces, strict dataclasses, io, images
+    "geometry": 1,    # pose, manifold, epipolar, essential
+    "data": 2,        # PairMatches, keys, pair graph, transforms, external match files
+    "metrics": 2,     # two-view errors, AUC, odometry, trajectories, statistics
+    "nn": 3,          # the reusable MessagePassing layers
+    "viz": 3,         # match drawings, plots
+    "frontend": 4,    # SIFT / LSD matching
+    "model": 4,       # StrLPose, its config and inputs
+    "synthetic": 5,   # generated scenes (uses the front end's configs)
+    "estimation": 5,  # classical solvers, guided, uncertainty, fusion
+    "datasets": 6,    # KITTI, DeMoN, Middlebury, generated, the match cache
+    "inference": 7,   # PoseEstimator, the method registry
+    "training": 7,    # the loop, config, data, loss, checkpoints
+    "evaluation": 8,  # the evaluate command on the inference registry
+    "cli": 9,         # strl-pose
+    "": 10,           # the package root: __init__ (lazy face) and _compat
 }
 
 
-def _modules() -> dict[str, Path]:
+@dataclass(frozen=True)
+class Edge:
+    src: str  # importing module
+    dst: str  # imported module
+    name: str | None  # the name taken (from-imports), else None
+    line: int
+    local: bool  # inside a function
+    lazy: bool = False  # a lazy-export string of a package face
+
+
+def modules(package: Path = PACKAGE) -> dict[str, Path]:
     out = {}
-    for path in PACKAGE.rglob("*.py"):
-        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    for path in package.rglob("*.py"):
+        parts = list(path.relative_to(package.parent).with_suffix("").parts)
         if parts[-1] == "__init__":
             parts = parts[:-1]
         out[".".join(parts)] = path
     return out
 
 
-def _targets(module: str, node: ast.stmt, is_package: bool) -> list[str]:
-    if isinstance(node, ast.Import):
-        return [a.name for a in node.names]
-    assert isinstance(node, ast.ImportFrom)
-    if node.level:
-        base = module.split(".") if is_package else module.split(".")[:-1]
-        base = base[: len(base) - (node.level - 1)]
-        name = ".".join(base + ([node.module] if node.module else []))
-    else:
-        name = node.module or ""
-    return [name] + [f"{name}.{a.name}" for a in node.names]
+def folder(module: str) -> str:
+    """The folder of a package module (``""`` for the root modules)."""
+    parts = module.split(".")
+    if len(parts) == 1 or (len(parts) == 2 and parts[1] not in FLOORS):
+        return ""
+    return parts[1]
 
 
-def _module_level_imports(tree: ast.Module) -> list[ast.stmt]:
-    found: list[ast.stmt] = []
-
-    def visit(body: list[ast.stmt]) -> None:
-        for node in body:
-            if isinstance(node, (ast.Import, ast.ImportFrom)):
-                found.append(node)
-            elif isinstance(node, ast.If):
-                if "TYPE_CHECKING" in ast.dump(node.test):
-                    continue
-                visit(node.body)
-                visit(node.orelse)
-            elif isinstance(node, ast.Try):
-                visit(node.body)
-                for handler in node.handlers:
-                    visit(handler.body)
-                visit(node.orelse)
-                visit(node.finalbody)
-            # function and class bodies are not module level: lazy imports live there
-
-    visit(tree.body)
-    return found
+def _resolve(target: str, known: dict[str, Path]) -> str | None:
+    while target and target not in known:
+        target = target.rpartition(".")[0]
+    return target or None
 
 
-def import_graph() -> dict[str, set[str]]:
-    """Module-level import edges between the modules of ``strl_pyg``."""
-    modules = _modules()
+def edges_of(module: str, source: str, known: dict[str, Path]) -> list[Edge]:
+    """Every import of a package module in ``source`` (the code of ``module``)."""
+    tree = ast.parse(source)
+    skip: set[int] = set()
+    local: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.dump(node.test):
+            skip.update(id(n) for stmt in node.body for n in ast.walk(stmt))
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            local.update(id(n) for n in ast.walk(node) if n is not node)
+    out = []
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.Import):
+            targets = [(a.name, None) for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and not node.level:
+            targets = [(node.module or "", a.name) for a in node.names]
+        elif (isinstance(node, ast.Call) and getattr(node.func, "id", None) == "lazy_exports"
+              and len(node.args) >= 2 and isinstance(node.args[1], ast.Dict)):
+            for key, value in zip(node.args[1].keys, node.args[1].values, strict=True):
+                if isinstance(value, ast.Constant) and isinstance(key, ast.Constant):
+                    target = value.value or f"{module}.{key.value}"
+                    dst = _resolve(target, known)
+                    if dst and dst != module:
+                        out.append(Edge(module, dst, key.value, node.lineno, False, True))
+            continue
+        else:
+            continue
+        for mod, attr in targets:
+            if not mod.startswith("strl_pyg"):
+                continue
+            dst = _resolve(f"{mod}.{attr}" if attr else mod, known)
+            if dst and dst != module:
+                out.append(Edge(module, dst, attr, node.lineno, id(node) in local))
+    return out
+
+
+def all_edges(package: Path = PACKAGE) -> list[Edge]:
+    known = modules(package)
+    return [e for name, path in known.items() for e in edges_of(name, path.read_text(), known)]
+
+
+def floor_violations(edges: list[Edge]) -> list[str]:
+    bad = []
+    for e in edges:
+        a, b = folder(e.src), folder(e.dst)
+        if a == b:
+            continue
+        if a not in FLOORS or b not in FLOORS:
+            bad.append(f"{e.src}: folder '{a or b}' has no floor in tests/test_layering.py")
+        elif FLOORS[b] >= FLOORS[a]:
+            kind = "lazy export" if e.lazy else "import inside a function" if e.local else "import"
+            bad.append(f"{e.src}:{e.line} ({a}, floor {FLOORS[a]}) {kind} of {e.dst} "
+                       f"({b}, floor {FLOORS[b]})")
+    return bad
+
+
+def private_violations(edges: list[Edge]) -> list[str]:
+    return [f"{e.src}:{e.line} takes {e.name} from {e.dst}" for e in edges
+            if e.name and e.name.startswith("_") and not e.name.endswith("__")
+            and not e.lazy and folder(e.src) != folder(e.dst)]
+
+
+def module_level_graph(edges: list[Edge]) -> dict[str, set[str]]:
     graph: dict[str, set[str]] = {}
-    for name, path in modules.items():
-        deps: set[str] = set()
-        tree = ast.parse(path.read_text(), filename=str(path))
-        for node in _module_level_imports(tree):
-            for target in _targets(name, node, path.name == "__init__.py"):
-                while target and target not in modules:  # an attribute: its module
-                    target = target.rpartition(".")[0]
-                if target and target != name:
-                    deps.add(target)
-        graph[name] = deps
+    for e in edges:
+        graph.setdefault(e.src, set())
+        if not e.local and not e.lazy:
+            graph[e.src].add(e.dst)
     return graph
 
 
@@ -159,13 +186,89 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
     return None
 
 
-def layer(module: str) -> int:
-    best = max((p for p in LAYERS if module == p or module.startswith(p + ".")), key=len,
-               default=None)
-    if best is None:
-        raise AssertionError(f"Expected a layer for module {module} in tests/test_layering.py "
-                             "LAYERS (got none): add the new module there")
-    return LAYERS[best]
+# ----------------------------------------------------------------------------- the package
+def test_the_root_holds_only_the_face_and_the_compat_table():
+    assert sorted(p.name for p in PACKAGE.glob("*.py")) == ["__init__.py", "_compat.py"]
+
+
+def test_every_folder_has_a_floor_and_a_face_that_says_what_lives_there():
+    for path in sorted(p for p in PACKAGE.iterdir() if (p / "__init__.py").is_file()):
+        assert path.name in FLOORS, f"folder {path.name} has no floor in FLOORS"
+        doc = ast.get_docstring(ast.parse((path / "__init__.py").read_text()))
+        assert doc and len(doc.splitlines()) >= 2, f"{path.name}/__init__.py: no docstring"
+
+
+def test_imports_only_go_down():
+    edges = all_edges()
+    assert any(e.local for e in edges) and any(e.lazy for e in edges)  # the walk sees both
+    bad = floor_violations(edges)
+    assert not bad, "imports that do not go down:\n" + "\n".join(sorted(bad))
+
+
+def test_no_private_name_crosses_a_folder():
+    bad = private_violations(all_edges())
+    assert not bad, "private names imported across folders:\n" + "\n".join(sorted(bad))
+
+
+def test_no_module_level_import_cycle():
+    cycle = find_cycle(module_level_graph(all_edges()))
+    assert cycle is None, f"module-level import cycle: {' -> '.join(cycle)}"
+
+
+def test_no_module_over_the_size_limit():
+    long = {str(p.relative_to(ROOT)): n for p in PACKAGE.rglob("*.py")
+            if (n := len(p.read_text().splitlines())) > MAX_LINES}
+    assert not long, f"modules over {MAX_LINES} lines: {long}"
+
+
+# ----------------------------------------------------------------------------- planted
+def _planted(tmp_path: Path, files: dict[str, str]) -> list[Edge]:
+    for rel, text in files.items():
+        path = tmp_path / "strl_pyg" / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    for d in list((tmp_path / "strl_pyg").rglob("*")):
+        if d.is_dir() and not (d / "__init__.py").exists():
+            (d / "__init__.py").write_text("")
+    return all_edges(tmp_path / "strl_pyg")
+
+
+def test_planted_upward_and_sideways_imports_are_caught(tmp_path):
+    edges = _planted(tmp_path, {
+        "geometry/pose.py": "from strl_pyg.model.net import StrLPose\n",  # up, module level
+        "data/graph.py": "def f():\n    from strl_pyg.nn.layer import Conv\n",  # up, local
+        "nn/layer.py": "import strl_pyg.viz.plots\n",  # sideways: nn and viz share floor 3
+        "model/net.py": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
+                        "    from strl_pyg.inference.est import PoseEstimator\n",  # exempt
+        "viz/plots.py": "from strl_pyg.geometry.pose import Pose\n",  # down: fine
+        "inference/est.py": "",
+        "utils/__init__.py": "from strl_pyg.utils.lazy import lazy_exports\n"
+                             "__getattr__, __dir__ = lazy_exports(__name__, "
+                             "{'Pose': 'strl_pyg.geometry.pose'}, globals())\n",  # lazy up
+        "utils/lazy.py": "",
+    })
+    bad = floor_violations(edges)
+    assert len(bad) == 4, bad
+    assert any("geometry.pose:1 (geometry, floor 1) import of strl_pyg.model.net" in b
+               for b in bad)
+    assert any("import inside a function of strl_pyg.nn.layer" in b for b in bad)
+    assert any("strl_pyg.nn.layer:1 (nn, floor 3) import of strl_pyg.viz.plots" in b
+               for b in bad)
+    assert any("lazy export of strl_pyg.geometry.pose" in b for b in bad)
+
+
+def test_planted_private_import_and_cycle_are_caught(tmp_path):
+    edges = _planted(tmp_path, {
+        "model/net.py": "from strl_pyg.geometry.pose import _as_pose\n",  # private, across
+        "geometry/pose.py": "from strl_pyg.geometry.manifold import so3_exp\n",
+        "geometry/manifold.py": "from strl_pyg.geometry.pose import Pose\n",  # cycle
+        "data/a.py": "from strl_pyg.data.b import _x\n",  # private within a folder: fine
+        "data/b.py": "",
+    })
+    assert private_violations(edges) == [
+        "strl_pyg.model.net:1 takes _as_pose from strl_pyg.geometry.pose"]
+    cycle = find_cycle(module_level_graph(edges))
+    assert cycle and set(cycle) == {"strl_pyg.geometry.pose", "strl_pyg.geometry.manifold"}
 
 
 def test_cycle_finder_finds_a_planted_cycle():
@@ -173,32 +276,7 @@ def test_cycle_finder_finds_a_planted_cycle():
     assert find_cycle({"a": {"b"}, "b": set()}) is None
 
 
-def test_graph_sees_module_level_imports_only(tmp_path):
-    tree = ast.parse(
-        "import os\n"
-        "from typing import TYPE_CHECKING\n"
-        "from strl_pyg.geometry import Pose\n"
-        "if TYPE_CHECKING:\n    from strl_pyg.model import StrLPose\n"
-        "def f():\n    from strl_pyg.cli import main\n"
-    )
-    names = [t for n in _module_level_imports(tree) for t in _targets("strl_pyg.x", n, False)]
-    assert "strl_pyg.geometry.Pose" in names
-    assert not any("model" in n or "cli" in n for n in names)
-
-
-def test_no_import_cycles_between_modules():
-    graph = import_graph()
-    assert "strl_pyg.nn.attention" in graph and "strl_pyg.geometry.pose" in graph
-    cycle = find_cycle(graph)
-    assert cycle is None, f"module-level import cycle: {' -> '.join(cycle)}"
-
-
-def test_lower_layers_never_import_higher_ones():
-    bad = [f"{a} (layer {layer(a)}) imports {b} (layer {layer(b)})"
-           for a, deps in import_graph().items() for b in deps if layer(b) > layer(a)]
-    assert not bad, "upward imports at module level:\n" + "\n".join(sorted(bad))
-
-
+# ----------------------------------------------------------------------------- heavy deps
 _BLOCKER = r"""
 import importlib.abc, sys
 
@@ -217,8 +295,9 @@ for name in list(sys.modules):
 
 def _run(code: str) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    return subprocess.run([sys.executable, "-c", _BLOCKER + code], capture_output=True,
-                          text=True, timeout=300, cwd=ROOT, env=env)
+    return subprocess.run([sys.executable, "-W", "error::DeprecationWarning:strl_pyg", "-c",
+                           _BLOCKER + code], capture_output=True, text=True, timeout=300,
+                          cwd=ROOT, env=env)
 
 
 def test_blocker_blocks():
@@ -257,6 +336,13 @@ print(tuple(out.shape), float(pose.inv().compose(pose).t.norm()) < 1e-12)
 
 def test_match_containers_import_without_torch():
     code = ("import sys\nimport strl_pyg.data\nfrom strl_pyg.data import PairMatches\n"
+            "print('torch' in sys.modules)\n")
+    res = _run(code)
+    assert res.returncode == 0 and res.stdout.strip() == "False", res.stderr[-2000:]
+
+
+def test_the_command_line_parser_imports_without_torch():
+    code = ("import sys\nfrom strl_pyg.cli import build_parser\nbuild_parser()\n"
             "print('torch' in sys.modules)\n")
     res = _run(code)
     assert res.returncode == 0 and res.stdout.strip() == "False", res.stderr[-2000:]

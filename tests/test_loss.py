@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from strl_pyg.geometry import Pose, quaternion_to_rotation
-from strl_pyg.loss import PoseLoss, aleatoric_loss, pose_targets
+from strl_pyg.training.loss import PoseLoss, aleatoric_loss, pose_targets
 
 
 def axis_angle(axis, deg) -> torch.Tensor:

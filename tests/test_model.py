@@ -11,8 +11,8 @@ from torch_geometric.loader import DataLoader
 
 from strl_pyg.data import PairMatches, build_pair_graph
 from strl_pyg.data import keys as K
-from strl_pyg.loss import PoseLoss, pose_targets
-from strl_pyg.model import ABLATIONS, StrLPose, StrLPoseConfig
+from strl_pyg.model.strl_pose import ABLATIONS, StrLPose, StrLPoseConfig
+from strl_pyg.training.loss import PoseLoss, pose_targets
 
 H, W = 96, 128
 K_MAT = np.array([[100.0, 0, (W - 1) / 2], [0, 100.0, (H - 1) / 2], [0, 0, 1]])
@@ -273,7 +273,7 @@ def test_small_model_overfits_eight_pairs():
 @pytest.mark.parametrize("dtype", [torch.bfloat16, torch.float64])
 def test_a_model_in_another_dtype_runs_on_a_float32_graph(dtype):
     from strl_pyg.data import build_pair_graph
-    from strl_pyg.model import StrLPose, StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
     from strl_pyg.synthetic import generate_pair
 
     p = generate_pair(1)

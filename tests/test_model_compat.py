@@ -16,7 +16,7 @@ import torch
 from torch_geometric.data import Batch
 
 from strl_pyg.data import PairGraph
-from strl_pyg.model import StrLPose, StrLPoseConfig, upgrade_key
+from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig, upgrade_key
 
 FIXTURE = Path(__file__).parent / "data" / "legacy_model.pt"
 TINY = ["full", "full_geometric", "baseline", "V", "LP_metric"]

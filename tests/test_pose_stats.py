@@ -1,4 +1,4 @@
-"""strl_pyg.pose_stats: the one statistics function behind the training log's validation
+"""strl_pyg.metrics.stats: the one statistics function behind the training log's validation
 metrics and the evaluation tables; both give the same numbers under their own key names."""
 
 from __future__ import annotations
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import torch
 
-from strl_pyg.eval_report import PairResult, _stats
-from strl_pyg.pose_stats import pose_error_stats
-from strl_pyg.validation import _summary
+from strl_pyg.evaluation.report import PairResult, _stats
+from strl_pyg.metrics.stats import pose_error_stats
+from strl_pyg.training.validation import _summary
 
 # four successful pairs; the second has an undefined translation direction (NaN)
 ROT = [1.0, 2.0, 3.0, 10.0]
@@ -110,7 +110,7 @@ def test_bad_input_gets_a_one_line_error(args, exc, match):
 
 
 def test_coverage_interval_known_answers_and_bad_input():
-    from strl_pyg.pose_stats import coverage_interval
+    from strl_pyg.metrics.stats import coverage_interval
 
     lo, hi = coverage_interval(30, 30)  # by hand: n/(n+z^2) = 30/33.8416
     assert hi == 1.0 and lo == pytest.approx(30 / (30 + 1.96**2), rel=1e-12)
@@ -127,7 +127,7 @@ def test_coverage_interval_known_answers_and_bad_input():
 
 
 def test_median_ratio_interval_brackets_the_ratio_and_is_paired():
-    from strl_pyg.pose_stats import median_ratio_interval
+    from strl_pyg.metrics.stats import median_ratio_interval
 
     rng = np.random.default_rng(1)
     b = rng.gamma(2.0, 1.0, size=200)
@@ -148,8 +148,8 @@ def test_median_ratio_interval_brackets_the_ratio_and_is_paired():
 
 
 def test_auc_difference_interval_sees_a_real_gain_and_not_a_tie():
-    from strl_pyg.metrics import pose_auc
-    from strl_pyg.pose_stats import auc_difference_interval
+    from strl_pyg.metrics.stats import auc_difference_interval
+    from strl_pyg.metrics.two_view import pose_auc
 
     rng = np.random.default_rng(2)
     b = rng.gamma(2.0, 3.0, size=80)

@@ -1,4 +1,4 @@
-"""Bootstrap covariance of the classical poses (strl_pyg.pose_uncertainty)."""
+"""Bootstrap covariance of the classical poses (strl_pyg.estimation.uncertainty)."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from strl_pyg.baselines import estimate_relative_pose
-from strl_pyg.inference import PoseEstimator
-from strl_pyg.pose_uncertainty import bootstrap_covariance
+from strl_pyg.estimation.classical import estimate_relative_pose
+from strl_pyg.estimation.uncertainty import bootstrap_covariance
+from strl_pyg.inference.estimator import PoseEstimator
 from strl_pyg.synthetic import SceneConfig, generate_pair
 
 
@@ -69,7 +69,7 @@ def test_calibration_applies_on_the_lazy_path_and_only_to_the_fitted_bootstrap(p
     """The default predict path runs PoseLib alone: its covariance must still be calibrated,
     and equal to the one of the run of every method; a scale fitted with bootstrap=8 is not
     applied to a bootstrap=0 covariance (it says so)."""
-    from strl_pyg.model import StrLPose
+    from strl_pyg.model.strl_pose import StrLPose
 
     model = StrLPose.from_pretrained()
     fitted = model.metadata.get("calibration_bootstrap")
@@ -91,7 +91,7 @@ def test_fused_covariance_takes_its_calibration_scale(pair):
     and the fused pose itself does not change."""
     import copy
 
-    from strl_pyg.model import StrLPose
+    from strl_pyg.model.strl_pose import StrLPose
 
     model = StrLPose.from_pretrained()
     scaled = copy.deepcopy(model)
@@ -113,14 +113,14 @@ def test_guided_covariance_is_first_order_plus_the_bootstrap_of_its_solve(kind, 
     55-66 % on dino, object, low texture in bench_pose); now it adds the bootstrap of the solve
     it kept, like the classical records: on all matches it is the base method's own bootstrap
     (computed once), on the network's top matches the bootstrap of that subset."""
-    from strl_pyg.model import StrLPose
-    from strl_pyg.pose_methods import _have_poselib
-    from strl_pyg.pose_uncertainty import BOOTSTRAPPED
+    from strl_pyg.estimation.classical import have_poselib
+    from strl_pyg.estimation.uncertainty import BOOTSTRAPPED
+    from strl_pyg.model.strl_pose import StrLPose
 
     assert "guided" in BOOTSTRAPPED
     pair = generate_pair(seed, SceneConfig(kind=kind, noise_px=1.0, outlier_fraction=0.5))
     model = StrLPose.from_pretrained()
-    base = "poselib" if _have_poselib() else "opencv"
+    base = "poselib" if have_poselib() else "opencv"
     est = PoseEstimator(model, methods=[base, "guided"]).estimate(pair.matches).methods
     off = PoseEstimator(model, methods=[base, "guided"], bootstrap=0).estimate(
         pair.matches).methods
@@ -150,7 +150,7 @@ def test_fused_covariance_adds_the_classical_bootstrap(pair):
     only knew PoseLib's first-order covariance. Now the classical bootstrap term is added."""
     import copy
 
-    from strl_pyg.model import StrLPose
+    from strl_pyg.model.strl_pose import StrLPose
 
     model = StrLPose.from_pretrained()
     bare = copy.deepcopy(model)

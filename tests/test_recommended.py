@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from strl_pyg.frontend import FrontendConfig, match_images
-from strl_pyg.inference import PoseEstimator
-from strl_pyg.recommended import estimate_methods, estimate_recommended, methods_needed
+from strl_pyg.inference.estimator import PoseEstimator
+from strl_pyg.inference.recommended import estimate_methods, estimate_recommended, methods_needed
 from strl_pyg.synthetic import SceneConfig, generate_pair
 
 
 @pytest.fixture(scope="module")
 def model():
-    from strl_pyg.model import StrLPose
+    from strl_pyg.model.strl_pose import StrLPose
 
     return StrLPose.from_pretrained()
 
@@ -84,7 +84,7 @@ def test_without_poselib_opencv_takes_its_place_and_the_record_says_so(monkeypat
     import dataclasses
 
     from strl_pyg import inference
-    from strl_pyg.model import StrLPose
+    from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.synthetic import SceneConfig, generate_pair
 
     model = StrLPose.from_pretrained()
@@ -113,3 +113,30 @@ def test_without_poselib_opencv_takes_its_place_and_the_record_says_so(monkeypat
     assert inference.recommended_order(plain)[0] == "opencv"
     est = inference.PoseEstimator(plain, methods=["opencv"]).estimate(pair.matches)
     assert inference.POSELIB_MISSING not in est.pose.warnings
+
+
+def test_the_recommended_path_runs_each_method_at_most_once(model, pair, monkeypatch):
+    """Before, every prefix of the order got a fresh PoseEstimator that re-ran the methods of
+    the earlier prefixes (fused failing -> regression and opencv ran again for 'opencv')."""
+    import dataclasses
+
+    from strl_pyg.inference.estimator import METHODS
+    from strl_pyg.inference.record import MethodResult
+
+    calls: dict[str, int] = {}
+
+    def counted(name, fn):
+        def run(matches, ctx):
+            calls[name] = calls.get(name, 0) + 1
+            if name == "fused":  # planted failure: the path moves on to the next method
+                return MethodResult("fused", "failed", warnings=["planted"])
+            return fn(matches, ctx)
+        return run
+
+    for name, spec in list(METHODS.items()):
+        monkeypatch.setitem(METHODS, name, dataclasses.replace(spec, fn=counted(name, spec.fn)))
+    mdl = _with_order(model, ("fused", "opencv"))
+    est = estimate_recommended(mdl, pair.image0, pair.image1, pair.K, pair.K)
+    assert est.status == "ok" and est.pose.method == "opencv"
+    assert calls.get("fused") == 1 and calls.get("opencv") == 1, calls
+    assert max(calls.values()) == 1, calls

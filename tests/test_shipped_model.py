@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 import torch
 
-from strl_pyg.cli import DEFAULT_WEIGHTS
-from strl_pyg.evaluation import predict_pose
+from strl_pyg.cli.commands import DEFAULT_WEIGHTS
+from strl_pyg.evaluation.run import predict_pose
 from strl_pyg.geometry import Pose
-from strl_pyg.metrics import rotation_error_deg, translation_angle_error_deg
-from strl_pyg.model import StrLPose
+from strl_pyg.metrics.two_view import rotation_error_deg, translation_angle_error_deg
+from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.synthetic import SceneConfig, generate_pair
 
 # Held-out seeds (training used seeds below 2,000,000), the kinds the model was trained on.

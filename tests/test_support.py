@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.inference import PoseEstimator
-from strl_pyg.model import StrLPose
+from strl_pyg.inference.estimator import PoseEstimator
+from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.synthetic import SceneConfig, generate_pair
 
 K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
@@ -60,7 +60,7 @@ def test_few_random_matches_are_not_supported_either(model):
 def test_few_matches_that_all_agree_keep_their_pose(model):
     """With fewer matches than min_inliers every one must agree: 10 clean matches of a real
     pose pass (the review found that any pair with 5-11 matches was refused)."""
-    from strl_pyg.metrics import relative_pose_error
+    from strl_pyg.metrics.two_view import relative_pose_error
 
     pair = generate_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.0))
     m = pair.matches

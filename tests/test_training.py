@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from strl_pyg.geometry import Pose
-from strl_pyg.training import (
+from strl_pyg.training.loop import (
     StepBatchSampler,
     TrainConfig,
     load_checkpoint,
@@ -114,7 +114,7 @@ def test_torchrun_two_ranks_identical_and_equal_to_single_process(tmp_path):
         import os, sys, torch
         sys.path.insert(0, {str(REPO / "tests")!r})
         from test_training import tiny_config
-        from strl_pyg.training import train
+        from strl_pyg.training.loop import train
         out = train(tiny_config({str(tmp_path / "ddp")!r}), progress=False)
         torch.save(out["model"].state_dict(), {str(tmp_path)!r} + f"/rank{{os.environ['RANK']}}.pt")
     """))
@@ -146,9 +146,9 @@ def test_init_from_loads_weights_and_rejects_other_architectures(tmp_path):
 
 
 def test_geometric_head_trains_on_a_scene_distribution_from_regression_weights(tmp_path):
-    from strl_pyg.model import StrLPose, StrLPoseConfig
-    from strl_pyg.train_config import TrainConfig
-    from strl_pyg.training import shuffle_point_matches, train
+    from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
+    from strl_pyg.training.config import TrainConfig
+    from strl_pyg.training.loop import shuffle_point_matches, train
 
     base = StrLPose(StrLPoseConfig.ablation("full", hidden=16, layers=1, heads=2,
                                             patch_features=1))
@@ -179,7 +179,7 @@ def test_geometric_head_trains_on_a_scene_distribution_from_regression_weights(t
 def test_training_flags_for_the_wider_distribution():
     import argparse
 
-    from strl_pyg.train_config import TrainConfig, add_train_arguments
+    from strl_pyg.training.config import TrainConfig, add_train_arguments
 
     ap = add_train_arguments(argparse.ArgumentParser())
     args = ap.parse_args(["--scene-mix", "mixed_small", "--matches", "frontend",
@@ -211,7 +211,7 @@ def test_tensorboard_absent_is_said_once_and_recorded(tmp_path, monkeypatch):
 
 
 def test_curves_show_the_training_loss_beside_validation(tmp_path):
-    from strl_pyg.train_log import _train_pose_loss, read_log
+    from strl_pyg.training.log import _train_pose_loss, read_log
 
     result = train(tiny_config(tmp_path / "run"), progress=False)
     log = read_log(tmp_path / "run" / "log.csv")

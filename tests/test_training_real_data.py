@@ -10,9 +10,9 @@ import pytest
 import torch
 
 from strl_pyg.data import keys as keys_
-from strl_pyg.train_config import TrainConfig
-from strl_pyg.train_data import build_datasets
-from strl_pyg.training import train
+from strl_pyg.training.config import TrainConfig
+from strl_pyg.training.data import build_datasets
+from strl_pyg.training.loop import train
 
 TINY = {"hidden": 16, "layers": 1, "heads": 2}
 
@@ -45,7 +45,7 @@ def test_kitti_trains_and_validates_on_the_sequences_that_exist(kitti_root, tmp_
 
 
 def test_an_empty_validation_set_is_refused_before_the_first_step(tmp_path):
-    from strl_pyg.data.datasets import SyntheticPairs
+    from strl_pyg.datasets import SyntheticPairs
 
     cfg = TrainConfig(train_pairs=2, batch_size=2, steps=2, val_every=1, num_points=16,
                       num_lines=8, out_dir=str(tmp_path / "run"), tensorboard=False,
@@ -91,7 +91,7 @@ def test_demon_grey_model_gets_grey_patches(demon_train_root, tmp_path):
 
 
 def test_patch_channels_that_do_not_fit_the_data_fail_before_the_first_step(tmp_path):
-    from strl_pyg.data.datasets import SyntheticPairs
+    from strl_pyg.datasets import SyntheticPairs
 
     cfg = TrainConfig(train_pairs=2, val_pairs=1, batch_size=2, steps=2, num_points=16,
                       num_lines=8, out_dir=str(tmp_path / "run"), tensorboard=False,
@@ -99,7 +99,7 @@ def test_patch_channels_that_do_not_fit_the_data_fail_before_the_first_step(tmp_
     with pytest.raises(ValueError, match="patch_features=1 --set image_channels=1"):
         train(cfg, progress=False)
     assert not (tmp_path / "run" / "log.csv").exists()
-    from strl_pyg.train_data import check_graph_channels
+    from strl_pyg.training.data import check_graph_channels
 
     cnn = TrainConfig(model="R", model_overrides={**TINY, "image_channels": 3}).model_config()
     graph = SyntheticPairs(1, seed=0, keep_images=True)[0]

@@ -1,20 +1,20 @@
-"""Match containers, pair graphs, transforms and datasets.
+"""Match containers, pair graphs, transforms and match files of other tools (datasets of
+pair graphs live in :mod:`strl_pyg.datasets`).
 
 Names are imported on first use: ``from strl_pyg.data import PairMatches`` needs only numpy;
-graphs, transforms and datasets load torch and PyG when first touched.
+graphs and transforms load torch and PyG when first touched.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from strl_pyg._lazy import lazy_exports
+from strl_pyg.utils.lazy import lazy_exports
 
 _GRAPH = "strl_pyg.data.graph"
 _TRANSFORMS = "strl_pyg.data.transforms"
 
 __all__ = [
-    "datasets",
     "keys",
     "PairMatches",
     "load_external_matches",
@@ -39,13 +39,12 @@ __all__ = [
 ]
 
 __getattr__, __dir__ = lazy_exports(__name__, {
-    "datasets": "",
     "keys": "",
     "PairMatches": "strl_pyg.data.matches",
-    "load_external_matches": "strl_pyg.data.external",
-    "load_hloc_matches": "strl_pyg.data.external_hloc",
-    "from_lightglue": "strl_pyg.data.external",
-    "MatchFormatError": "strl_pyg.data.external",
+    "load_external_matches": "strl_pyg.data.external.formats",
+    "load_hloc_matches": "strl_pyg.data.external.hloc",
+    "from_lightglue": "strl_pyg.data.external.formats",
+    "MatchFormatError": "strl_pyg.data.external.formats",
     "build_pair_graph": _GRAPH,
     "PairGraph": _GRAPH,
     "ImplicitEdgesError": _GRAPH,
@@ -64,9 +63,13 @@ __getattr__, __dir__ = lazy_exports(__name__, {
 }, globals())
 
 if TYPE_CHECKING:  # for type checkers and IDEs; never executed
-    from strl_pyg.data import datasets, keys
-    from strl_pyg.data.external import MatchFormatError, from_lightglue, load_external_matches
-    from strl_pyg.data.external_hloc import load_hloc_matches
+    from strl_pyg.data import keys
+    from strl_pyg.data.external.formats import (
+        MatchFormatError,
+        from_lightglue,
+        load_external_matches,
+    )
+    from strl_pyg.data.external.hloc import load_hloc_matches
     from strl_pyg.data.graph import (
         ImplicitEdgesError,
         PairGraph,

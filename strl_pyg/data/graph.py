@@ -36,7 +36,7 @@ from strl_pyg.data.pair_graph import (
     materialize_complete_edges,
 )
 from strl_pyg.geometry import normalize_points
-from strl_pyg.io import atomic_open
+from strl_pyg.utils.io import atomic_open
 
 __all__ = [
     "build_pair_graph",

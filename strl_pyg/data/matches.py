@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from strl_pyg.images import check_image
-from strl_pyg.io import atomic_open
+from strl_pyg.utils.images import check_image
+from strl_pyg.utils.io import atomic_open
 
 __all__ = [
     "PairMatches",
@@ -79,7 +79,7 @@ def _check_size(value: Any, name: str) -> tuple[int, int]:
     return int(arr[0]), int(arr[1])
 
 
-def _check_K(value: Any, name: str) -> np.ndarray | None:
+def check_K(value: Any, name: str) -> np.ndarray | None:
     if value is None:
         return None
     K = _as_array(value, name)
@@ -99,7 +99,7 @@ def _check_K(value: Any, name: str) -> np.ndarray | None:
 
 def _check_image(value: Any, name: str) -> np.ndarray | None:
     """``None``, or the image checked by the package's one image check
-    (:func:`strl_pyg.images.check_image`, kept as given)."""
+    (:func:`strl_pyg.utils.images.check_image`, kept as given)."""
     return None if value is None else check_image(value, name)
 
 
@@ -215,8 +215,8 @@ class PairMatches:
         _check_in_image(self.lines1, self.image_size1, "lines1")
         self.point_scores = self._scores(self.point_scores, "point_scores", len(self.points0))
         self.line_scores = self._scores(self.line_scores, "line_scores", len(self.lines0))
-        self.K0 = _check_K(self.K0, "K0")
-        self.K1 = _check_K(self.K1, "K1")
+        self.K0 = check_K(self.K0, "K0")
+        self.K1 = check_K(self.K1, "K1")
         if (self.K0 is None) != (self.K1 is None):
             raise ValueError("Expected both K0 and K1 or neither (got only one)")
         if not isinstance(self.info, dict):
@@ -343,10 +343,10 @@ def _load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
 
 
 def __getattr__(name: str) -> Any:
-    # ``load_external_matches`` lives in :mod:`strl_pyg.data.external` (which imports this
+    # ``load_external_matches`` lives in :mod:`strl_pyg.data.external.formats` (which imports this
     # module); it stays importable from here.
     if name == "load_external_matches":
-        from strl_pyg.data.external import load_external_matches
+        from strl_pyg.data.external.formats import load_external_matches
 
         return load_external_matches
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -10,7 +10,7 @@ descriptors sampled along the segments (:mod:`~strl_pyg.frontend.line_descriptor
 Conventions: pixels with OpenCV's convention (centre of the top-left pixel is ``(0, 0)``);
 image suffixes 0 (reference) and 1 (target); ``T_0to1`` maps camera-0 points into camera 1.
 
-Errors: images go through the package's one image check (:func:`strl_pyg.images.check_image`,
+Errors: images go through the package's one image check (:func:`strl_pyg.utils.images.check_image`,
 grey uint8 out, at least 16x16 pixels): another type, dtype, shape or an empty image raises
 ``TypeError``/``ValueError`` with an ``Expected ... (got ...)`` message. Images of different
 sizes are allowed (the two cameras may differ; each image keeps its own size in the result).

@@ -13,14 +13,14 @@ from strl_pyg.data.matches import PairMatches
 from strl_pyg.frontend.config import FrontendConfig, NoMatchesError
 from strl_pyg.frontend.lines import detect_lines, match_lines
 from strl_pyg.frontend.points import fit_fundamental, match_points
-from strl_pyg.images import FRONTEND_MIN_SIDE, check_image
+from strl_pyg.utils.images import FRONTEND_MIN_SIDE, check_image
 
 __all__ = ["match_images", "check_frontend_image"]
 
 
 def check_frontend_image(image: Any, name: str) -> np.ndarray:
     """``image`` as grey uint8 ``[H, W]`` for the detectors: the package's one image check
-    (:func:`strl_pyg.images.check_image`) with ``grayscale=True`` and
+    (:func:`strl_pyg.utils.images.check_image`) with ``grayscale=True`` and
     ``min_side=FRONTEND_MIN_SIDE`` (16 px)."""
     return check_image(image, name, grayscale=True, min_side=FRONTEND_MIN_SIDE)
 

@@ -20,7 +20,8 @@ else becomes float64). Results are torch tensors unless documented otherwise.
 
 Modules: :mod:`~strl_pyg.geometry.pose` (tensor boundary, rotations, :class:`Pose`),
 :mod:`~strl_pyg.geometry.manifold` (``[w]_x``, SO(3) and sphere maps, tangent bases) and
-:mod:`~strl_pyg.geometry.epipolar` (``E``, ``F``, normalisation, projection, Sampson errors);
+:mod:`~strl_pyg.geometry.epipolar` (``E``, ``F``, normalisation, projection, Sampson errors) and
+:mod:`~strl_pyg.geometry.essential` (the weighted eight-point solve, imported by its path);
 every name is importable from ``strl_pyg.geometry``. Needs numpy and torch only (kornia is
 imported on the first quaternion conversion).
 """
@@ -35,8 +36,3 @@ from strl_pyg.geometry.manifold import *  # noqa: F403
 from strl_pyg.geometry.pose import *  # noqa: F403
 
 __all__ = [*_pose.__all__, *_manifold.__all__, *_epipolar.__all__]
-
-# private helpers that other modules of the package use
-from strl_pyg.geometry.pose import _as_pose as _as_pose  # noqa: E402
-from strl_pyg.geometry.pose import _check_tail as _check_tail  # noqa: E402
-from strl_pyg.geometry.pose import _common as _common  # noqa: E402

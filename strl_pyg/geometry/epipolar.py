@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from strl_pyg.geometry.manifold import skew
-from strl_pyg.geometry.pose import Pose, _check_tail, _common, as_tensor
+from strl_pyg.geometry.pose import Pose, _common, as_tensor, check_tail
 
 __all__ = [
     "essential_from_pose",
@@ -23,6 +23,7 @@ __all__ = [
     "normalize_points",
     "project_points",
     "signed_sampson",
+    "pose_sampson",
     "sampson_error",
     "symmetric_epipolar_error",
     "fundamental_from_pose",
@@ -66,7 +67,7 @@ def fundamental_from_essential(E: Any, K0: Any, K1: Any) -> torch.Tensor:
     """
     E, K0, K1 = (as_tensor(a, n) for a, n in ((E, "E"), (K0, "K0"), (K1, "K1")))
     for a, n in ((E, "E"), (K0, "K0"), (K1, "K1")):
-        _check_tail(a, (3, 3), n)
+        check_tail(a, (3, 3), n)
     E, K0, K1 = _common(E, K0, K1)
     return _inv_K(K1).transpose(-1, -2) @ E @ _inv_K(K0)
 
@@ -82,8 +83,8 @@ def normalize_points(x: Any, K: Any) -> torch.Tensor:
         normalised coordinates, shape ``(*, N, 2)``.
     """
     x, K = as_tensor(x, "x"), as_tensor(K, "K")
-    _check_tail(x, (2,), "x")
-    _check_tail(K, (3, 3), "K")
+    check_tail(x, (2,), "x")
+    check_tail(K, (3, 3), "K")
     if x.dim() < 2:
         raise ValueError(f"Expected 'x' of shape (*, N, 2) (got {tuple(x.shape)})")
     x, K = _common(x, K)
@@ -101,8 +102,8 @@ def project_points(X: Any, K: Any) -> torch.Tensor:
         K: intrinsics, shape ``(*, 3, 3)``.
     """
     X, K = as_tensor(X, "X"), as_tensor(K, "K")
-    _check_tail(X, (3,), "X")
-    _check_tail(K, (3, 3), "K")
+    check_tail(X, (3,), "X")
+    check_tail(K, (3, 3), "K")
     X, K = _common(X, K)
     p = X @ K.transpose(-1, -2)
     return p[..., :2] / p[..., 2:3]
@@ -110,9 +111,9 @@ def project_points(X: Any, K: Any) -> torch.Tensor:
 
 def _epipolar_terms(M: Any, x0: Any, x1: Any):
     M, x0, x1 = as_tensor(M, "E_or_F"), as_tensor(x0, "x0"), as_tensor(x1, "x1")
-    _check_tail(M, (3, 3), "E_or_F")
-    _check_tail(x0, (2,), "x0")
-    _check_tail(x1, (2,), "x1")
+    check_tail(M, (3, 3), "E_or_F")
+    check_tail(x0, (2,), "x0")
+    check_tail(x1, (2,), "x1")
     if x0.dim() < 2 or x0.shape[-2] != x1.shape[-2]:
         raise ValueError(
             "Expected 'x0' and 'x1' of shape (*, N, 2) with the same N "
@@ -173,6 +174,22 @@ def signed_sampson(E_or_F: Any, x0: Any, x1: Any, eps: float = 1e-300) -> torch.
     """
     r, den = _sampson_terms(E_or_F, x0, x1)
     return r / torch.sqrt(den + eps)
+
+
+def pose_sampson(R: Any, t: Any, x0: Any, x1: Any) -> torch.Tensor:
+    """Signed Sampson residuals of the pose ``(R, t)`` (``X1 = R X0 + t``) on normalised
+    matches: :func:`signed_sampson` of ``E = [t]_x R``, the package's one Sampson residual
+    under a pose (its absolute value is the Sampson distance).
+
+    Args:
+        R: rotations, shape ``(*, 3, 3)``; t: translations, shape ``(*, 3)`` (the scale of
+            ``t`` scales the residuals: pass a unit direction for distances).
+        x0, x1: normalised points, shape ``(*, N, 2)``.
+
+    Returns:
+        residuals, shape ``(*, N)``.
+    """
+    return signed_sampson(skew(as_tensor(t)) @ as_tensor(R), x0, x1)
 
 
 def symmetric_epipolar_error(

@@ -2,8 +2,8 @@
 bases of translation directions and the sphere's exponential and logarithm.
 
 These give the minimal 5-parameter charts of a relative pose up to scale used by the pose
-fusion (:mod:`strl_pyg.pose_fusion`) and the weighted refinement
-(:func:`strl_pyg.essential.refine_pose`): a left rotation increment
+fusion (:mod:`strl_pyg.estimation.fusion`) and the weighted refinement
+(:func:`strl_pyg.geometry.essential.refine_pose`): a left rotation increment
 ``R(w) = exp([w]_x) R_ref`` and a translation direction ``t(d) = exp_{t_ref}(B d)`` with the
 basis ``B = [b1, b2]`` of :func:`tangent_basis`.
 """
@@ -14,7 +14,7 @@ from typing import Any
 
 import torch
 
-from strl_pyg.geometry.pose import _check_tail, as_tensor, rotation_to_quaternion
+from strl_pyg.geometry.pose import as_tensor, check_tail, rotation_to_quaternion
 
 __all__ = ["skew", "so3_exp", "so3_log", "tangent_basis", "sphere_exp", "sphere_log"]
 
@@ -22,7 +22,7 @@ __all__ = ["skew", "so3_exp", "so3_log", "tangent_basis", "sphere_exp", "sphere_
 def skew(v: Any) -> torch.Tensor:
     """Cross-product matrices ``[v]_x`` with ``[v]_x w = v x w``: ``(*, 3) -> (*, 3, 3)``."""
     v = as_tensor(v, "v")
-    _check_tail(v, (3,), "v")
+    check_tail(v, (3,), "v")
     x, y, z = v.unbind(-1)
     o = torch.zeros_like(x)
     return torch.stack([o, -z, y, z, o, -x, -y, x, o], dim=-1).reshape(*v.shape[:-1], 3, 3)
@@ -63,7 +63,7 @@ def tangent_basis(t: Any) -> torch.Tensor:
     ``(*, 3)``; ``(t, b1, b2)`` is right-handed and the basis is a deterministic function of
     the direction of ``t``. Raises ``ValueError`` for a zero translation."""
     t = as_tensor(t, "t")
-    _check_tail(t, (3,), "t")
+    check_tail(t, (3,), "t")
     n = t.norm(dim=-1, keepdim=True)
     if t.numel() and not bool((n > 1e-12).all()):
         raise ValueError("Expected a non-zero translation for a tangent basis (got |t| = 0)")

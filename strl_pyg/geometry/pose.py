@@ -19,6 +19,7 @@ __all__ = [
     "rotation_angle_deg",
     "Pose",
     "as_pose",
+    "check_tail",
     "relative_pose_from_c2w",
     "relative_pose_from_w2c",
 ]
@@ -54,7 +55,8 @@ def as_tensor(x: Any, name: str = "input") -> torch.Tensor:
     return torch.from_numpy(np.ascontiguousarray(arr))
 
 
-def _check_tail(x: torch.Tensor, tail: tuple[int, ...], name: str) -> None:
+def check_tail(x: torch.Tensor, tail: tuple[int, ...], name: str) -> None:
+    """Raises a one-line ``ValueError`` unless the trailing dimensions of ``x`` are ``tail``."""
     if x.dim() < len(tail) or tuple(x.shape[x.dim() - len(tail):]) != tail:
         want = "(*, " + ", ".join(map(str, tail)) + ")"
         raise ValueError(f"Expected '{name}' of shape {want} (got {tuple(x.shape)})")
@@ -79,7 +81,7 @@ def rotation_to_quaternion(R: Any) -> torch.Tensor:
         switches of the conversion.
     """
     R = as_tensor(R, "R")
-    _check_tail(R, (3, 3), "R")
+    check_tail(R, (3, 3), "R")
     r2q, _ = _kornia_conversions()
     q = r2q(R.contiguous(), eps=torch.finfo(R.dtype).eps)
     return torch.where(q[..., :1] < 0, -q, q)
@@ -95,7 +97,7 @@ def quaternion_to_rotation(q: Any) -> torch.Tensor:
         rotation matrices, shape ``(*, 3, 3)``.
     """
     q = as_tensor(q, "q")
-    _check_tail(q, (4,), "q")
+    check_tail(q, (4,), "q")
     norm = q.norm(dim=-1, keepdim=True)
     if q.numel() and bool((norm < 1e-12).any()):
         raise ValueError("Expected quaternions of non-zero norm (got a zero quaternion)")
@@ -116,7 +118,7 @@ def rotation_angle_deg(R: Any) -> torch.Tensor:
         angles, shape ``(*)``.
     """
     R = as_tensor(R, "R")
-    _check_tail(R, (3, 3), "R")
+    check_tail(R, (3, 3), "R")
     cos = (R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2] - 1.0) / 2.0
     w = torch.stack(
         [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
@@ -143,8 +145,8 @@ class Pose:
 
     def __init__(self, R: Any, t: Any) -> None:
         R, t = as_tensor(R, "R"), as_tensor(t, "t")
-        _check_tail(R, (3, 3), "R")
-        _check_tail(t, (3,), "t")
+        check_tail(R, (3, 3), "R")
+        check_tail(t, (3,), "t")
         try:
             shape = torch.broadcast_shapes(R.shape[:-2], t.shape[:-1])
         except RuntimeError as err:
@@ -179,7 +181,7 @@ class Pose:
         The values are whatever the file holds (camera-to-world for ``poses/NN.txt``).
         """
         row = as_tensor(row, "row")
-        _check_tail(row, (12,), "row")
+        check_tail(row, (12,), "row")
         return cls.from_matrix(row.reshape(*row.shape[:-1], 3, 4))
 
     @classmethod
@@ -261,7 +263,7 @@ class Pose:
     def transform(self, points: Any) -> torch.Tensor:
         """Applies the pose to 3D points: ``(*, N, 3) -> (*, N, 3)``."""
         points = as_tensor(points, "points")
-        _check_tail(points, (3,), "points")
+        check_tail(points, (3,), "points")
         if points.dim() < 2:
             raise ValueError(f"Expected 'points' of shape (*, N, 3) (got {tuple(points.shape)})")
         R, t, points = _common(self.R, self.t, points)
@@ -297,7 +299,6 @@ def as_pose(T: Any, name: str = "T") -> Pose:
     return T if isinstance(T, Pose) else _named_from_matrix(T, name)
 
 
-_as_pose = as_pose  # the former private name
 
 
 def _named_from_matrix(T: Any, name: str) -> Pose:
@@ -319,7 +320,7 @@ def relative_pose_from_c2w(T_w_c0: Any, T_w_c1: Any) -> Pose:
     Returns:
         :class:`Pose` ``T_0to1`` of the broadcast batch shape.
     """
-    return _as_pose(T_w_c1, "T_w_c1").inv() @ _as_pose(T_w_c0, "T_w_c0")
+    return as_pose(T_w_c1, "T_w_c1").inv() @ as_pose(T_w_c0, "T_w_c0")
 
 
 def relative_pose_from_w2c(T_c0_w: Any, T_c1_w: Any) -> Pose:
@@ -332,4 +333,4 @@ def relative_pose_from_w2c(T_c0_w: Any, T_c1_w: Any) -> Pose:
     Returns:
         :class:`Pose` ``T_0to1`` of the broadcast batch shape.
     """
-    return _as_pose(T_c1_w, "T_c1_w") @ _as_pose(T_c0_w, "T_c0_w").inv()
+    return as_pose(T_c1_w, "T_c1_w") @ as_pose(T_c0_w, "T_c0_w").inv()

@@ -109,7 +109,7 @@ class AttentionConv(MessagePassing):
       :func:`torch.nn.functional.scaled_dot_product_attention` on padded per-graph blocks and a
       boolean key mask. No :math:`O(N^2)` edge list is built. The block layout comes from
       a :class:`~strl_pyg.nn.DenseLayout` passed as ``layout`` (built once per forward by the
-      caller: no host synchronisation in the layer, as :class:`~strl_pyg.model.StrLPose`
+      caller: no host synchronisation in the layer, as :class:`~strl_pyg.model.strl_pose.StrLPose`
       does), else from the graph ids on every call (validated on the host).
 
     A missing ``edge_index`` (``None`` without ``complete=True``) is an error, never complete

@@ -87,7 +87,7 @@ class InlierHead(nn.Sequential):
     r"""Per-node inlier logits of the geometric head (``StrLPoseConfig.geometric``):
     ``Linear(C_in, C) -> ReLU -> Linear(C, C/2) -> ReLU -> Linear(C/2, 1)`` on the
     concatenated final node features of both streams; the sigmoid of a logit is the node's
-    weight in the weighted essential-matrix solve (:mod:`strl_pyg.essential`).
+    weight in the weighted essential-matrix solve (:mod:`strl_pyg.geometry.essential`).
 
     Args:
         in_channels (int): :math:`C_{in}` (geometric plus visual feature size).

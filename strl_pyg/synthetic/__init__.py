@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from strl_pyg._lazy import lazy_exports
+from strl_pyg.utils.lazy import lazy_exports
 
 _CONFIG = "strl_pyg.synthetic.config"
 _DIST = "strl_pyg.synthetic.distributions"

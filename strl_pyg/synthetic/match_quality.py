@@ -6,7 +6,7 @@ epipolar constraint this also checks the position along the epipolar line, which
 it a real test of line matches (two segments are always consistent with *some* 3D line).
 
 (Formerly ``strl_pyg.synthetic.metrics``, still importable; the pose metrics are
-:mod:`strl_pyg.metrics`.)
+:mod:`strl_pyg.metrics.two_view`.)
 """
 
 from __future__ import annotations

@@ -1,1 +1,3 @@
-"""Visualisation: trajectory and error plots, match drawings (matplotlib, Agg backend)."""
+"""Visualisation with matplotlib (Agg backend): match drawings (:mod:`.matches`) and
+trajectory, error and training-curve plots (:mod:`.plots`). Imported only by the code that
+draws, so nothing else pulls in matplotlib."""

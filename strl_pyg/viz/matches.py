@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.io import atomic_open
+from strl_pyg.utils.io import atomic_open
 
 __all__ = ["draw_matches", "save_matches_png", "INLIER_COLOUR", "OUTLIER_COLOUR"]
 

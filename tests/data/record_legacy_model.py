@@ -33,7 +33,7 @@ from test_model import make_pair
 from torch_geometric.data import Batch
 
 from strl_pyg.data import PairMatches, build_pair_graph
-from strl_pyg.model import StrLPose, StrLPoseConfig
+from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
 
 OUT = Path(__file__).with_name("legacy_model.pt")
 TINY = dict(hidden=8, layers=2, heads=2, line_channels=4)

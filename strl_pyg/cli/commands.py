@@ -1,0 +1,423 @@
+"""The ``strl-pose`` command line.
+
+Subcommands: ``demo`` (the main job on an embedded default: a generated pair goes through
+matching, graph and model), ``match``, ``predict``, ``train``, ``evaluate`` and ``bench``.
+Every error in the user's input ends with a one-line ``error: Expected ... (got ...)`` on
+stderr and exit code 2 (no traceback): bad flags and values, missing files, folders given as
+files, undecodable images, bad intrinsics, empty or foreign match files, checkpoints that are
+corrupt or would need code to load (refused: all checkpoints load with ``weights_only=True``),
+and outputs that cannot be written (checked before any work). ``predict`` exits with 0 for a
+pose with status ``ok``, 1 for no pose, 3 for an ``unreliable`` one (computed, not to use:
+see ``strl-pose predict --help``); output cut short by a closed stdout (``| head``) ends
+quietly with 141.
+
+Large images are downscaled for matching so that their longer side is at most ``--max-side``
+pixels (default :data:`MAX_SIDE`; ``0`` keeps the full resolution), with the intrinsics scaled
+by the same factors under the package's pixel-centre convention (centre of the top-left pixel
+at ``(0, 0)``: ``x' = (x + 0.5) s - 0.5``). Saved matches are mapped back to the original
+pixel frame; the relative pose does not depend on the image scale.
+
+``strl-pose --help`` and argument errors return without importing torch: the parser is built
+from torch-free modules and every command imports its heavy modules when it runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from strl_pyg.cli.guard import run_guarded
+from strl_pyg.cli.inputs import (  # noqa: F401  (re-exported: the readers' public home)
+    MAX_SIDE,
+    PairInputs,
+    UsageError,
+    _check_input_file,
+    _intrinsics,
+    bootstrap_count,
+    downscale_for_matching,
+    non_negative_int,
+    read_image_file,
+    read_intrinsics,
+    read_pair,
+)
+from strl_pyg.synthetic.config import LINE_SCENE_KINDS
+from strl_pyg.training.checkpoints import DEFAULT_WEIGHTS, WEIGHTS_DIR, default_checkpoint  # noqa: F401
+
+__all__ = ["main", "run_guarded", "check_train_files", "build_parser", "read_intrinsics",
+           "read_image_file", "default_checkpoint", "predict_pair", "downscale_for_matching",
+           "PairInputs", "MAX_SIDE"]
+
+DEMO_SEED = 2_000_017  # held out: training uses seeds < 2,000,000
+
+
+def load_model(path: str | os.PathLike | None):
+    from strl_pyg.model.strl_pose import StrLPose
+
+    path = Path(path) if path else default_checkpoint()
+    if not path.is_file():
+        raise UsageError(f"Expected a model checkpoint at '{path}' (got no such file); train one "
+                         "with 'strl-pose train' or pass --checkpoint")
+    return StrLPose.load(path).eval()
+
+
+# ----------------------------------------------------------------------------- the pipeline
+def predict_pair(model, matches, resample_seed: int | None = 0,
+                 warmup: bool = False) -> dict[str, Any]:
+    """Runs the network alone on one pair's matches; returns its pose and uncertainty.
+
+    The graph is built and resampled as the checkpoint stores (:attr:`StrLPose.metadata
+    <strl_pyg.model.StrLPose.metadata>`; 384 points, 192 lines for old checkpoints) with seed
+    ``resample_seed``, or not resampled when it is None. With ``warmup``, one untimed forward
+    pass runs first, so ``time_ms`` is the steady-state time. For the recommended pose of all
+    methods use :class:`strl_pyg.inference.estimator.PoseEstimator`.
+    """
+    import torch
+
+    from strl_pyg.inference.inputs import network_pose
+
+    def run():
+        return network_pose(model, matches, resample_seed or 0,
+                            "model" if resample_seed is not None else None)
+
+    if warmup:
+        run()
+    t0 = time.perf_counter()
+    out = run()
+    ms = (time.perf_counter() - t0) * 1e3
+    q, t, lv = (x[0].detach().cpu().double() for x in (out.quaternion, out.translation,
+                                                       out.log_var))
+    from strl_pyg.geometry import Pose
+
+    return {
+        "T_0to1": Pose.from_quaternion(q, t).matrix().numpy(),
+        "quaternion": q.numpy(),
+        "translation": t.numpy(),
+        "sigma": torch.exp(0.5 * lv).numpy(),
+        "log_var": lv.numpy(),
+        "time_ms": ms,
+    }
+
+
+def _pose_errors(T_est: np.ndarray, T_gt: np.ndarray) -> tuple[float, float]:
+    from strl_pyg.metrics.two_view import relative_pose_error
+
+    r, t = relative_pose_error(np.asarray(T_est)[None], np.asarray(T_gt)[None])
+    return float(r[0]), float(t[0])
+
+
+def _fmt_pose(T: np.ndarray) -> str:
+    from strl_pyg.geometry import Pose
+
+    p = Pose.from_matrix(np.asarray(T, dtype=np.float64))
+    t = p.t.numpy()
+    return (f"rotation {float(p.angle_deg()):.3f} deg, q(wxyz) "
+            f"{np.array2string(p.quaternion().numpy(), precision=4)}, t "
+            f"{np.array2string(t, precision=4)}")
+
+
+def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out[k] = _jsonable(v)
+        elif isinstance(v, np.ndarray):
+            out[k] = v.tolist()
+        elif isinstance(v, (np.floating, np.integer)):
+            out[k] = v.item()
+        else:
+            out[k] = v
+    return out
+
+
+#: What each method is, beside its registry name (the one name the output uses for it).
+METHOD_LABELS = {"regression": "the network's pose head", "opencv": "OpenCV MAGSAC",
+                 "poselib": "PoseLib", "fused": "network + classical, information form",
+                 "geometric": "the network's weighted eight-point", "guided": "network-guided "
+                 "classical solve"}
+
+#: ``strl-pose predict``'s exit codes (also in its ``--help``).
+EXIT_CODES = {0: "a pose: status 'ok'",
+              1: "no pose: status 'degenerate' or 'failed'",
+              2: "an error in the input (one 'error: Expected ...' line on stderr)",
+              3: "no pose to use: status 'unreliable' (a pose was computed, but the "
+                 "intrinsics fail the input checks or its matches lie behind a camera: see the "
+                 "warnings; T_0to1 and sigma are null)",
+              130: "interrupted",
+              141: "stdout closed early (e.g. '| head'): output stopped quietly"}
+STATUS_EXIT = {"ok": 0, "degenerate": 1, "failed": 1, "unreliable": 3}
+
+
+def _print_estimate(est, indent: str = "") -> None:
+    """The recommended pose in words: status, method, uncertainty, warnings; then each
+    method's own result."""
+    pose = est.pose
+    if pose.status == "unreliable":
+        label = METHOD_LABELS.get(pose.method, pose.method)
+        print(f"{indent}pose: unreliable, no pose given (see the warnings); {pose.method} "
+              f"({label}) computed, not to use: {_fmt_pose(pose.info['unreliable_T_0to1'])}")
+    elif pose.status == "ok":
+        label = METHOD_LABELS.get(pose.method, pose.method)
+        print(f"{indent}pose: ok, from {pose.method} ({label}): {_fmt_pose(pose.T_0to1)}")
+        if pose.sigma is not None:
+            kind = pose.info.get("covariance", "network log-variance")
+            cal = "calibrated" if "calibration_scale" in pose.info else "uncalibrated"
+            print(f"{indent}  sigma ({kind}, {cal}): "
+                  f"rotation {pose.sigma['rotation_deg']:.3f} deg, "
+                  f"translation direction {pose.sigma['translation_deg']:.3f} deg")
+    else:
+        print(f"{indent}pose: {pose.status}, no pose given")
+    for w in pose.warnings:
+        print(f"{indent}warning: {w}")
+    print(f"{indent}methods:")
+    for name, r in est.methods.items():
+        detail = _fmt_pose(r.T_0to1) if r.status == "ok" else "; ".join(r.warnings)
+        if r.status == "unreliable":
+            detail = "; ".join(r.info["unreliable"])
+        extra = f", {r.num_inliers} inliers" if r.num_inliers is not None else ""
+        print(f"{indent}  {name:<11} {r.status:<10} {detail}  ({r.time_ms:.1f} ms{extra})")
+
+
+# ----------------------------------------------------------------------------- subcommands
+def cmd_demo(args) -> int:
+    from strl_pyg.utils.io import check_output_dir
+
+    check_output_dir(args.out, "a folder for --out")  # before any work
+    from strl_pyg.frontend import epipolar_residuals, match_images
+    from strl_pyg.synthetic import SceneConfig, generate_pair
+    from strl_pyg.viz.matches import save_matches_png
+
+    model = load_model(args.checkpoint)
+    pair = generate_pair(args.seed, SceneConfig(kind=args.kind))
+    print(f"generated pair: kind={args.kind}, seed={args.seed}, "
+          f"{pair.image0.shape[0]}x{pair.image0.shape[1]} px (H x W; held out from training)")
+    matches = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K)
+    tm = matches.info.get("timings_ms", {})
+    print(f"front end: {matches.num_points} points, {matches.num_lines} lines "
+          f"in {tm.get('total', float('nan')):.0f} ms")
+    pred = predict_pair(model, matches, warmup=True)  # warm-up: steady-state times below
+    from strl_pyg.inference.estimator import PoseEstimator
+
+    est = PoseEstimator(model).estimate(matches)  # every method
+    T_gt = pair.T_0to1
+    print(f"\n{'method':<14} {'status':<10} {'rot err':>8} {'t err':>8} {'ms':>7}   pose")
+    print(f"{'ground truth':<14} {'':<10} {0.0:8.3f} {0.0:8.3f} {'-':>7}   {_fmt_pose(T_gt)}")
+    report = {}
+    for name, r in est.methods.items():  # registry names: one method, one name
+        if r.T_0to1 is None:
+            print(f"{name:<14} {r.status:<10} {'-':>8} {'-':>8} {r.time_ms:7.1f}   "
+                  f"{'; '.join(r.warnings)}")
+            continue
+        rot, tr = _pose_errors(r.T_0to1, T_gt)
+        print(f"{name:<14} {r.status:<10} {rot:8.3f} {tr:8.3f} {r.time_ms:7.1f}   "
+              f"{_fmt_pose(r.T_0to1)}")
+        report[name] = {"rot_err_deg": rot, "trans_err_deg": tr, "status": r.status}
+    s = pred["sigma"]
+    print(f"\npredicted sigma (regression): quaternion {np.array2string(s[:4], precision=4)}, "
+          f"translation {np.array2string(s[4:], precision=4)}")
+    print(f"recommended pose: {est.status}" + (f", from {est.pose.method}" if est.pose.method
+                                               else "")
+          + "".join(f"\nwarning: {w}" for w in est.warnings))
+    if est.pose.sigma is not None and est.status == "ok":
+        kind = est.pose.info.get("covariance", "network log-variance")
+        print(f"recommended pose's sigma ({kind}): rotation "
+              f"{est.pose.sigma['rotation_deg']:.3f} deg, translation direction "
+              f"{est.pose.sigma['translation_deg']:.3f} deg")
+    p_err, l_err = epipolar_residuals(matches, T_gt)
+    out = Path(args.out)
+    png = save_matches_png(out / "demo_matches.png", matches, point_inliers=p_err < 2.0,
+                           line_inliers=l_err < 2.0)
+    print(f"matches drawn (green: epipolar error < 2 px under the true pose): {png}")
+    if args.json:
+        print(json.dumps({**est.to_dict(), "prediction": _jsonable(pred), "errors": report}))
+    return 0
+
+
+def _match(inputs, args):
+    from strl_pyg.frontend import FrontendConfig, match_images
+
+    img0, img1, K0, K1 = inputs
+    return match_images(img0, img1, K0=K0, K1=K1, config=FrontendConfig(detector=args.detector))
+
+
+def _check_file_arg(path: str, flag: str, example: str) -> None:
+    """An output file flag's value: a folder (existing, or ending in '/') is refused with the
+    file name to add (``Path('out/')`` is ``out``: it used to become a file named ``out``)."""
+    from strl_pyg.utils.io import check_output_file
+
+    if path.endswith(("/", os.sep)) or Path(path).is_dir():
+        name = str(Path(path) / example)
+        raise UsageError(f"Expected a file path for {flag} (got '{path}', which names a folder; "
+                         f"e.g. '{name}')")
+    check_output_file(path, f"a file path for {flag}")
+
+
+def cmd_match(args) -> int:
+    _check_file_arg(args.out, "--out", "matches.npz")  # before any work
+    if args.png:
+        _check_file_arg(args.png, "--png", "matches.png")
+    inputs = read_pair(args)
+    from strl_pyg.viz.matches import save_matches_png
+
+    matches = inputs.to_original_frame(_match(inputs, args))
+    path = matches.save(args.out)
+    print(f"{matches.num_points} points, {matches.num_lines} lines -> {path}")
+    if args.png:
+        print(f"drawing -> {save_matches_png(args.png, matches)}")
+    return 0
+
+
+def cmd_predict(args) -> int:
+    """Pose of two images: the recommended ``"pose"`` record (:mod:`strl_pyg.inference.estimator`)
+    and the own result of each method run (``--methods``; default: only the ones the
+    recommended pose needs, :mod:`strl_pyg.inference.recommended`). Exit status (:data:`EXIT_CODES`)
+    0 when the pose's status is ``"ok"``, 1 when it is ``"degenerate"`` or ``"failed"``, 3
+    when it is ``"unreliable"`` (printed either way)."""
+    inputs = read_pair(args)  # fail on bad files before any heavy work
+    model = load_model(args.checkpoint)
+    from strl_pyg.frontend import FrontendConfig
+
+    img0, img1, K0, K1 = inputs
+    from strl_pyg.inference.recommended import estimate_methods
+
+    est = estimate_methods(model, img0, img1, K0, K1, FrontendConfig(detector=args.detector),
+                           "regression" if args.no_baseline else args.methods,
+                           bootstrap=args.bootstrap)
+    code = STATUS_EXIT[est.status]
+    if args.json:
+        print(json.dumps({**est.to_dict(), "translation_kind": model.config.translation,
+                          "intrinsics": K0 is not None}))
+        return code
+    print(f"matches: {est.num_points} points, {est.num_lines} lines")
+    _print_estimate(est)
+    return code
+
+
+def cmd_train(args, parser) -> int:
+    check_train_files(args)  # before torch is imported
+    from strl_pyg.training.loop import run_from_args
+
+    return run_from_args(args, parser)
+
+
+def check_train_files(args) -> None:
+    """Checks the files a training run needs (``--out`` writable, ``--init-from`` present,
+    ``<out>/last.pt`` for ``--resume``) before torch is imported; raises ``UsageError`` /
+    ``OSError`` with one-line messages."""
+    from strl_pyg.utils.io import check_output_dir
+
+    check_output_dir(args.out, "a run folder for --out")
+    if args.init_from:
+        _check_input_file(args.init_from, "weights file for --init-from")
+    if args.resume:
+        _check_input_file(Path(args.out) / "last.pt", "training checkpoint for --resume")
+
+
+def cmd_evaluate(argv: list[str]) -> int:
+    pre = argparse.ArgumentParser(add_help=False, allow_abbrev=False)
+    pre.add_argument("--out", nargs="?", default=None)  # a missing value is the real
+    pre.add_argument("--checkpoint", nargs="?", default=None)  # parser's to report
+    known, _ = pre.parse_known_args(argv)
+    if known.out:
+        from strl_pyg.utils.io import check_output_dir
+
+        check_output_dir(known.out, "a folder for --out")  # before any work
+    if known.checkpoint:
+        _check_input_file(known.checkpoint, "model checkpoint for --checkpoint")
+    try:
+        from strl_pyg.evaluation.run import main as evaluate_main
+    except ImportError as err:
+        raise UsageError(f"Expected strl_pyg.evaluation.run to be importable (got {err})") from err
+    return int(evaluate_main(argv, prog="strl-pose evaluate") or 0)
+
+
+# ----------------------------------------------------------------------------- parser
+def _add_pair_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("image0", help="reference image")
+    p.add_argument("image1", help="target image")
+    p.add_argument("--K", help="intrinsics of both images: 'fx,fy,cx,cy', 9 numbers or a file "
+                               "(3x3, 3x4, or KITTI calib.txt)")
+    p.add_argument("--K0", help="intrinsics of image 0 (same formats)")
+    p.add_argument("--K1", help="intrinsics of image 1 (default: --K0)")
+    p.add_argument("--detector", choices=("sift", "orb"), default="sift")
+    p.add_argument("--max-side", type=non_negative_int, default=MAX_SIDE, metavar="PX",
+                   help=f"downscale images whose longer side exceeds PX for matching, K scaled "
+                        f"alike (default {MAX_SIDE}; 0: full resolution)")
+
+
+class _Parser(argparse.ArgumentParser):
+    """Reports a bad command line as one line (``UsageError``, exit code 2 in :func:`main`)
+    instead of argparse's usage block."""
+
+    def error(self, message: str):
+        raise UsageError(f"Expected valid arguments (got {message}); see '{self.prog} --help'")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``strl-pose`` parser; building it imports neither torch nor the training code."""
+    from strl_pyg.training.config import add_train_arguments
+
+    ap = _Parser(prog="strl-pose", description=__doc__,
+                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("demo", help="the main job on a generated pair (no downloads)")
+    p.add_argument("--seed", type=non_negative_int, default=DEMO_SEED)
+    p.add_argument("--kind", choices=LINE_SCENE_KINDS, default="street")
+    p.add_argument("--checkpoint", default=None, help="default: the shipped weights")
+    p.add_argument("--out", default="outputs/demo", help="folder for the match drawing")
+    p.add_argument("--json", action="store_true", help="also print the result as JSON")
+    p = sub.add_parser("match", help="match points and lines of two images into a .npz")
+    _add_pair_args(p)
+    p.add_argument("--out", required=True, help="output .npz (PairMatches.save keys)")
+    p.add_argument("--png", default=None, help="also draw the matches to this PNG")
+    p = sub.add_parser("predict", help="relative pose of two images",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog="exit codes:\n" + "\n".join(
+                           f"  {k:<4} {v}" for k, v in EXIT_CODES.items()))
+    _add_pair_args(p)
+    p.add_argument("--checkpoint", default=None, help="default: the shipped weights")
+    p.add_argument("--json", action="store_true", help="print JSON only")
+    p.add_argument("--no-baseline", action="store_true", help="the network's regression only")
+    p.add_argument("--methods", default="recommended", metavar="M",
+                   help="'recommended' (default: the checkpoint's recommended order, stopping "
+                        "at the first 'ok' method), 'all', or names, e.g. 'regression,opencv'")
+    p.add_argument("--bootstrap", type=bootstrap_count, default=8, metavar="N",
+                   help="resamples behind the PoseLib/OpenCV covariance (default 8, the "
+                        "calibrated setting; 0: first-order covariance only, faster)")
+    p = sub.add_parser("train", help="train a model (see examples/train.py)")
+    add_train_arguments(p)
+    sub.add_parser("evaluate", help="evaluate a checkpoint (see examples/evaluate.py)",
+                   add_help=False)
+    p = sub.add_parser("bench", help="time the pipeline stages on this machine")
+    p.add_argument("--checkpoint", default=None)
+    p.add_argument("--repeat", type=int, default=20)
+    return ap
+
+
+def _dispatch(argv: list[str]) -> int:
+    if argv[:1] == ["evaluate"]:
+        return cmd_evaluate(argv[1:])
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command == "train":
+        return cmd_train(args, parser)
+    if args.command == "bench":
+        from strl_pyg.cli.bench import cmd_bench
+
+        return cmd_bench(args)
+    return {"demo": cmd_demo, "match": cmd_match, "predict": cmd_predict}[args.command](args)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """The ``strl-pose`` entry point; returns the exit code (0, or 2 for a user error)."""
+    return run_guarded(_dispatch, list(sys.argv[1:] if argv is None else argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,77 @@
+"""Pose estimation from matches without a network of its own: the classical solvers
+(:mod:`.classical`: OpenCV, PoseLib), network-guided robust estimation (:mod:`.guided`),
+bootstrap covariances (:mod:`.uncertainty`) and the fusion of a network pose with a classical
+one (:mod:`.fusion`).
+"""
+
+from __future__ import annotations
+
+from strl_pyg.utils.lazy import lazy_exports
+
+__all__ = [
+    "tangent_basis",
+    "so3_exp",
+    "so3_log",
+    "sphere_exp",
+    "sphere_log",
+    "BaselineResult",
+    "BASELINE_METHODS",
+    "MIN_POINTS",
+    "estimate_relative_pose",
+    "mean_focal",
+    "normalised_matches",
+    "have_poselib",
+    "msac_cost",
+    "guided_estimate",
+    "REFINE_WEIGHTINGS",
+    "bootstrap_covariance",
+    "MIN_BOOTSTRAP",
+    "BOOTSTRAPPED",
+    "FusedPose",
+    "FUSION_MODES",
+    "MIN_INLIERS",
+    "GATE_CHI2",
+    "PARAMETER_NAMES",
+    "pose_to_tangent",
+    "tangent_to_pose",
+    "sampson_residuals",
+    "sampson_jacobian",
+    "truncated_sigma",
+    "classical_covariance",
+    "network_covariance",
+    "fuse_poses",
+]
+
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "tangent_basis": "strl_pyg.estimation.fusion",
+    "so3_exp": "strl_pyg.estimation.fusion",
+    "so3_log": "strl_pyg.estimation.fusion",
+    "sphere_exp": "strl_pyg.estimation.fusion",
+    "sphere_log": "strl_pyg.estimation.fusion",
+    "BaselineResult": "strl_pyg.estimation.classical",
+    "BASELINE_METHODS": "strl_pyg.estimation.classical",
+    "MIN_POINTS": "strl_pyg.estimation.classical",
+    "estimate_relative_pose": "strl_pyg.estimation.classical",
+    "mean_focal": "strl_pyg.estimation.classical",
+    "normalised_matches": "strl_pyg.estimation.classical",
+    "have_poselib": "strl_pyg.estimation.classical",
+    "msac_cost": "strl_pyg.estimation.guided",
+    "guided_estimate": "strl_pyg.estimation.guided",
+    "REFINE_WEIGHTINGS": "strl_pyg.estimation.guided",
+    "bootstrap_covariance": "strl_pyg.estimation.uncertainty",
+    "MIN_BOOTSTRAP": "strl_pyg.estimation.uncertainty",
+    "BOOTSTRAPPED": "strl_pyg.estimation.uncertainty",
+    "FusedPose": "strl_pyg.estimation.fusion",
+    "FUSION_MODES": "strl_pyg.estimation.fusion",
+    "MIN_INLIERS": "strl_pyg.estimation.fusion",
+    "GATE_CHI2": "strl_pyg.estimation.fusion",
+    "PARAMETER_NAMES": "strl_pyg.estimation.fusion",
+    "pose_to_tangent": "strl_pyg.estimation.fusion",
+    "tangent_to_pose": "strl_pyg.estimation.fusion",
+    "sampson_residuals": "strl_pyg.estimation.fusion",
+    "sampson_jacobian": "strl_pyg.estimation.fusion",
+    "truncated_sigma": "strl_pyg.estimation.fusion",
+    "classical_covariance": "strl_pyg.estimation.fusion",
+    "network_covariance": "strl_pyg.estimation.fusion",
+    "fuse_poses": "strl_pyg.estimation.fusion",
+}, globals())

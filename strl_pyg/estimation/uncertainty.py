@@ -1,0 +1,89 @@
+"""Bootstrap covariance of a classical robust pose: the part of the uncertainty that the
+first-order (Jacobian) covariance cannot see.
+
+The first-order covariance of :func:`strl_pyg.estimation.fusion.classical_covariance` describes the
+noise of a *correct* solution around it. A robust solver also fails in ways that have nothing to
+do with that noise: a wrong RANSAC solution, a near-degenerate configuration (an object filling
+little of the image, low texture) where several poses explain the inliers about as well. Then
+the estimate moves far when the matches change a little. The bootstrap measures exactly that:
+the solver is re-run on ``n`` resamples (with replacement) of the point matches and the
+covariance of the resampled poses, in the tangent chart of the estimate, is returned. The
+estimators' ``poselib`` / ``opencv`` / ``guided`` records carry first-order + bootstrap
+covariances, the ``fused`` one information form + the classical bootstrap
+(:class:`strl_pyg.inference.PoseEstimator`, ``bootstrap=8``, :data:`BOOTSTRAPPED`), calibrated
+with one scale per method (``benchmarks/bench_pose.py --calibrate``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from strl_pyg.data.matches import PairMatches
+from strl_pyg.estimation.classical import estimate_relative_pose
+from strl_pyg.geometry import Pose
+
+__all__ = ["bootstrap_covariance", "MIN_BOOTSTRAP", "BOOTSTRAPPED"]
+
+#: The methods whose records carry first-order + bootstrap covariances (``guided``: the
+#: bootstrap of its chosen classical solve, on the matches that solve used; ``fused``: the
+#: information-form covariance + the bootstrap of the classical estimate it starts from).
+BOOTSTRAPPED = ("poselib", "opencv", "guided", "fused")
+
+#: Fewest resamples that give a covariance (a 5x5 covariance from fewer is mostly noise).
+MIN_BOOTSTRAP = 3
+
+
+def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poselib",
+                         n: int = 8, threshold_px: float = 1.0, seed: int = 0
+                         ) -> np.ndarray | None:
+    """Covariance ``[5, 5]`` (float64) of the robust estimate ``pose`` of ``matches``, from
+    ``n`` bootstrap resamples of its point matches, in the tangent parameters of
+    :func:`strl_pyg.estimation.fusion.pose_to_tangent` (rotation increment ``w``, rad; translation
+    direction on the sphere, rad) around ``pose``.
+
+    Each resample draws ``num_points`` point matches with replacement (seeded: the same inputs
+    give the same covariance) and runs :func:`~strl_pyg.estimation.estimate_relative_pose` with
+    ``method``; line segments are not used. The covariance is the second moment of the
+    resampled poses' tangent coordinates about ``pose`` (so a consistent offset counts, not
+    only the spread). Returns ``None`` when fewer than
+    :data:`MIN_BOOTSTRAP` resamples gave a pose.
+    """
+    from strl_pyg.estimation.fusion import pose_to_tangent, tangent_basis
+
+    if not isinstance(matches, PairMatches):
+        raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")
+    if not isinstance(pose, Pose) or pose.R.dim() != 2:
+        raise TypeError(f"Expected an unbatched Pose (got {type(pose).__name__})")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < MIN_BOOTSTRAP:
+        raise ValueError(f"Expected n as an integer >= {MIN_BOOTSTRAP} (got {n!r})")
+    if not threshold_px > 0:
+        raise ValueError(f"Expected threshold_px > 0 (got {threshold_px!r})")
+    n = int(n)
+    R0 = pose.R.double()
+    t0 = pose.t.double()
+    norm = float(t0.norm())
+    if not norm > 0:
+        raise ValueError("Expected a pose with a non-zero translation (got t = 0)")
+    t0 = t0 / norm
+    basis = tangent_basis(t0)
+    rng = np.random.default_rng(seed)
+    xs = []
+    for b in range(n):
+        idx = rng.integers(0, matches.num_points, matches.num_points)
+        scores = None if matches.point_scores is None else matches.point_scores[idx]
+        # points only: the solver reads neither lines nor images (and re-validating the
+        # images on every resample would cost more than the solve on small pairs)
+        sample = replace(matches, points0=matches.points0[idx], points1=matches.points1[idx],
+                         point_scores=scores, lines0=None, lines1=None, line_scores=None,
+                         image0=None, image1=None)
+        res = estimate_relative_pose(sample, method, threshold_px, seed=seed + b + 1)
+        if res.success:
+            xs.append(pose_to_tangent(res.pose, R0, t0, basis).numpy())
+    if len(xs) < MIN_BOOTSTRAP:
+        return None
+    X = np.asarray(xs, dtype=np.float64)
+    # second moment about the estimate (the chart origin), not about the resamples' mean: when
+    # the resamples agree on another solution, that offset is part of the uncertainty
+    return X.T @ X / len(X)

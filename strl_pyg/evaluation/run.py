@@ -1,0 +1,388 @@
+"""Evaluation of a Str-L Pose checkpoint against the classical baselines and the fused pose,
+on the same matches, with the paper's tables; also the ``strl-pose evaluate`` command line.
+
+Per pair (:class:`~strl_pyg.evaluation.pairs.EvalPair`: matches, ground-truth ``T_0to1``,
+subset, id) the methods of :class:`~strl_pyg.inference.PoseEstimator`, by the registry's
+names (:data:`METHODS`: ``regression``, ``opencv``, ``poselib``, ``fused``, ``geometric``,
+``guided``), estimate ``T_0to1`` (``X1 = R X0 + t``) with the estimator's support checks and
+statuses: a method's pose counts only with status ``"ok"``. The 0.2 names (``strl``,
+``fused_opencv``, ``fused_poselib``) still work, with a warning (:data:`LEGACY_METHOD_NAMES`).
+
+The job is in three modules: the pairs (:mod:`strl_pyg.evaluation.pairs`: generated, DeMoN,
+KITTI),
+running the methods over them (this module: :func:`evaluate_pairs`, and :func:`main`, the
+command line), and the report (:mod:`strl_pyg.evaluation.report`: errors, the tables, KITTI
+trajectories and drift, markdown / JSON / PNG files). Every public name of the other two is
+re-exported here.
+
+Command-line errors (a bad flag or value, a missing checkpoint or data folder, no pairs) are
+one ``error: Expected ... (got ...)`` line on stderr and exit code 2, as in every other
+``strl-pose`` command.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from strl_pyg.data.matches import PairMatches
+from strl_pyg.evaluation.pairs import (
+    EvalPair,
+    demon_eval_pairs,
+    kitti_eval_pairs,
+    synthetic_eval_pairs,
+)
+from strl_pyg.evaluation.report import (
+    AUC_THRESHOLDS,
+    SHORT_SEGMENT_LENGTHS,
+    EvalReport,
+    PairResult,
+    pair_result,
+)
+from strl_pyg.geometry import Pose
+from strl_pyg.inference.inputs import network_pose, prepare_matches
+from strl_pyg.metrics.two_view import (  # noqa: F401  (names this module had before the 0.2 split)
+    integrate_relative_poses,
+    kitti_odometry_errors,
+    kitti_odometry_summary,
+    pose_auc,
+    relative_pose_error,
+)
+from strl_pyg.synthetic.config import LINE_SCENE_KINDS, SCENE_KINDS
+from strl_pyg.utils.io import one_line
+
+__all__ = [
+    "METHODS",
+    "AUC_THRESHOLDS",
+    "SHORT_SEGMENT_LENGTHS",
+    "EvalPair",
+    "PairResult",
+    "pair_result",
+    "EvalReport",
+    "LEGACY_METHOD_NAMES",
+    "NETWORK_METHODS",
+    "available_methods",
+    "resolve_methods",
+    "prepare_matches",
+    "predict_pose",
+    "evaluate_pairs",
+    "synthetic_eval_pairs",
+    "demon_eval_pairs",
+    "kitti_eval_pairs",
+    "build_parser",
+    "main",
+]
+
+#: The methods ``evaluate`` scores: the registry of
+#: :class:`~strl_pyg.inference.PoseEstimator`, by the same names.
+METHODS = ("regression", "opencv", "poselib", "fused", "geometric", "guided")
+
+#: Names of the 0.2 runner -> registry names (accepted with a DeprecationWarning). The former
+#: ``fused_opencv`` / ``fused_poselib`` are the registry's ``fused``, which fuses with the
+#: first ``"ok"`` classical pose (PoseLib when installed).
+LEGACY_METHOD_NAMES = {"strl": "regression", "fused_poselib": "fused", "fused_opencv": "fused"}
+
+#: Methods that need a network.
+NETWORK_METHODS = ("regression", "fused", "geometric", "guided")
+
+
+def available_methods() -> tuple[str, ...]:
+    """:data:`METHODS` whose dependencies are installed (PoseLib's only when importable)."""
+    from strl_pyg.inference.estimator import METHODS as REGISTRY
+
+    return tuple(m for m in METHODS if REGISTRY[m].available())
+
+
+def resolve_methods(methods: Iterable[str] | None, model: Any) -> tuple[str, ...]:
+    """Registry names of ``methods`` (comma-separated items allowed; old names with a
+    :class:`DeprecationWarning`); ``None``: :func:`available_methods`, without the network
+    methods when ``model`` is ``None``."""
+    import warnings
+
+    if methods is None:
+        names = available_methods()
+        return names if model is not None else tuple(m for m in names
+                                                      if m not in NETWORK_METHODS)
+    if isinstance(methods, str):
+        methods = [methods]
+    out = []
+    for item in methods:
+        for name in str(item).split(","):
+            name = name.strip()
+            if name in LEGACY_METHOD_NAMES:
+                new = LEGACY_METHOD_NAMES[name]
+                warnings.warn(f"method '{name}' is now called '{new}' (the PoseEstimator "
+                              f"registry's name)", DeprecationWarning, stacklevel=3)
+                name = new
+            if name not in METHODS:
+                raise ValueError(f"Expected methods from {METHODS} (got {name!r})")
+            if name not in out:
+                out.append(name)
+    if not out:
+        raise ValueError(f"Expected methods from {METHODS} (got none)")
+    return tuple(out)
+
+
+# ----------------------------------------------------------------------------- model
+def predict_pose(model: torch.nn.Module, matches: PairMatches,
+                 resample: tuple[int, int] | None = (384, 192), seed: int = 0,
+                 device: str | torch.device = "cpu") -> Any:
+    """The model's ``PoseOutput`` (one pair): :func:`strl_pyg.inference.network_pose` with
+    this module's former defaults (``resample=(384, 192)``; ``"model"`` takes the counts the
+    checkpoint stores)."""
+    return network_pose(model, matches, seed, resample, device)
+
+
+# ----------------------------------------------------------------------------- evaluation
+def evaluate_pairs(
+    model: torch.nn.Module | None,
+    pairs: Iterable[EvalPair],
+    methods: Sequence[str] | None = None,
+    resample: Any = "model",
+    seed: int = 0,
+    threshold_px: float = 1.0,
+    device: str | torch.device = "cpu",
+    progress: bool = True,
+    meta: dict[str, Any] | None = None,
+) -> EvalReport:
+    """Runs the methods of :class:`~strl_pyg.inference.PoseEstimator` (the same registry, the
+    same names, the same support checks and statuses) on every pair and scores them.
+
+    Args:
+        model: a :class:`~strl_pyg.model.StrLPose` (``None``: classical methods only).
+        pairs: :class:`EvalPair` s.
+        methods: names from :data:`METHODS` (old names of :data:`LEGACY_METHOD_NAMES` are
+            accepted with a warning; default: :func:`available_methods`, without the network
+            methods when ``model`` is ``None``).
+        resample: the regression's input graph (``"model"``: the checkpoint's counts,
+            ``(points, lines)`` or ``None``), seeded by ``seed``.
+        seed: the estimator's seed (resampling and RANSAC): a pair's result does not depend
+            on the other pairs or their order.
+        threshold_px: inlier threshold of the classical estimators, pixels.
+        device: where the network runs.
+        progress: show a tqdm bar.
+        meta: extra metadata stored in the report.
+
+    A method's pose counts only with status ``"ok"``; any other status (``"failed"``,
+    ``"unreliable"``, ``"degenerate"``) is a failure of that method on that pair.
+
+    Returns:
+        :class:`EvalReport`.
+    """
+    from strl_pyg.inference.estimator import PoseEstimator
+
+    methods = resolve_methods(methods, model)
+    needs_model = any(m in NETWORK_METHODS for m in methods)
+    if needs_model and model is None:
+        raise ValueError(f"Expected a model for methods {list(methods)} (got None)")
+    if model is not None:
+        model = model.to(device).eval()
+    estimator = PoseEstimator(model, methods=list(methods), seed=seed, threshold_px=threshold_px,
+                              device=device if model is not None else None, bootstrap=0,
+                              resample=resample)
+    results: list[PairResult] = []
+    truth: dict[str, tuple[str, np.ndarray, tuple[int, int] | None]] = {}
+    for pair in tqdm(list(pairs), desc="evaluate", disable=not progress):
+        if not isinstance(pair, EvalPair):
+            raise TypeError(f"Expected EvalPair items (got {type(pair).__name__})")
+        if pair.pair_id in truth:
+            raise ValueError(f"Expected unique pair ids (got '{pair.pair_id}' twice)")
+        truth[pair.pair_id] = (pair.subset, pair.T_0to1, pair.frames)
+        est = estimator.estimate(pair.matches)
+        for name in methods:
+            r = est.methods[name]
+            ok = r.status == "ok"
+            pose = Pose.from_matrix(torch.as_tensor(r.T_0to1)) if ok else Pose.identity()
+            results.append(pair_result(pair, name, pose, r.time_ms, ok))
+    return EvalReport(results, methods, truth, dict(meta or {}))
+
+
+# ----------------------------------------------------------------------------- command line
+class _UsageError(ValueError):
+    """A bad evaluation command line; :func:`main` prints it as one line, exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """Reports a bad flag or value as one :class:`_UsageError` line, not a usage block."""
+
+    def error(self, message: str):
+        if not message.startswith("Expected"):
+            message = f"Expected valid arguments (got {message}); see '{self.prog} --help'"
+        raise _UsageError(one_line(message))
+
+
+def _number(kind: type, low: float, what: str, high: float = math.inf):
+    """An argparse ``type``: a finite ``kind`` in ``[low, high)`` or a one-line error."""
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            value = None
+        if value is None or not (math.isfinite(value) and low <= value < high):
+            raise argparse.ArgumentTypeError(f"Expected {what} (got {text!r})")
+        return value
+
+    return parse
+
+
+_POSITIVE_INT = _number(int, 1, "an integer >= 1")
+_NON_NEGATIVE_INT = _number(int, 0, "an integer >= 0")
+
+
+def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
+    """The flags of ``examples/evaluate.py`` and ``strl-pose evaluate``; a bad flag or value
+    raises a one-line ``ValueError`` ("Expected ... (got ...)") instead of exiting."""
+    p = _Parser(prog=prog, description=(
+        "Evaluates a Str-L Pose checkpoint against the classical baselines and the fused pose."),
+                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    from strl_pyg.training.checkpoints import default_checkpoint
+
+    p.add_argument("--checkpoint", default=str(default_checkpoint()),
+                   help="StrLPose checkpoint (StrLPose.save); default: the shipped weights")
+    p.add_argument("--dataset", choices=("synthetic", "demon", "kitti"), default="synthetic")
+    p.add_argument("--data-root", help="DeMoN DeepSfM root or KITTI odometry root")
+    p.add_argument("--sequences", nargs="+", default=["09", "10"], help="KITTI test sequences")
+    p.add_argument("--frame-gap", type=_POSITIVE_INT, default=1, help="KITTI pair (i, i + gap)")
+    p.add_argument("--split", default="test", help="DeMoN split folder")
+    p.add_argument("--limit", type=_POSITIVE_INT, default=None,
+                   help="real data: first N pairs only")
+    p.add_argument("--cache-dir", default="outputs/match_cache", help="front-end match cache")
+    p.add_argument("--workers", type=_NON_NEGATIVE_INT, default=1,
+                   help="front-end matching processes")
+    p.add_argument("--num-pairs", type=_POSITIVE_INT, default=30,
+                   help="synthetic: number of pairs")
+    p.add_argument("--seed", type=_NON_NEGATIVE_INT, default=2_000_000,
+                   help="synthetic: first held-out seed")
+    p.add_argument("--kinds", nargs="+", default=list(LINE_SCENE_KINDS), choices=SCENE_KINDS)
+    p.add_argument("--matches", choices=("frontend", "ground_truth"), default="frontend",
+                   help="synthetic: front-end matches on the rendered images (as on real "
+                        "data) or the generator's exact matches (the classical methods then "
+                        "score ~0 deg without --noise-px / --outlier-fraction)")
+    p.add_argument("--noise-px", type=_number(float, 0.0, "a finite number >= 0"), default=0.0,
+                   help="synthetic match noise")
+    p.add_argument("--outlier-fraction", type=_number(float, 0.0, "a fraction in [0, 1)", 1.0),
+                   default=0.0, help="synthetic outliers")
+    p.add_argument("--methods", nargs="+", default=None,
+                   help=f"names of PoseEstimator's registry, space- or comma-separated, from "
+                        f"{', '.join(METHODS)} (default: all available; PoseLib's only if "
+                        f"importable); the 0.2 names strl, fused_opencv, fused_poselib still "
+                        f"work, with a warning")
+    p.add_argument("--no-resample", action="store_true",
+                   help="feed all matches instead of resampling to 384 points / 192 lines")
+    p.add_argument("--resample-seed", type=_NON_NEGATIVE_INT, default=0)
+    p.add_argument("--threshold-px", type=_number(float, 1e-12, "a finite number > 0"),
+                   default=1.0, help="classical inlier threshold")
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--out", default=None, help="output folder (results.md, .json, PNGs)")
+    p.add_argument("--no-progress", action="store_true")
+    return p
+
+
+def _checked(args: argparse.Namespace) -> Path:
+    """Checks the paths, methods and device of parsed flags; returns the checkpoint path."""
+    ckpt = Path(args.checkpoint)
+    if not ckpt.is_file():
+        raise _UsageError(f"Expected a checkpoint file at '{ckpt}' (got none)")
+    if args.dataset != "synthetic":
+        if not args.data_root:
+            raise _UsageError(f"Expected --data-root for --dataset {args.dataset} (got none)")
+        if not Path(args.data_root).is_dir():
+            raise _UsageError(f"Expected a data folder at '{args.data_root}' (got none)")
+    if args.methods is not None:
+        try:
+            args.methods = list(resolve_methods(args.methods, True))
+        except ValueError as err:
+            raise _UsageError(one_line(err)) from None
+        missing = sorted(set(args.methods) - set(available_methods()))
+        if missing:
+            raise _UsageError(f"Expected available methods (got {missing}: is PoseLib "
+                              "installed?)")
+    try:
+        torch.device(args.device)
+    except RuntimeError:
+        raise _UsageError(f"Expected a torch device such as 'cpu' or 'cuda' for --device "
+                          f"(got {args.device!r})") from None
+    from strl_pyg.training.loop import check_device
+
+    try:  # before the checkpoint is mapped onto it (an absent device blamed the checkpoint)
+        check_device(args.device)
+    except ValueError as err:
+        raise _UsageError(one_line(err)) from None
+    if args.out:
+        from strl_pyg.utils.io import check_output_dir
+
+        try:
+            check_output_dir(args.out, "a folder for --out")  # before any work
+        except OSError as err:
+            raise _UsageError(one_line(err)) from None
+    return ckpt
+
+
+def _run(argv: list[str] | None, prog: str | None) -> int:
+    args = build_parser(prog).parse_args(argv)
+    ckpt = _checked(args)
+    from strl_pyg.model.strl_pose import StrLPose
+
+    try:
+        model = StrLPose.load(ckpt, map_location=args.device)
+    except (OSError, ValueError, TypeError, KeyError, RuntimeError) as err:
+        text = one_line(err)
+        raise _UsageError(text if text.startswith("Expected") else (
+            f"Expected a StrLPose checkpoint at '{ckpt}' (got {text})")) from None
+    progress = not args.no_progress
+    try:
+        if args.dataset == "synthetic":
+            pairs = synthetic_eval_pairs(
+                args.num_pairs, args.seed, args.kinds, args.matches,
+                scene={"noise_px": args.noise_px, "outlier_fraction": args.outlier_fraction},
+                progress=progress)
+        elif args.dataset == "demon":
+            pairs = demon_eval_pairs(args.data_root, args.cache_dir, split=args.split,
+                                     limit=args.limit, num_workers=args.workers,
+                                     progress=progress, on_missing="skip")
+        else:
+            pairs = kitti_eval_pairs(args.data_root, args.cache_dir, args.sequences,
+                                     args.frame_gap, limit=args.limit, num_workers=args.workers,
+                                     progress=progress, on_missing="skip")
+    except (FileNotFoundError, ValueError) as err:
+        raise _UsageError(one_line(err)) from None
+    if not pairs:
+        raise _UsageError(f"Expected pairs to evaluate in {args.dataset} (got none)")
+    meta = {"checkpoint": str(ckpt), "dataset": args.dataset, "pairs": len(pairs),
+            "resample": "none" if args.no_resample else f"checkpoint's counts, seed "
+                                                              f"{args.resample_seed}"}
+    if args.dataset == "synthetic":
+        meta.update(matches=args.matches, noise_px=args.noise_px,
+                    outliers=args.outlier_fraction, seed=args.seed)
+    report = evaluate_pairs(
+        model, pairs, args.methods, None if args.no_resample else "model",
+        seed=args.resample_seed, threshold_px=args.threshold_px, device=args.device,
+        progress=progress, meta=meta)
+    print(report.to_markdown())
+    if args.out:
+        for path in report.save(args.out):
+            print(f"wrote {path}")
+    return 0
+
+
+def main(argv: list[str] | None = None, prog: str | None = None) -> int:
+    """Runs an evaluation from command-line flags (:func:`build_parser`); returns the exit
+    code: 0, or 2 after one ``error: Expected ... (got ...)`` line on stderr for a bad flag or
+    value, a missing checkpoint, data folder or pairs, or an unwritable ``--out``."""
+    try:
+        return _run(argv, prog)
+    except _UsageError as err:
+        print(f"error: {one_line(err)}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

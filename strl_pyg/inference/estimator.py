@@ -1,0 +1,442 @@
+"""Inference: one call from a pair's matches (or two images and K) to a pose with a status.
+
+:class:`PoseEstimator` runs every registered method (:data:`METHODS`, in registration order)
+on the same :class:`~strl_pyg.data.PairMatches` and picks the recommended pose: the first
+method of :data:`RECOMMENDED_ORDER` whose status is ``"ok"`` (PoseLib when installed, else
+OpenCV, else the network's regression). All poses are ``T_0to1`` (``X1 = R X0 + t``).
+
+Statuses (:data:`STATUSES`, :mod:`strl_pyg.inference.record`): ``"ok"`` (a pose),
+``"unreliable"`` (a pose was computed but must not be used, so none is given: the intrinsics
+fail the input checks (:func:`intrinsics_problems`: principal point outside the image, focal
+length out of range, a normalised K with pixel points, one K for two image sizes), or more
+than 10 % of the matches that fit its epipolar geometry lie behind a camera
+(:data:`CHEIRALITY_MIN`); the reasons are in its warnings, the computed pose in
+``info["unreliable_T_0to1"]``), ``"degenerate"`` (the input does not determine the pose: fewer
+point matches than the solvers need (:data:`MIN_POINTS`), or zero parallax (identical
+images): no pose is given), ``"failed"`` (the method found no pose, e.g. RANSAC returned no
+model, or the matches do not support it; never replaced by an identity pose). A pose exists
+only with ``"ok"``.
+
+The work is split by concern, and every name below is importable from here:
+
+* :mod:`strl_pyg.inference.record`: the records (:class:`MethodResult`, :class:`PoseEstimate`,
+  ``to_dict``) and the covariance / ``sigma`` convention.
+* :mod:`strl_pyg.inference.inputs`: the network's input graph and forward (:func:`prepare_graph`,
+  :func:`forward_pose`) and the input checks (:func:`input_warnings`, :func:`zero_parallax`).
+* :mod:`strl_pyg.inference.methods`: the methods themselves (regression, classical, fused,
+  geometric, guided) and the :class:`MethodContext` they see.
+* this module: the registry (:data:`METHODS`, :func:`register_method`), the recommended
+  order and :class:`PoseEstimator`.
+
+Adding a method is one call: ``register_method("name", fn)`` with
+``fn(matches, context) -> MethodResult``; ``context.results`` holds the methods run before it.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+import torch
+
+from strl_pyg.data.matches import PairMatches
+from strl_pyg.estimation.classical import (
+    MIN_POINTS,
+    estimate_relative_pose,  # noqa: F401  (0.1.x name here)
+)
+from strl_pyg.estimation.uncertainty import BOOTSTRAPPED
+from strl_pyg.inference.inputs import (
+    FOCAL_RANGE,
+    NORMALISED_K_MAX,  # noqa: F401  (importable from here like the module's other names)
+    ZERO_PARALLAX_FRACTION,
+    ZERO_PARALLAX_PX,
+    forward_pose,
+    input_warnings,
+    intrinsics_problems,
+    prepare_graph,
+    prepare_matches,
+    zero_parallax,
+)
+from strl_pyg.inference.methods import (
+    MethodContext,
+    MethodFn,
+    _calibration,
+    _classical,
+    _fused,
+    _geometric,
+    _guided,
+    _regression,
+    have_poselib,
+)
+from strl_pyg.inference.record import STATUSES, MethodResult, PoseEstimate
+from strl_pyg.inference.support import (
+    CHEIRALITY_MIN,
+    MIN_INLIER_RATIO,
+    MIN_SUPPORT_INLIERS,
+    SUPPORT_CHECKED,
+    check_support,
+)
+
+__all__ = [
+    "STATUSES", "RECOMMENDED_ORDER", "recommended_order", "MIN_POINTS", "ZERO_PARALLAX_PX",
+    "ZERO_PARALLAX_FRACTION",
+    "FOCAL_RANGE", "METHODS", "MethodSpec", "MethodResult", "MethodContext", "PoseEstimate",
+    "PoseEstimator", "register_method", "prepare_matches", "prepare_graph", "forward_pose",
+    "input_warnings", "zero_parallax",
+]
+
+#: Which method fills the recommended pose: the first ``"ok"`` one (unavailable ones skipped).
+RECOMMENDED_ORDER: tuple[str, ...] = ("poselib", "opencv", "regression")
+
+
+# ----------------------------------------------------------------------------- registry
+@dataclass(frozen=True)
+class MethodSpec:
+    """A registered method: ``fn``, the point matches it needs (fewer: ``"degenerate"``),
+    whether it needs ``K0``/``K1`` (missing: ``"failed"``) and whether it is installed."""
+
+    fn: MethodFn
+    min_points: int = MIN_POINTS
+    needs_intrinsics: bool = True
+    available: Callable[[], bool] = lambda: True
+
+
+#: ``name -> MethodSpec``, run in this order.
+METHODS: dict[str, MethodSpec] = {}
+
+
+def register_method(name: str, fn: MethodFn, *, min_points: int = MIN_POINTS,
+                    needs_intrinsics: bool = True, available: Callable[[], bool] | None = None,
+                    replace_existing: bool = False) -> None:
+    """Adds a method to :data:`METHODS` (run after the ones registered before it)."""
+    if name in METHODS and not replace_existing:
+        raise ValueError(f"Expected a new method name (got {name!r}, already registered)")
+    METHODS[name] = MethodSpec(fn, min_points, needs_intrinsics, available or (lambda: True))
+
+
+def recommended_order(model: torch.nn.Module | None) -> tuple[str, ...]:
+    """The order in which methods fill the recommended pose: the checkpoint's
+    ``metadata["recommended_order"]`` (measured on held-out data when the checkpoint was
+    calibrated, see ``benchmarks/bench_pose.py --calibrate``), else :data:`RECOMMENDED_ORDER`.
+    Methods that are not installed are skipped when the estimate is made."""
+    order = _stored_order(model) or RECOMMENDED_ORDER
+    if "poselib" in order and not METHODS["poselib"].available():
+        # measured with PoseLib, which fused and guided also start from: without it those are
+        # other, unmeasured methods, so OpenCV (the remaining classical default) takes its place
+        i = order.index("poselib")
+        order = tuple(m for m in order[:i] if m != "opencv") + ("opencv",) + tuple(
+            m for m in order[i + 1:] if m != "opencv")
+    return order
+
+
+#: Why every pose is ``"unreliable"`` when :func:`intrinsics_problems` finds any (followed by
+#: them in the method records; the recommended pose lists them once, as input warnings).
+BAD_INTRINSICS = "computed with intrinsics that fail the input checks"
+
+#: Added to the recommended pose's warnings when the order was measured with PoseLib and it is
+#: not installed here.
+POSELIB_MISSING = ("PoseLib is not installed: the recommended order was measured with it, so "
+                   "OpenCV takes its place (pip install 'strl-pyg[poselib]' for the measured "
+                   "default)")
+
+
+def _stored_order(model: torch.nn.Module | None) -> tuple[str, ...]:
+    """The checkpoint's measured ``metadata["recommended_order"]`` (``()`` when absent)."""
+    md = getattr(model, "metadata", None) if model is not None else None
+    order = md.get("recommended_order") if isinstance(md, dict) else None
+    ok = isinstance(order, (list, tuple)) and all(isinstance(m, str) for m in order)
+    return tuple(order) if ok else ()
+
+
+def _measured_with_missing_poselib(model: torch.nn.Module | None) -> bool:
+    return "poselib" in _stored_order(model) and not METHODS["poselib"].available()
+
+
+register_method("regression", _regression, needs_intrinsics=False)
+register_method("opencv", _classical("opencv"))
+register_method("poselib", _classical("poselib"), available=have_poselib)
+register_method("fused", _fused)
+register_method("geometric", _geometric)
+register_method("guided", _guided)
+
+
+# ----------------------------------------------------------------------------- estimator
+def _unique(items: list[str]) -> list[str]:
+    return list(dict.fromkeys(items))
+
+
+class PoseEstimator:
+    """Pose of one image pair by every registered method, with a recommended one.
+
+    Args:
+        model: a :class:`~strl_pyg.model.strl_pose.StrLPose` (any dtype or device), or a checkpoint
+            path; ``None``: the shipped model,
+            :meth:`StrLPose.from_pretrained() <strl_pyg.model.strl_pose.StrLPose.from_pretrained>`,
+            loaded on the first estimate (its metadata calibrates every method and gives the
+            recommended order, also when only classical methods run).
+        methods: names from :data:`METHODS` to run (default: all installed ones); one name
+            as a ``str`` is one method.
+        seed: resampling and RANSAC seed (same input, same result).
+        threshold_px: inlier threshold of the classical solvers, pixels.
+        device: where the network runs: the model is moved there (``model.to(device)``,
+            in place); default: the model's device. A device this machine does not have
+            (``"cuda"`` without CUDA) is a ``ValueError`` here, not a failure of every network
+            method later.
+        raise_errors: re-raise a method's exception instead of recording ``"failed"``.
+        bootstrap: resamples of the point matches behind the ``poselib`` / ``opencv``
+            covariances (first order + bootstrap, :mod:`strl_pyg.estimation.uncertainty`); ``0``:
+            first order only. Their calibration scales apply only when the checkpoint's
+            ``metadata["calibration_bootstrap"]`` (0 when absent) equals it; otherwise the
+            record keeps the uncalibrated covariance and says so in ``warnings``.
+        min_inlier_ratio, min_inliers: a solver's pose (:data:`SUPPORT_CHECKED`) is
+            ``"failed"`` when the matches do not support it: fewer of the point matches lie
+            within :data:`SUPPORT_BAND` x ``threshold_px`` of it (Sampson distance; the band
+            keeps correct poses of 2 px matches) than this fraction of them, or than
+            ``min(min_inliers, number of matches)`` (with fewer matches than that, every match
+            must agree). Random matches give RANSAC a few percent (11 of 300), and on a few
+            dozen its 5-point sample plus a handful (9 of 32 on two unrelated images). When no
+            checked solver is left ``"ok"`` for that reason, the regression is not used as the
+            recommended pose either. Defaults 0.1 and 12; ``0`` switches either off. Only
+            matches in front of both cameras count (as in the solvers' own counts).
+        min_in_front: a checked pose is ``"unreliable"`` when fewer than this fraction of the
+            point matches within the support band lie in front of both cameras (its sign or
+            decomposition is wrong; default :data:`CHEIRALITY_MIN`, ``0`` = off). Every pose
+            is ``"unreliable"`` when the intrinsics fail :func:`intrinsics_problems`.
+        resample: the regression's input graph: ``"model"`` (default: the point / line counts
+            the checkpoint was trained with, seeded by ``seed``), ``(points, lines)`` or
+            ``None`` (every match).
+    """
+
+    def __init__(self, model: Any = None, methods: Any = None,
+                 seed: int = 0, threshold_px: float = 1.0, device: Any = None,
+                 raise_errors: bool = False, bootstrap: int = 8,
+                 min_inlier_ratio: float = MIN_INLIER_RATIO,
+                 min_inliers: int = MIN_SUPPORT_INLIERS,
+                 min_in_front: float = CHEIRALITY_MIN, resample: Any = "model") -> None:
+        if isinstance(model, (str, os.PathLike)):  # a checkpoint path, as --checkpoint takes
+            from strl_pyg.model.strl_pose import StrLPose
+
+            model = StrLPose.load(model)
+        elif model is not None and not isinstance(model, torch.nn.Module):
+            raise TypeError(f"Expected a StrLPose, a checkpoint path or None (got "
+                            f"{type(model).__name__})")
+        if not (isinstance(min_inlier_ratio, (int, float)) and 0 <= min_inlier_ratio < 1):
+            raise ValueError(f"Expected min_inlier_ratio in [0, 1) (got {min_inlier_ratio!r})")
+        if isinstance(min_inliers, bool) or not isinstance(min_inliers, int) or min_inliers < 0:
+            raise ValueError(f"Expected min_inliers as an integer >= 0 (got {min_inliers!r})")
+        if not (isinstance(min_in_front, (int, float)) and not isinstance(min_in_front, bool)
+                and 0 <= min_in_front <= 1):
+            raise ValueError(f"Expected min_in_front in [0, 1] (got {min_in_front!r})")
+        self.min_in_front = float(min_in_front)
+        self.min_inlier_ratio = float(min_inlier_ratio)
+        self.min_inliers = min_inliers
+        if isinstance(methods, str):  # one method by name (tuple("poselib") spelt letters)
+            methods = (methods,)
+        names = tuple(methods) if methods is not None else tuple(
+            n for n, s in METHODS.items() if s.available())
+        unknown = [n for n in names if n not in METHODS]
+        if unknown or not names:
+            raise ValueError(f"Expected methods from {tuple(METHODS)} (got {list(names)})")
+        missing = [n for n in names if not METHODS[n].available()]
+        if missing:
+            raise ValueError(f"Expected installed methods (got {missing}: not importable here)")
+        if not threshold_px > 0:
+            raise ValueError(f"Expected threshold_px > 0 (got {threshold_px!r})")
+        if isinstance(bootstrap, bool) or not isinstance(bootstrap, int) or not (
+                bootstrap == 0 or bootstrap >= 3):
+            raise ValueError(f"Expected bootstrap = 0 (off) or an integer >= 3 (got "
+                             f"{bootstrap!r})")
+        self.method_names = names
+        self.bootstrap = bootstrap
+        self._model = model
+        self.seed, self.threshold_px = int(seed), float(threshold_px)
+        if not (isinstance(resample, str) and resample == "model") and resample is not None and (
+                len(resample) != 2 or min(resample) < 0):
+            raise ValueError(f"Expected resample 'model', None or (points, lines) >= 0 "
+                             f"(got {resample!r})")
+        self.resample = resample
+        self.device = _check_device(device)
+        if self.device is not None and self._model is not None:
+            self._model = self._model.to(self.device)
+        self.raise_errors = raise_errors
+
+    @property
+    def model(self) -> torch.nn.Module:
+        if self._model is None:
+            from strl_pyg.model.strl_pose import StrLPose
+
+            self._model = StrLPose.from_pretrained()
+            if self.device is not None:
+                self._model = self._model.to(self.device)
+        return self._model
+
+    def estimate(self, matches: PairMatches,
+                 known: dict[str, MethodResult] | None = None) -> PoseEstimate:
+        """Runs the methods on ``matches`` (pixels; ``K0``/``K1`` for the classical ones).
+
+        ``known``: results of methods already run on these same matches (e.g. by an earlier
+        call, :attr:`PoseEstimate.methods`); they are taken as they are, not run again."""
+        if not isinstance(matches, PairMatches):
+            raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")
+        warnings = input_warnings(matches.image_size0, matches.image_size1, matches.K0,
+                                  matches.K1)
+        n, degenerate = matches.num_points, None
+        if zero_parallax(matches):
+            degenerate = (f"zero parallax: most of the {n} point matches moved less than "
+                          f"{ZERO_PARALLAX_PX} px (identical or near-identical images): the "
+                          "translation is undefined")
+            warnings.append(degenerate)
+        ctx = MethodContext(self.seed, self.threshold_px, self.bootstrap, self.device,
+                            self.resample, load_model=lambda: self.model)
+        # the model (the shipped one when None was given) calibrates the classical methods
+        # too, also when no network method runs (the default predict path: PoseLib only);
+        # before, PoseEstimator(methods=["poselib"]) gave uncalibrated sigmas without a word
+        model = self.model
+        calibration = _calibration(model)
+        md = getattr(model, "metadata", None) if model is not None else None
+        fitted_boot = int(md.get("calibration_bootstrap", 0)) if isinstance(md, dict) else 0
+        for name in self.method_names:
+            spec = METHODS[name]
+            if known and name in known:
+                ctx.results[name] = known[name]
+                continue
+            if degenerate is not None:
+                res = MethodResult(name, "degenerate", warnings=[degenerate])
+            elif n < spec.min_points:
+                res = MethodResult(name, "degenerate", warnings=[
+                    f"too few point matches for {name}: {n} (needs {spec.min_points})"])
+            elif spec.needs_intrinsics and not matches.has_intrinsics:
+                res = MethodResult(name, "failed",
+                                   warnings=[f"{name} needs intrinsics K0, K1 (got none)"])
+            else:
+                try:
+                    res = spec.fn(matches, ctx)
+                except Exception as err:
+                    if self.raise_errors:
+                        raise
+                    first = str(err).splitlines()[0] if str(err) else ""
+                    res = MethodResult(name, "failed", info={"raised": type(err).__name__},
+                                       warnings=[f"{name} raised {type(err).__name__}: {first}"])
+            res = self._support(res, matches)
+            scale = calibration.get(name)
+            if (scale is not None and name in BOOTSTRAPPED and res.covariance is not None
+                    and fitted_boot != self.bootstrap):
+                res.warnings.append(
+                    f"{name}: covariance not calibrated (the checkpoint's scale was fitted with "
+                    f"bootstrap={fitted_boot}, this estimate used bootstrap={self.bootstrap})")
+                scale = None
+            if (scale is not None and name in ("guided", "fused") and res.covariance is not None
+                    and _measured_with_missing_poselib(model)):
+                res.warnings.append(
+                    f"{name}: covariance not calibrated (the checkpoint's scale was fitted with "
+                    "PoseLib as its classical base, which is not installed here)")
+                scale = None
+            if scale is not None and res.covariance is not None:
+                res.covariance = res.covariance * scale
+                res.info["calibration_scale"] = scale
+            ctx.results[name] = res
+        problems = intrinsics_problems(matches.image_size0, matches.image_size1, matches.K0,
+                                       matches.K1)
+        if problems:  # every method reads K (the network normalises its coordinates by it)
+            why = f"{BAD_INTRINSICS}: " + "; ".join(problems)
+            for name, res in ctx.results.items():
+                if why not in res.warnings:  # a known result may carry it already
+                    ctx.results[name] = res.unreliable([why])
+        return self._recommend(ctx.results, warnings, matches)
+
+    def estimate_images(self, image0: np.ndarray, image1: np.ndarray, K0: Any = None,
+                        K1: Any = None, frontend_config: Any = None) -> PoseEstimate:
+        """Matches two images with :func:`~strl_pyg.frontend.match_images`, then
+        :meth:`estimate`. ``K1`` defaults to ``K0`` (one camera). No matches at all gives
+        status ``"degenerate"``."""
+        from strl_pyg.frontend import NoMatchesError, match_images
+
+        if K0 is None and K1 is not None:
+            raise ValueError("Expected K0 with K1 (got K1 only)")
+        K1 = K0 if K1 is None else K1
+        try:
+            matches = match_images(image0, image1, K0=K0, K1=K1, config=frontend_config)
+        except NoMatchesError as err:
+            warnings = input_warnings(np.shape(image0)[:2], np.shape(image1)[:2], K0, K1)
+            why = f"no matches: {str(err).splitlines()[0]}"
+            methods = {m: MethodResult(m, "degenerate", warnings=[why])
+                       for m in self.method_names}
+            return PoseEstimate(MethodResult(None, "degenerate", warnings=warnings + [why]),
+                                methods, 0, 0, None)
+        return self.estimate(matches)
+
+    def _support(self, res: MethodResult, matches: PairMatches) -> MethodResult:
+        return check_support(res, matches, self.threshold_px, self.min_inlier_ratio,
+                             self.min_inliers, self.min_in_front)
+
+    def _recommend(self, results: dict[str, MethodResult], warnings: list[str],
+                   matches: PairMatches) -> PoseEstimate:
+        """The first ``"ok"`` method of the recommended order; without one, the first
+        ``"unreliable"`` one (no pose to use either, but the reason and the computed pose);
+        else ``"degenerate"`` or ``"failed"``.
+        The pose's warnings say why the earlier methods were passed over and which methods
+        could not run at all (an exception: e.g. the network on a device it cannot use)."""
+        chosen = recommended_order(self._model)
+        order = [m for m in chosen if m in results]
+        notes = [POSELIB_MISSING] if _measured_with_missing_poselib(self._model) else []
+        raised = [m for m, r in results.items() if r.info.get("raised")]
+        notes += [f"{m} could not run: {'; '.join(results[m].warnings)}" for m in raised]
+        # the regression stands in only while some solver's pose is supported or none was
+        # refused for lack of support
+        unsupported = any(r.info.get("unsupported") for r in results.values()) and not any(
+            r.status == "ok" for m, r in results.items() if m in SUPPORT_CHECKED)
+        fallback = None  # (record, notes so far) of the first "unreliable" pose
+        for m in order:
+            r = results[m]
+            if r.status in ("ok", "unreliable") and m == "regression" and unsupported:
+                notes.append("regression not used: the matches support no solver's pose")
+                continue
+            if r.status == "ok":
+                pose = replace(r, warnings=_unique(warnings + notes + r.warnings))
+                return PoseEstimate(pose, results, matches.num_points, matches.num_lines,
+                                    matches)
+            if r.status == "unreliable" and fallback is None:
+                fallback = (r, list(notes))
+            reasons = [w for w in r.warnings if w not in warnings]
+            if reasons and m not in raised:
+                notes.append(f"{m} {r.status}: {'; '.join(reasons)}")
+        if fallback is not None:
+            r, before = fallback
+            own = [f"{BAD_INTRINSICS} (the warnings on K above)"
+                   if w.startswith(f"{BAD_INTRINSICS}: ") else w for w in r.warnings]
+            pose = replace(r, warnings=_unique(warnings + before + own))
+            return PoseEstimate(pose, results, matches.num_points, matches.num_lines, matches)
+        if not order:
+            notes.append(f"none of the recommended methods {chosen} was run")
+        status = "degenerate" if any(results[m].status == "degenerate" for m in order) \
+            else "failed"
+        pose = MethodResult(None, status, warnings=_unique(warnings + notes))
+        return PoseEstimate(pose, results, matches.num_points, matches.num_lines, matches)
+
+
+def _check_device(device: Any) -> torch.device | None:
+    """``device`` as a ``torch.device`` (``None`` stays ``None``); ``ValueError`` for a name
+    torch does not know or a device this machine does not have."""
+    if device is None:
+        return None
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError):
+        raise ValueError(f"Expected a torch device such as 'cpu' or 'cuda' (got {device!r})"
+                         ) from None
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            raise ValueError(f"Expected a device this machine has (got {device!r}: CUDA is not "
+                             "available here); use device='cpu', or None for the model's own")
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise ValueError(f"Expected a CUDA device index below {torch.cuda.device_count()} "
+                             f"(got {device!r})")
+    elif dev.type == "mps" and not torch.backends.mps.is_available():
+        raise ValueError(f"Expected a device this machine has (got {device!r}: MPS is not "
+                         "available here); use device='cpu', or None for the model's own")
+    elif dev.type == "meta":
+        raise ValueError(f"Expected a device that holds data (got {device!r})")
+    return dev

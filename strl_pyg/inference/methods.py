@@ -1,0 +1,298 @@
+"""The pose methods :class:`~strl_pyg.inference.PoseEstimator` runs, one function each, and
+the context they share; :mod:`strl_pyg.inference.estimator` registers them in :data:`METHODS
+<strl_pyg.inference.estimator.METHODS>`, in this order:
+
+* ``regression``: the network's pose head (resampled graph, as in training).
+* ``opencv``, ``poselib``: the classical essential-matrix solvers
+  (:mod:`strl_pyg.estimation.classical`).
+* ``fused`` (:func:`_fused`): the network and the first ``"ok"`` classical pose combined in
+  information form (:func:`~strl_pyg.estimation.fusion.fuse_poses`).
+* ``geometric``: the weighted eight-point solve of the geometric head, refined.
+* ``guided``: the classical solver guided by the geometric head's inlier weights
+  (:func:`~strl_pyg.estimation.guided.guided_estimate`).
+
+A method is ``fn(matches, context) -> MethodResult``; ``context.results`` holds the methods
+run before it. Covariances (:mod:`strl_pyg.inference.record`): the network's from its predicted
+log-variances, the classical ones from the Sampson residuals of their inliers (first order:
+optimistic for RANSAC estimates), the fused one from the information-form fusion.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+
+from strl_pyg.data.matches import PairMatches
+from strl_pyg.estimation.classical import estimate_relative_pose, have_poselib
+from strl_pyg.estimation.uncertainty import bootstrap_covariance
+from strl_pyg.inference.inputs import network_pose
+from strl_pyg.inference.record import MethodResult
+
+__all__ = ["MethodContext", "MethodFn"]
+
+
+# ----------------------------------------------------------------------------- context
+@dataclass
+class MethodContext:
+    """What a method sees besides the matches: the settings of the run (seed, classical
+    inlier threshold, bootstrap count), the model (loaded on first use by ``load_model``),
+    the results of the methods run before it, and shared work (e.g. a forward pass)."""
+
+    seed: int = 0
+    threshold_px: float = 1.0
+    bootstrap: int = 8
+    device: Any = None  # where the network runs (None: the model's device)
+    resample: Any = "model"  # the regression's input resampling (prepare_graph)
+    load_model: Callable[[], torch.nn.Module] | None = field(default=None, repr=False)
+    results: dict[str, MethodResult] = field(default_factory=dict)
+    cache: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def model(self) -> torch.nn.Module:
+        if "model" not in self.cache:
+            if self.load_model is None:
+                raise ValueError("Expected a model for a network method (got none)")
+            self.cache["model"] = self.load_model()
+        return self.cache["model"]
+
+
+MethodFn = Callable[[PairMatches, MethodContext], MethodResult]
+
+
+# ----------------------------------------------------------------------------- methods
+def _regression(matches: PairMatches, ctx: MethodContext) -> MethodResult:
+    from strl_pyg.estimation.fusion import network_covariance, tangent_basis
+    from strl_pyg.geometry import Pose
+
+    model = ctx.model
+    start = time.perf_counter()
+    out = network_pose(model, matches, ctx.seed, ctx.resample, ctx.device)
+    ms = (time.perf_counter() - start) * 1e3
+    q, t, lv = (x[0].detach().cpu().double() for x in (out.quaternion, out.translation,
+                                                       out.log_var))
+    if not all(bool(torch.isfinite(x).all()) for x in (q, t, lv)) or float(t.norm()) < 1e-12:
+        return MethodResult("regression", "failed", time_ms=ms, raw=out,
+                            warnings=["the network returned a non-finite or zero pose"])
+    cov = network_covariance(q, t, lv, tangent_basis(t)).numpy()
+    info = {"quaternion": q, "translation": t, "log_var": lv,
+            "sigma_components": torch.exp(0.5 * lv),
+            "translation_kind": model.config.translation}
+    return MethodResult("regression", "ok", Pose.from_quaternion(q, t).matrix().numpy(), cov,
+                        time_ms=ms, info=info, raw=out)
+
+
+def _classical(name: str) -> MethodFn:
+    def fn(matches: PairMatches, ctx: MethodContext) -> MethodResult:
+        from strl_pyg.estimation.fusion import classical_covariance
+
+        thr = ctx.threshold_px
+        res = estimate_relative_pose(matches, name, thr, seed=ctx.seed)
+        if not res.success:
+            return MethodResult(name, "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
+                                warnings=[f"{name} found no pose (no essential matrix with "
+                                          "points in front of both cameras)"])
+        warnings, cov, info = [], None, dict(res.info)
+        try:
+            cov = classical_covariance(res.pose, matches, res.inliers, threshold_px=thr)[1]
+            cov = cov.numpy()
+        except ValueError as err:
+            warnings.append(f"{name}: no covariance ({err})")
+        rec = MethodResult(name, "ok", res.pose.matrix().numpy(), cov, warnings, res.time_ms,
+                           res.num_inliers, info=info, raw=res)
+        if cov is not None and ctx.bootstrap:
+            # first order (noise around a right solution) + bootstrap (instability of the
+            # solution itself), see strl_pyg.estimation.uncertainty
+            start = time.perf_counter()
+            boot = bootstrap_covariance(matches, res.pose, name, ctx.bootstrap, thr,
+                                        ctx.seed)
+            rec.time_ms += (time.perf_counter() - start) * 1e3
+            ctx.cache[f"bootstrap_{name}"] = boot  # guided and fused reuse it
+        else:
+            boot = None
+        return _add_bootstrap(rec, boot, ctx.bootstrap, "first-order")
+
+    return fn
+
+
+def _full_forward(matches: PairMatches, ctx: MethodContext):
+    """The network on every match (no resampling: the geometric head weighs each match),
+    computed once per pair and shared by ``geometric`` and ``guided``."""
+    if "full_forward" not in ctx.cache:
+        model = ctx.model
+        start = time.perf_counter()
+        out = network_pose(model, matches, ctx.seed, None, ctx.device)
+        ctx.cache["full_forward"] = (out, (time.perf_counter() - start) * 1e3)
+    return ctx.cache["full_forward"]
+
+
+def _no_head(name: str, ctx: MethodContext) -> MethodResult | None:
+    if not getattr(ctx.model.config, "geometric", False):
+        return MethodResult(name, "failed", warnings=[
+            f"{name} needs a model with the geometric head (config.geometric=True); this "
+            "checkpoint has only the regression head"])
+    return None
+
+
+def _with_covariance(name: str, pose_T: np.ndarray, matches: PairMatches, thr: float,
+                     **kw: Any) -> MethodResult:
+    from strl_pyg.estimation.classical import normalised_matches
+    from strl_pyg.estimation.fusion import classical_covariance
+    from strl_pyg.geometry import Pose, pose_sampson
+
+    pose = Pose.from_matrix(torch.as_tensor(pose_T, dtype=torch.float64))
+    x0, x1, focal = normalised_matches(matches)
+    inl = (pose_sampson(pose.R, pose.t, x0, x1).abs() < thr / focal).numpy()
+    warnings = list(kw.pop("warnings", []))
+    cov = None
+    try:
+        cov = classical_covariance(pose, matches, inl, threshold_px=thr)[1].numpy()
+    except ValueError as err:
+        warnings.append(f"{name}: no covariance ({err})")
+    return MethodResult(name, "ok", pose_T, cov, warnings, num_inliers=int(inl.sum()), **kw)
+
+
+def _geometric(matches: PairMatches, ctx: MethodContext) -> MethodResult:
+    from strl_pyg.estimation.classical import normalised_matches
+    from strl_pyg.geometry import Pose
+    from strl_pyg.geometry.essential import DEGENERATE, refine_pose
+
+    bad = _no_head("geometric", ctx)
+    if bad is not None:
+        return bad
+    out, ms = _full_forward(matches, ctx)
+    geo = out.geometric
+    status = int(geo.status[0])
+    if status != 0:
+        why = "degenerate weighted solve (too few effective matches or rank-deficient)" \
+            if status == DEGENERATE else "no intrinsics: the weighted solve needs K0, K1"
+        return MethodResult("geometric", "degenerate" if status == DEGENERATE else "failed",
+                            time_ms=ms, warnings=[f"geometric: {why}"], raw=out)
+    start = time.perf_counter()
+    w = torch.sigmoid(geo.point_logits.double().cpu())
+    x0, x1, focal = normalised_matches(matches)
+    R, t = refine_pose(geo.R[:1].cpu(), geo.t[:1].cpu(), x0[None], x1[None], w[None],
+                       iterations=10, tau=ctx.threshold_px / focal)
+    T = Pose(R[0], t[0]).matrix().numpy()
+    ms += (time.perf_counter() - start) * 1e3
+    return _with_covariance("geometric", T, matches, ctx.threshold_px, time_ms=ms,
+                            info={"mean_weight": float(w.mean())}, raw=out)
+
+
+def _guided(matches: PairMatches, ctx: MethodContext) -> MethodResult:
+    from strl_pyg.estimation.guided import guided_estimate
+
+    bad = _no_head("guided", ctx)
+    if bad is not None:
+        return bad
+    base = "poselib" if have_poselib() else "opencv"
+    out, ms = _full_forward(matches, ctx)
+    w = torch.sigmoid(out.geometric.point_logits.double().cpu()).numpy()
+    prior = ctx.results.get(base)
+    classical = prior.raw if prior is not None and prior.status == "ok" else None
+    res = guided_estimate(matches, w, base, ctx.threshold_px, seed=ctx.seed,
+                          classical=classical)
+    ms += res.time_ms
+    if not res.success:
+        return MethodResult("guided", "failed", time_ms=ms, raw=res,
+                            warnings=[f"guided {base}: no hypothesis found"])
+    info = {"base": base, "candidate": res.info["candidate"], "refined": res.info["refined"]}
+    rec = _with_covariance("guided", res.pose.matrix().numpy(), matches,
+                           ctx.threshold_px, time_ms=ms, info=info, raw=res)
+    boot, n_boot = None, ctx.bootstrap
+    if rec.covariance is not None and n_boot:
+        # the same bootstrap as the classical records, of the solve guided kept: on all the
+        # matches (then it is the base method's own, computed once) or on the network's top
+        # matches; the refinement, when kept, is not re-run per resample
+        start = time.perf_counter()
+        subset = res.info.get("point_index")
+        key = f"bootstrap_{base}"
+        if (subset is None and res.info["candidate"] == "all" and not res.info["refined"]
+                and key in ctx.cache):
+            boot = ctx.cache[key]
+        else:
+            sub = matches if subset is None else matches.select(point_index=subset)
+            boot = bootstrap_covariance(sub, res.pose, base, n_boot,
+                                        ctx.threshold_px, ctx.seed)
+        rec.time_ms += (time.perf_counter() - start) * 1e3
+    return _add_bootstrap(rec, boot, n_boot, "first-order")
+
+
+def _add_bootstrap(rec: MethodResult, boot: np.ndarray | None, n_boot: int, kind: str,
+                   source: str = "") -> MethodResult:
+    """``rec`` with the bootstrap term ``boot`` added to its covariance (if both exist) and
+    ``info["covariance"]`` saying which covariance it carries (``kind``, ``+ <source>bootstrap
+    (n)``); a warning when the bootstrap was asked for but gave too few poses."""
+    if rec.covariance is None:
+        return rec
+    if boot is not None:
+        rec.covariance = rec.covariance + boot
+        rec.info["covariance"] = f"{kind} + {source}bootstrap ({n_boot})"
+    else:
+        rec.info["covariance"] = kind
+        if n_boot:
+            rec.warnings.append(f"{rec.method}: fewer than 3 of {n_boot} bootstrap resamples "
+                                f"gave a pose; {kind} covariance only")
+    return rec
+
+
+def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:
+    from strl_pyg.estimation.fusion import fuse_poses
+
+    net = ctx.results.get("regression")
+    cls = next((ctx.results[c] for c in ("poselib", "opencv")
+                if c in ctx.results and ctx.results[c].status == "ok"), None)
+    if net is None or net.status != "ok" or cls is None:
+        return MethodResult("fused", "failed", warnings=[
+            "fused needs an 'ok' regression and an 'ok' classical estimate (poselib or opencv)"])
+    start = time.perf_counter()
+    # the regression's calibrated variance, times the fusion's own inflation (fitted on the
+    # held-out calibration pairs by benchmarks/bench_pose.py --calibrate: the smallest that
+    # keeps the 95 % upper bound of the median change against the classical pose <= +5 %)
+    scale = _calibration(ctx.model).get("regression", 1.0) * fusion_inflation(ctx.model)
+    f = fuse_poses(net.raw, None, cls.raw, matches, threshold_px=ctx.threshold_px,
+                   network_scale=scale)
+    ms = (time.perf_counter() - start) * 1e3 + net.time_ms + cls.time_ms
+    if f.source == "network":
+        return MethodResult("fused", "failed", time_ms=ms, raw=f, warnings=[
+            f"fused: too few {cls.method} inliers for a covariance ({f.info['num_inliers']})"])
+    gate = f.info.get("gate", {})
+    info = {"classical": cls.method, "network_weight": f.weights,
+            "sign_disagreement": f.info["sign_disagreement"], "used": f.source,
+            "gate_d2": gate.get("d2"), "network_variance_scale": scale}
+    warnings = [] if f.source == "fused" else [f"fused: {gate.get('reason')}"]
+    rec = MethodResult("fused", "ok", f.pose.matrix().numpy(), f.covariance.numpy(),
+                       warnings, time_ms=ms, num_inliers=f.info["num_inliers"], info=info,
+                       raw=f)
+    # the fused pose stays near the classical one and moves with it when the matches change:
+    # the classical bootstrap term (instability of the solve, which the information form
+    # cannot see) is added, as for the classical record itself (its warning, if any, is there)
+    boot = ctx.cache.get(f"bootstrap_{cls.method}")
+    rec = _add_bootstrap(rec, boot, 0 if boot is None else ctx.bootstrap,
+                         "information form", f"{cls.method} ")
+    return rec
+
+
+def fusion_inflation(model: torch.nn.Module | None) -> float:
+    """Multiplier of the network's calibrated variance in the fusion
+    (``metadata["fusion_inflation"]``, 1 when absent)."""
+    md = getattr(model, "metadata", None) if model is not None else None
+    k = md.get("fusion_inflation", 1.0) if isinstance(md, dict) else 1.0
+    return float(k) if isinstance(k, (int, float)) and k > 0 else 1.0
+
+
+def _calibration(model: torch.nn.Module | None) -> dict[str, float]:
+    """Per-method covariance scales fitted on held-out data (checkpoint metadata
+    ``"calibration"``; ``{}`` when the checkpoint has none)."""
+    if model is None:
+        return {}
+    md = getattr(model, "metadata", None)
+    cal = md.get("calibration", {}) if isinstance(md, dict) else {}
+    return {str(k): float(v) for k, v in cal.items()} if isinstance(cal, dict) else {}
+
+
+

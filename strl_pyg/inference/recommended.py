@@ -1,0 +1,116 @@
+"""The recommended pose without the work it does not need (``strl-pose predict``'s default).
+
+:class:`~strl_pyg.inference.PoseEstimator` with its default runs every installed method and
+then picks the recommended pose: the first ``"ok"`` method of the checkpoint's recommended
+order (:func:`~strl_pyg.inference.recommended_order`). :func:`estimate_recommended` gives the
+same recommended pose but runs the methods of that order one at a time, stopping at the first
+``"ok"`` one (with the methods it needs: ``fused`` reads ``regression`` and a classical
+estimate, ``guided`` reuses the classical one; or at the first ``"unreliable"`` one when the
+intrinsics fail the input checks: every later pose would be too), and matches line segments
+only once a method that reads them (the network's) is about to run: the classical solvers use
+points only.
+
+Same pose: every method is deterministic in the matches and the seed, the point matches do not
+depend on whether lines are matched (``filter_points`` off), and a method's result depends only
+on the methods before it. The estimate's ``methods`` holds only the methods that ran.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+__all__ = ["estimate_recommended", "estimate_methods", "methods_needed", "NETWORK_METHODS",
+           "DEPENDENCIES"]
+
+#: Methods that run the network (they read line segments and image patches).
+NETWORK_METHODS = ("regression", "geometric", "guided", "fused")
+#: Methods a method reads the results of (classical: the first installed of the two).
+DEPENDENCIES = {"fused": ("regression", "classical"), "guided": ("classical",)}
+
+
+def _classical() -> str:
+    from strl_pyg.inference.estimator import METHODS
+
+    return "poselib" if METHODS["poselib"].available() else "opencv"
+
+
+def methods_needed(names: Any) -> tuple[str, ...]:
+    """``names`` with the methods they depend on, in registration order (the order
+    :class:`~strl_pyg.inference.estimator.PoseEstimator` runs them)."""
+    from strl_pyg.inference.estimator import METHODS
+
+    want = set()
+    for name in names:
+        want.add(name)
+        want.update(_classical() if d == "classical" else d for d in DEPENDENCIES.get(name, ()))
+    return tuple(m for m in METHODS if m in want)
+
+
+def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0: Any = None,
+                         K1: Any = None, frontend_config: Any = None, **estimator_kw: Any):
+    """The recommended :class:`~strl_pyg.inference.estimator.PoseEstimate` of two images (module
+    docstring), running only the methods it needs.
+
+    Args:
+        model: a :class:`~strl_pyg.model.StrLPose`; its metadata gives the recommended order.
+        image0, image1, K0, K1: as :meth:`PoseEstimator.estimate_images
+            <strl_pyg.inference.PoseEstimator.estimate_images>` (``K1`` defaults to ``K0``).
+        frontend_config: :class:`~strl_pyg.frontend.FrontendConfig` (default: its defaults);
+            its ``lines`` is switched on only when a network method runs.
+        estimator_kw: passed to :class:`~strl_pyg.inference.estimator.PoseEstimator` (``seed``,
+            ``threshold_px``, ``device``).
+    """
+    from strl_pyg.frontend import FrontendConfig, NoMatchesError, match_images
+    from strl_pyg.inference.estimator import METHODS, PoseEstimator, recommended_order
+    from strl_pyg.inference.inputs import intrinsics_problems
+
+    cfg = frontend_config if frontend_config is not None else FrontendConfig()
+    if not isinstance(cfg, FrontendConfig):
+        raise TypeError(f"Expected a FrontendConfig (got {type(cfg).__name__})")
+    if K0 is None and K1 is not None:
+        raise ValueError("Expected K0 with K1 (got K1 only)")
+    K1 = K0 if K1 is None else K1
+    order = [m for m in recommended_order(model) if m in METHODS and METHODS[m].available()]
+    if not order:  # nothing recommended is installed: the estimator reports it
+        return PoseEstimator(model, **estimator_kw).estimate_images(image0, image1, K0, K1, cfg)
+    matches, est, run = {}, None, ()
+    done: dict[bool, dict] = {}  # results per match set: each method runs at most once
+    for name in order:
+        run = methods_needed((*run, name))
+        lines = cfg.lines and any(m in NETWORK_METHODS for m in run)
+        if lines not in matches:
+            try:
+                matches[lines] = match_images(image0, image1, K0, K1,
+                                              dataclasses.replace(cfg, lines=lines))
+            except NoMatchesError:  # the estimator's own "degenerate" record
+                return PoseEstimator(model, methods=run, **estimator_kw).estimate_images(
+                    image0, image1, K0, K1, dataclasses.replace(cfg, lines=lines))
+        m = matches[lines]
+        est = PoseEstimator(model, methods=run, **estimator_kw).estimate(
+            m, known=done.setdefault(lines, {}))
+        done[lines].update(est.methods)
+        if est.methods[name].status == "ok":
+            break
+        if (est.pose.status == "unreliable" and est.pose.method == name
+                and intrinsics_problems(m.image_size0, m.image_size1, m.K0, m.K1)):
+            break  # every method reads the same K: the later ones are "unreliable" too
+    return est
+
+
+def estimate_methods(model: Any, image0: np.ndarray, image1: np.ndarray, K0: Any, K1: Any,
+                     frontend_config: Any, methods: str = "recommended", **estimator_kw: Any):
+    """``strl-pose predict --methods``: ``"recommended"`` (:func:`estimate_recommended`),
+    ``"all"`` (every installed method) or comma-separated names of
+    :data:`~strl_pyg.inference.estimator.METHODS` (``ValueError`` for others)."""
+    from strl_pyg.inference.estimator import PoseEstimator
+
+    if methods == "recommended":
+        return estimate_recommended(model, image0, image1, K0, K1, frontend_config,
+                                    **estimator_kw)
+    names = None if methods == "all" else tuple(m.strip() for m in methods.split(",")
+                                                if m.strip())
+    return PoseEstimator(model, methods=names, **estimator_kw).estimate_images(
+        image0, image1, K0, K1, frontend_config=frontend_config)

@@ -1,0 +1,160 @@
+"""The pose record of :mod:`strl_pyg.inference.estimator`: one method's result
+(:class:`MethodResult`)
+and a pair's estimate (:class:`PoseEstimate`: the recommended pose and every method's), both
+JSON-ready through ``to_dict``. All poses are ``T_0to1`` (``X1 = R X0 + t``).
+
+Statuses (:data:`STATUSES`): ``"ok"`` (a pose), ``"unreliable"`` (a pose was computed but
+must not be used: the intrinsics fail the input checks, or many of the matches that fit its
+epipolar geometry lie behind a camera; the reasons are in ``warnings`` and
+``info["unreliable"]``, the computed pose, for inspection only, in
+``info["unreliable_T_0to1"]``), ``"degenerate"`` (the input does not determine the pose:
+fewer point matches than the solvers need, or zero parallax (identical images): no pose is
+given), ``"failed"`` (the method found no pose, e.g. RANSAC returned no model, or the matches
+do not support it; never replaced by an identity pose). A pose (``T_0to1``, ``covariance``,
+``sigma``) exists only with ``"ok"``: a script that reads ``T_0to1`` or ``sigma`` without
+the status gets ``None`` for any other.
+
+Uncertainty: ``covariance`` ``[5, 5]`` in the tangent parameters of
+:mod:`strl_pyg.estimation.fusion` around the method's own pose (rotation increment ``w`` in rad,
+``R = exp([w]_x) R_hat``; translation direction ``d`` in rad on the unit sphere, basis
+:func:`~strl_pyg.geometry.tangent_basis` of ``t_hat``), and ``sigma``: its summary
+``{"rotation_deg": sqrt(tr Cov_w), "translation_deg": sqrt(tr Cov_d)}`` (RMS angles, degrees).
+PoseLib's, OpenCV's and the guided one are first order plus a bootstrap of the classical solve
+(:mod:`strl_pyg.estimation.uncertainty`), the fused one the information-form fusion plus the
+classical bootstrap, the network's come from its predicted log-variances
+(``info["covariance"]`` names which); each is scaled by the checkpoint's calibration
+(``info["calibration_scale"]``) where one applies.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+
+from strl_pyg.data.matches import PairMatches
+
+__all__ = ["STATUSES", "MethodResult", "PoseEstimate"]
+
+STATUSES = ("ok", "unreliable", "degenerate", "failed")
+
+
+@dataclass
+class MethodResult:
+    """One method's pose (or the recommended one, :attr:`PoseEstimate.pose`).
+
+    Attributes:
+        method: the method's name (``None`` for a recommended pose no method could give).
+        status: one of :data:`STATUSES`.
+        T_0to1: float64 ``[4, 4]`` when ``status == "ok"``, else ``None``.
+        covariance: ``[5, 5]`` (module docstring) or ``None`` when not available.
+        warnings: human-readable reasons and caveats.
+        time_ms: wall time of the method.
+        num_inliers: classical methods' inlier count.
+        info: JSON-ready extras (e.g. the network's ``log_var``).
+        raw: the library object (``PoseOutput``, ``BaselineResult``, ``FusedPose``); not
+            serialised.
+    """
+
+    method: str | None
+    status: str
+    T_0to1: np.ndarray | None = None
+    covariance: np.ndarray | None = None
+    warnings: list[str] = field(default_factory=list)
+    time_ms: float = 0.0
+    num_inliers: int | None = None
+    info: dict[str, Any] = field(default_factory=dict)
+    raw: Any = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.status not in STATUSES:
+            raise ValueError(f"Expected status in {STATUSES} (got {self.status!r})")
+        if self.status == "ok":
+            T = np.asarray(self.T_0to1, dtype=np.float64) if self.T_0to1 is not None else None
+            if T is None or T.shape != (4, 4) or not np.isfinite(T).all():
+                raise ValueError("Expected a finite T_0to1 [4, 4] with status 'ok' (got "
+                                 f"{None if T is None else T.shape})")
+            self.T_0to1 = T
+        else:
+            self.T_0to1 = self.covariance = None
+
+    def unreliable(self, reasons: list[str]) -> MethodResult:
+        """This record as ``"unreliable"`` (from ``"ok"``; an ``"unreliable"`` one gets the
+        further reasons; any other is returned unchanged): no ``T_0to1`` nor covariance, the
+        pose moved to ``info["unreliable_T_0to1"]``, ``reasons`` added to ``warnings`` and to
+        ``info["unreliable"]``."""
+        if self.status not in ("ok", "unreliable") or not reasons:
+            return self
+        info = {**self.info, "unreliable": list(self.info.get("unreliable", [])) + reasons}
+        if self.status == "ok":
+            info["unreliable_T_0to1"] = self.T_0to1
+        return MethodResult(self.method, "unreliable", None, None, self.warnings + reasons,
+                            self.time_ms, self.num_inliers, info, self.raw)
+
+    @property
+    def sigma(self) -> dict[str, float] | None:
+        """``{"rotation_deg", "translation_deg"}`` RMS angles of :attr:`covariance`."""
+        if self.covariance is None:
+            return None
+        d = np.clip(np.diag(self.covariance), 0.0, None)
+        return {"rotation_deg": math.degrees(math.sqrt(d[:3].sum())),
+                "translation_deg": math.degrees(math.sqrt(d[3:].sum()))}
+
+    def to_dict(self) -> dict[str, Any]:
+        return _jsonable({"method": self.method, "status": self.status, "T_0to1": self.T_0to1,
+                          "sigma": self.sigma, "covariance": self.covariance,
+                          "warnings": list(self.warnings), "time_ms": self.time_ms,
+                          "num_inliers": self.num_inliers, "info": self.info})
+
+
+@dataclass
+class PoseEstimate:
+    """Result of :meth:`PoseEstimator.estimate`: the recommended :attr:`pose` (its
+    ``warnings`` hold every input warning and why earlier methods were passed over), each
+    method's own result in :attr:`methods`, the match counts and the matches used."""
+
+    pose: MethodResult
+    methods: dict[str, MethodResult]
+    num_points: int
+    num_lines: int
+    matches: PairMatches | None = field(default=None, repr=False)
+
+    @property
+    def status(self) -> str:
+        return self.pose.status
+
+    @property
+    def T_0to1(self) -> np.ndarray | None:
+        return self.pose.T_0to1
+
+    @property
+    def warnings(self) -> list[str]:
+        return self.pose.warnings
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: ``{"pose": {...}, "methods": {name: {...}}, "num_points",
+        "num_lines"}``; each record has ``method``, ``status``, ``T_0to1`` (nested lists or
+        ``None``), ``sigma``, ``covariance``, ``warnings``, ``time_ms``, ``num_inliers``,
+        ``info``; non-finite numbers become ``None``."""
+        return {"pose": self.pose.to_dict(),
+                "methods": {k: v.to_dict() for k, v in self.methods.items()},
+                "num_points": self.num_points, "num_lines": self.num_lines}
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, torch.Tensor):
+        v = v.detach().cpu().double().numpy()
+    if isinstance(v, np.ndarray):
+        return _jsonable(v.tolist())
+    if isinstance(v, (np.floating, np.integer, np.bool_)):
+        v = v.item()
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v

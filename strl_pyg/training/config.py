@@ -1,0 +1,210 @@
+"""The training configuration and its command-line flags, without importing torch.
+
+:class:`TrainConfig` decides a run (``strl_pyg.training.loop`` re-exports it); the flags of
+``examples/train.py`` and ``strl-pose train`` come from :func:`add_train_arguments`. This
+module imports only the standard library and numpy (the scene kinds), so ``strl-pose --help``
+and argument errors return before torch is loaded.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from strl_pyg.synthetic.config import LINE_SCENE_KINDS  # numpy only
+from strl_pyg.utils.dataclass import strict_from_dict
+
+__all__ = [
+    "DATASETS",
+    "DATA_CHANNELS",
+    "ABLATION_NAMES",
+    "TrainConfig",
+    "add_train_arguments",
+]
+
+DATASETS = ("synthetic", "kitti", "demon")
+
+#: Image channels of each dataset's graphs: generated scenes are rendered grey, KITTI's
+#: ``image_0`` camera is grey, DeMoN is RGB. The default model's ``patch_features`` and
+#: ``image_channels`` follow them, so the default model accepts the default data.
+DATA_CHANNELS = {"synthetic": 1, "kitti": 1, "demon": 3}
+
+#: The keys of :data:`strl_pyg.model.ABLATIONS` (a test keeps them equal), for ``--model``.
+ABLATION_NAMES = ("baseline", "L", "LP", "R", "V", "LP+R", "LP+V", "V+W", "full")
+
+
+@dataclass
+class TrainConfig:
+    """Everything that decides a training run (stored in each checkpoint)."""
+
+    dataset: str = "synthetic"  # synthetic | kitti | demon
+    data_root: str | None = None  # dataset root (kitti: the odometry root; demon: DeepSfM root)
+    cache_dir: str = "outputs/match_cache"  # front-end match cache of real datasets
+    scene: dict[str, Any] = field(default_factory=dict)  # SceneConfig fields (synthetic)
+    scene_kinds: list[str] = field(default_factory=lambda: list(LINE_SCENE_KINDS))
+    # synthetic: a named mixture of scene configurations (strl_pyg.training.loop.SCENE_MIXES), which
+    # replaces `scene` / `scene_kinds`; pairs are split evenly over its configurations
+    scene_mix: str | None = None
+    matches: str = "ground_truth"  # synthetic: "ground_truth" or "frontend" (cached, workers)
+    outlier_augment: float = 0.0  # up to this fraction of point matches shuffled into outliers
+    train_pairs: int = 2048  # synthetic: pairs in the training set (seeds 0..N-1)
+    val_pairs: int = 128  # synthetic: held-out pairs (seeds from 1_000_000)
+    kitti_k: int = 1  # kitti: frame gap of a pair
+    train_sequences: list[str] | None = None  # kitti: override the standard split (00-08)
+    val_sequences: list[str] | None = None  # kitti: override the standard split (09-10)
+    limit: int | None = None  # real datasets: keep only the first pairs (smoke runs)
+    model: str = "full"  # ablation row of the paper (StrLPoseConfig.ablation)
+    model_overrides: dict[str, Any] = field(default_factory=dict)  # other StrLPoseConfig fields
+    lr: float = 1e-4  # Adam, as the paper
+    batch_size: int = 16  # global batch (split over DDP ranks), as the paper
+    steps: int = 2000  # optimiser steps
+    val_every: int = 200  # validate and checkpoint every this many steps (and at the end)
+    num_points: int = 384  # resampled per pair, as the paper
+    num_lines: int = 192
+    patch_size: int = 1  # the paper's single pixel
+    swap_prob: float = 0.5  # training pairs have their images exchanged with this probability
+    init_from: str | None = None  # start from these weights (model.pt or last.pt); fine-tuning
+    grad_clip: float | None = 10.0  # max gradient norm (None: off)
+    seed: int = 0  # model initialisation (and, unless data_seed is set, the data below)
+    # pairs, batch order and resampling (None: ``seed``); rows of an ablation share it so they
+    # train on the same pairs in the same order while ``seed`` varies the initialisation
+    data_seed: int | None = None
+    out_dir: str = "runs/default"
+    num_workers: int = 0  # data-loading processes
+    device: str = "cpu"
+    tensorboard: bool = True  # also log to TensorBoard when it is installed
+    # last.pt is also written every this many steps (0: off) and every this many minutes
+    # (0: off), besides every validation and on SIGINT / SIGTERM
+    checkpoint_every: int = 0
+    checkpoint_minutes: float = 10.0
+    in_memory: bool = True  # keep generated / loaded graphs in memory after first access
+    # Geometric head (model_overrides={"geometric": True}): strl_pyg.training.loss.GeometricLoss
+    geo_threshold_px: float = 2.0  # inlier label threshold on the true Sampson distance
+    geo_cls_weight: float = 1.0  # weight of the inlier classification loss
+    geo_ess_weight: float = 0.5  # weight of the essential (epipolar) loss ...
+    geo_ess_start: int = 200  # ... from this step on (the classifier learns first)
+
+    def __post_init__(self) -> None:
+        if self.dataset not in DATASETS:
+            raise ValueError(f"Expected dataset in {DATASETS} (got {self.dataset!r})")
+        if self.matches not in ("ground_truth", "frontend"):
+            raise ValueError(f"Expected matches in ('ground_truth', 'frontend') "
+                             f"(got {self.matches!r})")
+        if not 0.0 <= self.outlier_augment < 1.0:
+            raise ValueError(f"Expected outlier_augment in [0, 1) (got {self.outlier_augment!r})")
+        if self.scene_mix is not None:
+            from strl_pyg.synthetic.distributions import DISTRIBUTIONS
+
+            if self.scene_mix not in DISTRIBUTIONS:
+                raise ValueError(f"Expected scene_mix in {tuple(DISTRIBUTIONS)} "
+                                 f"(got {self.scene_mix!r})")
+        if self.data_seed is not None and (not isinstance(self.data_seed, int)
+                                           or self.data_seed < 0):
+            raise ValueError(f"Expected a non-negative integer data_seed (got {self.data_seed!r})")
+        if not isinstance(self.checkpoint_every, int) or self.checkpoint_every < 0:
+            raise ValueError(f"Expected checkpoint_every >= 0 steps "
+                             f"(got {self.checkpoint_every!r})")
+        if not self.checkpoint_minutes >= 0:
+            raise ValueError(f"Expected checkpoint_minutes >= 0 (got {self.checkpoint_minutes!r})")
+        for name in ("batch_size", "steps", "val_every", "train_pairs", "val_pairs", "kitti_k"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 1:
+                raise ValueError(f"Expected a positive integer '{name}' (got {value!r})")
+        if not 0.0 <= self.swap_prob <= 1.0:
+            raise ValueError(f"Expected swap_prob in [0, 1] (got {self.swap_prob!r})")
+        if not self.lr > 0:
+            raise ValueError(f"Expected a positive learning rate (got {self.lr!r})")
+        if self.dataset != "synthetic" and not self.data_root:
+            raise ValueError(f"Expected --data-root for dataset '{self.dataset}' (got none)")
+
+    @property
+    def resolved_data_seed(self) -> int:
+        """The seed of the data (pairs, batch order, resampling)."""
+        return self.seed if self.data_seed is None else self.data_seed
+
+    def model_config(self):
+        """The :class:`~strl_pyg.StrLPoseConfig` of this run: the ablation row ``model`` with
+        ``model_overrides``; unless overridden, metric translation on KITTI and patch / image
+        channels of the dataset (:data:`DATA_CHANNELS`, ``patch_features = C * p * p``)."""
+        from strl_pyg.model.strl_pose import StrLPoseConfig
+
+        overrides = dict(self.model_overrides)
+        known = [f.name for f in fields(StrLPoseConfig)]
+        unknown = sorted(set(overrides) - set(known))
+        if unknown:
+            raise ValueError(f"Expected --set keys among the StrLPoseConfig fields "
+                             f"{', '.join(known)} (got {', '.join(unknown)})")
+        if self.dataset == "kitti":
+            overrides.setdefault("translation", "metric")
+        channels = DATA_CHANNELS[self.dataset]
+        overrides.setdefault("patch_features", channels * self.patch_size ** 2)
+        overrides.setdefault("image_channels", channels)
+        return StrLPoseConfig.ablation(self.model, **overrides)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
+        return strict_from_dict(cls, d)
+
+
+def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Adds the training flags (one per :class:`TrainConfig` field that users set) to ``ap``."""
+    d = TrainConfig()
+    ap.add_argument("--dataset", choices=DATASETS, default=d.dataset)
+    ap.add_argument("--data-root", default=None, help="dataset root (kitti, demon)")
+    ap.add_argument("--cache-dir", default=d.cache_dir, help="front-end match cache")
+    ap.add_argument("--model", choices=ABLATION_NAMES, default=d.model,
+                    help="ablation row of the paper (default: full)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="model config override, e.g. --set hidden=64 --set layers=3")
+    ap.add_argument("--scene", action="append", default=[], metavar="KEY=VALUE",
+                    help="SceneConfig field of generated scenes, e.g. --scene noise_px=0.5")
+    ap.add_argument("--scene-kinds", default=",".join(d.scene_kinds),
+                    help="generated scene kinds, comma-separated")
+    ap.add_argument("--scene-mix", default=None,
+                    help="generated scenes drawn per seed from this distribution (e.g. "
+                         "mixed_small, mixed; see strl_pyg.synthetic.distributions); replaces "
+                         "--scene/--scene-kinds")
+    ap.add_argument("--matches", choices=("ground_truth", "frontend"), default=d.matches,
+                    help="generated scenes: the generator's matches or front-end matches on "
+                         "the rendered images (cached in --cache-dir)")
+    ap.add_argument("--outlier-augment", type=float, default=d.outlier_augment,
+                    help="up to this fraction of point matches shuffled into outliers")
+    ap.add_argument("--geo-ess-start", type=int, default=d.geo_ess_start,
+                    help="geometric head (--set geometric=true): step the epipolar loss starts")
+    ap.add_argument("--train-pairs", type=int, default=d.train_pairs)
+    ap.add_argument("--val-pairs", type=int, default=d.val_pairs)
+    ap.add_argument("--kitti-k", type=int, default=d.kitti_k, help="frame gap of KITTI pairs")
+    ap.add_argument("--train-sequences", default=None, help="KITTI sequences, comma-separated")
+    ap.add_argument("--val-sequences", default=None, help="KITTI sequences, comma-separated")
+    ap.add_argument("--limit", type=int, default=None, help="keep only the first pairs")
+    ap.add_argument("--lr", type=float, default=d.lr)
+    ap.add_argument("--batch-size", type=int, default=d.batch_size)
+    ap.add_argument("--steps", type=int, default=d.steps)
+    ap.add_argument("--val-every", type=int, default=d.val_every)
+    ap.add_argument("--num-points", type=int, default=d.num_points)
+    ap.add_argument("--num-lines", type=int, default=d.num_lines)
+    ap.add_argument("--patch-size", type=int, default=d.patch_size)
+    ap.add_argument("--swap-prob", type=float, default=d.swap_prob,
+                    help="probability of exchanging the two images of a training pair")
+    ap.add_argument("--init-from", default=None,
+                    help="start from these weights (model.pt or last.pt), e.g. to fine-tune")
+    ap.add_argument("--seed", type=int, default=d.seed,
+                    help="model initialisation (and the data, unless --data-seed is given)")
+    ap.add_argument("--data-seed", type=int, default=None,
+                    help="seed of the training pairs, batch order and resampling (default: "
+                         "--seed); ablation rows share it")
+    ap.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every,
+                    help="also write last.pt every this many steps (0: off)")
+    ap.add_argument("--checkpoint-minutes", type=float, default=d.checkpoint_minutes,
+                    help="also write last.pt every this many minutes (0: off); always on "
+                         "Ctrl-C / SIGTERM and at every validation")
+    ap.add_argument("--workers", type=int, default=d.num_workers)
+    ap.add_argument("--device", default=d.device)
+    ap.add_argument("--out", default=d.out_dir, help="run folder (checkpoint, logs, curves)")
+    ap.add_argument("--resume", action="store_true", help="continue from <out>/last.pt")
+    ap.add_argument("--overwrite", action="store_true",
+                    help="start afresh in an existing run folder (its checkpoint is replaced)")
+    ap.add_argument("--no-tensorboard", action="store_true")
+    ap.add_argument("--no-progress", action="store_true")
+    return ap

@@ -1,0 +1,282 @@
+"""Training data: the dataset factory of a :class:`~strl_pyg.training.config.TrainConfig`,
+in-memory caching, seeded per-step resampling and augmentation, and the deterministic
+step batch sampler (the batch of global step ``s`` is a pure function of ``(seed, s)``).
+"""
+
+from __future__ import annotations
+
+import copy
+import warnings
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import Tensor
+from torch.utils.data import ConcatDataset, Dataset, Sampler
+from torch_geometric.data import HeteroData
+
+from strl_pyg.data import keys as keys_
+from strl_pyg.data.transforms import FixedSizeResample, RandomSwap
+from strl_pyg.geometry import Pose
+from strl_pyg.training.config import TrainConfig
+
+__all__ = ["build_datasets", "check_sources", "check_graph_channels", "model_input_channels",
+           "shuffle_point_matches", "StepBatchSampler", "unaugmented_poses"]
+
+
+class _InMemory(Dataset):
+    """Caches the items of a dataset after their first access (generation is the slow part)."""
+
+    def __init__(self, base: Any, enabled: bool) -> None:
+        self.base, self.enabled, self.items = base, enabled, {}
+
+    def __len__(self) -> int:
+        return len(self.base)
+
+    def __getitem__(self, i: int) -> HeteroData:
+        if not self.enabled:
+            return self.base[i]
+        if i not in self.items:
+            self.items[i] = self.base[i]
+        return self.items[i]
+
+
+class _Resampled(Dataset):
+    """Applies :class:`FixedSizeResample` and :class:`RandomSwap`, seeded by the key
+    ``(index, step, position)``."""
+
+    def __init__(self, base: Dataset, num_points: int, num_lines: int, seed: int,
+                 swap_prob: float = 0.0, outlier_max: float = 0.0) -> None:
+        self.base, self.num_points, self.num_lines, self.seed = base, num_points, num_lines, seed
+        self.swap_prob = swap_prob
+        self.outlier_max = outlier_max
+
+    def __len__(self) -> int:
+        return len(self.base)
+
+    def __getitem__(self, key: tuple[int, int, int]) -> HeteroData:
+        index, step, position = key
+        seed = (self.seed * 1_000_003 + step * 4099 + position) % (2**63)
+        data = FixedSizeResample(self.num_points, self.num_lines, seed=seed)(self.base[index])
+        if self.swap_prob > 0:
+            data = RandomSwap(self.swap_prob, seed=seed + 1)(data)
+        if self.outlier_max > 0:
+            data = shuffle_point_matches(data, self.outlier_max, seed + 2)
+        return data
+
+
+def shuffle_point_matches(data: HeteroData, max_fraction: float, seed: int) -> HeteroData:
+    """Training augmentation: a fraction ``U(0, max_fraction)`` of the point matches get the
+    image-1 side of another point match (``pos1``, ``kpts1``, ``patch1`` permuted together), so
+    they become realistic outliers (a real feature of image 1, consistent patch) whose label
+    the geometric loss recomputes from the true pose. Returns a shallow copy."""
+    gen = torch.Generator().manual_seed(int(seed) % (2**63))
+    store = data[keys_.POINT]
+    n = store[keys_.POS1].shape[0]
+    m = int(float(torch.rand(1, generator=gen)) * max_fraction * n)
+    if m < 2:
+        return data
+    out = copy.copy(data)  # attributes are reassigned below, never modified in place
+    idx = torch.randperm(n, generator=gen)[:m]
+    perm = idx[torch.roll(torch.arange(m), 1)]
+    for key in (keys_.POS1, keys_.KPTS1, keys_.PATCH1):
+        if key in store:
+            out[keys_.POINT][key] = store[key].index_copy(0, idx, store[key][perm])
+    return out
+
+
+class StepBatchSampler(Sampler):
+    """Yields, for steps ``start .. stop - 1``, the keys ``(index, step, position)`` of this
+    rank's shard of each global batch. The order is a pure function of ``(seed, step)``."""
+
+    def __init__(self, num_items: int, batch_size: int, start: int, stop: int, seed: int,
+                 rank: int = 0, world_size: int = 1) -> None:
+        if num_items < 1:
+            raise ValueError("Expected a non-empty training set (got 0 pairs)")
+        if batch_size % world_size:
+            raise ValueError(
+                f"Expected batch_size divisible by the number of processes "
+                f"(got {batch_size} and {world_size})"
+            )
+        self.n, self.bs, self.start, self.stop = num_items, batch_size, start, stop
+        self.seed, self.rank, self.world = seed, rank, world_size
+        self.per_epoch = max(1, num_items // batch_size)
+        self._perm_epoch, self._perm = -1, None
+
+    def global_batch(self, step: int) -> list[int]:
+        epoch, k = divmod(step, self.per_epoch)
+        if epoch != self._perm_epoch:
+            g = torch.Generator().manual_seed(self.seed * 7919 + epoch)
+            self._perm = torch.randperm(self.n, generator=g)
+            self._perm_epoch = epoch
+        idx = self._perm[k * self.bs:(k + 1) * self.bs]
+        if len(idx) < self.bs:  # fewer items than a batch: wrap around
+            idx = self._perm[torch.arange(k * self.bs, (k + 1) * self.bs) % self.n]
+        return idx.tolist()
+
+    def __iter__(self):
+        for step in range(self.start, self.stop):
+            batch = self.global_batch(step)
+            yield [(i, step, pos) for pos, i in enumerate(batch)][self.rank::self.world]
+
+    def __len__(self) -> int:
+        return self.stop - self.start
+
+
+def build_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
+    """Training and validation datasets of pair graphs (without resampling)."""
+    from strl_pyg.data import datasets as D
+
+    if cfg.dataset == "synthetic" and cfg.scene_mix is not None:
+        return _mixed_datasets(cfg)
+    if cfg.dataset == "synthetic":
+        from strl_pyg.synthetic import SceneConfig
+
+        keep = cfg.model_config().visual == "cnn"
+        kinds = cfg.scene_kinds or [SceneConfig().kind]
+
+        def part(total: int, base: int) -> ConcatDataset:
+            # kind j gets seeds base + j * 100_000 + i; sizes split as evenly as possible
+            sizes = [total // len(kinds) + (j < total % len(kinds)) for j in range(len(kinds))]
+            return ConcatDataset([
+                D.SyntheticPairs(n, seed=base + j * 100_000,
+                                 scene_config=SceneConfig(**{**cfg.scene, "kind": kind}),
+                                 patch_size=cfg.patch_size, keep_images=keep)
+                for j, (kind, n) in enumerate(zip(kinds, sizes, strict=True)) if n > 0
+            ])
+
+        return part(cfg.train_pairs, cfg.resolved_data_seed * 10_000_000), part(
+            cfg.val_pairs, 1_000_000 + cfg.resolved_data_seed * 10_000_000)
+    model_cfg = cfg.model_config()
+    keep = model_cfg.visual == "cnn"
+    # the graphs' channels follow the model's (default: the data's, DATA_CHANNELS): a grey
+    # model, e.g. fine-tuning the shipped weights, reads colour data as grey
+    grey = model_input_channels(model_cfg, cfg.patch_size) == 1
+    common = dict(cache_dir=cfg.cache_dir, patch_size=cfg.patch_size, keep_images=keep,
+                  limit=cfg.limit, on_missing="skip", grayscale=grey)
+    if cfg.dataset == "kitti":
+        train = D.KITTIOdometry(cfg.data_root, split="train", sequences=cfg.train_sequences,
+                                frame_gap=cfg.kitti_k, **common)
+        val = D.KITTIOdometry(cfg.data_root, split="test", sequences=cfg.val_sequences,
+                              frame_gap=cfg.kitti_k, **common)
+    else:
+        train = D.DeMoNFolder(cfg.data_root, split="train", **common)
+        val = D.DeMoNFolder(cfg.data_root, split="test", **common)
+    # before any matching: a run must not train for hours and then have nothing to validate
+    check_sources(cfg, train, val)
+    for ds in (train, val):
+        ds.build_cache(num_workers=max(1, cfg.num_workers))
+    check_sources(cfg, train, val, matched=True)
+    return train, val
+
+
+def model_input_channels(model_cfg: Any, patch_size: int) -> int | None:
+    """Image channels a model reads (``None``: no visual branch): ``image_channels`` for
+    ``visual="cnn"``, else ``patch_features / patch_size**2``."""
+    if model_cfg.visual is None:
+        return None
+    if model_cfg.visual == "cnn":
+        return model_cfg.image_channels
+    return model_cfg.patch_features // patch_size ** 2
+
+
+def check_graph_channels(model_cfg: Any, patch_size: int, graph: HeteroData) -> None:
+    """``ValueError`` before training when the data's patches (or images) do not have the
+    channels the model reads, naming the ``--set`` flags that fit the data."""
+    if model_cfg.visual is None:
+        return
+    store = graph[keys_.POINT]
+    if model_cfg.visual == "cnn":
+        img = graph[keys_.IMAGE0] if keys_.IMAGE0 in graph else None
+        got = None if img is None else int(img.shape[-3])
+        want, flag = model_cfg.image_channels, "image_channels"
+    else:
+        patch = store[keys_.PATCH0] if keys_.PATCH0 in store else None
+        got = None if patch is None else int(patch.shape[1])
+        want, flag = model_cfg.patch_features, "patch_features"
+    if got is not None and got != want:
+        c = got // patch_size ** 2 if flag == "patch_features" else got
+        raise ValueError(
+            f"Expected training graphs with the {want} {flag} the model reads (got {got}: "
+            f"{c}-channel images); pass --set patch_features={c * patch_size ** 2} "
+            f"--set image_channels={c}, or leave both unset to follow the data")
+
+
+def _kitti_on_disk(root: Path, camera: str) -> list[str]:
+    seq_dir = root / "sequences"
+    if not seq_dir.is_dir():
+        return []
+    return sorted(p.name for p in seq_dir.iterdir() if (p / camera).is_dir())
+
+
+def check_sources(cfg: TrainConfig, train: Any, val: Any, matched: bool = False) -> None:
+    """Raises ``ValueError`` naming what is missing, and the flag that fixes it, when the
+    training or validation set of a real dataset holds no pair (sequences absent, no pairs
+    among the frames on disk, or, with ``matched``, every pair failed matching); warns when
+    KITTI validation sequences are also training sequences."""
+    flags = {"train": ("--train-sequences", cfg.train_sequences),
+             "validation": ("--val-sequences", cfg.val_sequences)}
+    for role, ds in (("train", train), ("validation", val)):
+        if (len(ds) if matched else ds.num_pairs) > 0:  # num_pairs: no cache touched
+            continue
+        if matched:
+            raise ValueError(
+                f"Expected {role} pairs that the front end can match (got none: all "
+                f"{ds.num_pairs} gave no matches; markers in '{ds.cache.dir}')")
+        if cfg.dataset == "kitti":
+            on_disk = _kitti_on_disk(Path(cfg.data_root), ds.camera)
+            asked = list(ds.sequences) + list(ds.missing_sequences)
+            why = (f"sequences {', '.join(ds.missing_sequences)} have no '{ds.camera}' folder "
+                   f"under '{Path(cfg.data_root) / 'sequences'}'" if ds.missing_sequences
+                   else f"no frames i, i + {cfg.kitti_k} both with images")
+            flag, given = flags[role]
+            default = "" if given else " (the standard split)"
+            raise ValueError(
+                f"Expected {role} pairs from KITTI sequences {', '.join(asked)}{default} (got "
+                f"none: {why}); pass {flag} with sequences that exist (here: "
+                f"{', '.join(on_disk) or 'none'}), e.g. {flag} {on_disk[-1] if on_disk else 'NN'}")
+        split = ds.split
+        why = (f"{len(ds.missing_sequences)} listed sequences absent, e.g. "
+               f"{ds.missing_sequences[:3]}" if ds.missing_sequences else "no sequences")
+        raise ValueError(f"Expected DeMoN {role} pairs under '{Path(cfg.data_root) / split}' "
+                         f"(got none: {why})")
+    if cfg.dataset == "kitti" and not matched:
+        both = sorted(set(train.sequences) & set(val.sequences))
+        if both:
+            warnings.warn(f"KITTI sequences {', '.join(both)} are in both the training and the "
+                          "validation set: validation measures training pairs; pass other "
+                          "--val-sequences for a held-out figure", UserWarning, stacklevel=3)
+
+
+def _mixed_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
+    """Training / validation sets drawn from a named scene distribution
+    (:func:`strl_pyg.synthetic.scene_distribution`: one scene configuration per seed)."""
+    from strl_pyg.data import datasets as D
+    from strl_pyg.synthetic.distributions import DISTRIBUTIONS, scene_distribution
+
+    if cfg.scene_mix not in DISTRIBUTIONS:
+        raise ValueError(f"Expected scene_mix in {tuple(DISTRIBUTIONS)} (got {cfg.scene_mix!r})")
+    dist = scene_distribution(cfg.scene_mix)
+    keep = cfg.model_config().visual == "cnn"
+    kw = dict(matches="frontend", cache_dir=cfg.cache_dir) if cfg.matches == "frontend" else {}
+    sets = []
+    for n, base in ((cfg.train_pairs, cfg.resolved_data_seed * 10_000_000),
+                    (cfg.val_pairs, 1_000_000 + cfg.resolved_data_seed * 10_000_000)):
+        ds = D.SyntheticPairs(n, seed=base, scene_config=dist, patch_size=cfg.patch_size,
+                              keep_images=keep, **kw)
+        if kw:
+            ds.build_cache(num_workers=cfg.num_workers)
+        sets.append(ds)
+    return sets[0], sets[1]
+
+
+def unaugmented_poses(batch: HeteroData) -> Tensor:
+    """Ground-truth poses with the swap augmentation undone (the trivial predictor is the mean
+    pose of the data as it comes, not of the augmented data)."""
+    T = batch[keys_.T_0TO1].detach()
+    if keys_.SWAPPED not in batch:
+        return T
+    swapped = batch[keys_.SWAPPED].bool()
+    T = T.clone()
+    T[swapped] = Pose.from_matrix(T[swapped]).inv().matrix().to(T)
+    return T

@@ -1,0 +1,420 @@
+"""Training engine: data, deterministic batching, validation, checkpoints, resume and DDP.
+
+The script ``examples/train.py`` is a thin command line over :class:`TrainConfig` and
+:func:`train`. Everything that decides a run lives in the config, which is stored in every
+checkpoint.
+
+Determinism: the batch of global step ``s`` is a pure function of ``(seed, s)``: epoch
+``e = s // steps_per_epoch`` visits the training set in the order of a permutation seeded by
+``(seed, e)``, and the random resampling of each item is seeded by ``(seed, s, position)``.
+So ``--resume`` continues exactly where a run stopped, whatever the number of data workers,
+and every DDP rank computes its shard of the same global batch.
+
+Modules: :mod:`strl_pyg.training.config` (the config and its flags, torch-free),
+:mod:`strl_pyg.training.data` (datasets, resampling, the step sampler),
+:mod:`strl_pyg.training.validation` (validation metrics),
+:mod:`strl_pyg.training.checkpoints` (files),
+:mod:`strl_pyg.training.log` (CSV log, curves) and this one (the loop and its command line).
+Their public names are re-exported here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import signal
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+from torch.utils.data import DataLoader
+from torch_geometric.loader.dataloader import Collater
+from tqdm.auto import tqdm
+
+from strl_pyg.data import keys as keys_
+from strl_pyg.model.strl_pose import StrLPose
+from strl_pyg.training.checkpoints import (
+    CHECKPOINT_VERSION,
+    init_weights,
+    load_checkpoint,
+    rng_state,
+    save_checkpoint,
+    set_rng_state,
+)
+from strl_pyg.training.config import DATASETS, TrainConfig, add_train_arguments  # noqa: F401
+from strl_pyg.training.data import (
+    StepBatchSampler,
+    _InMemory,
+    _Resampled,
+    build_datasets,
+    check_graph_channels,
+    shuffle_point_matches,
+    unaugmented_poses,
+)
+from strl_pyg.training.log import TrainLogger, plot_history
+from strl_pyg.training.loss import GeometricLoss, PoseLoss
+from strl_pyg.training.validation import evaluate_model, mean_pose
+
+__all__ = [
+    "TrainConfig",
+    "train",
+    "check_run_folder",
+    "RESUME_FREE_FIELDS",
+    "evaluate_model",
+    "mean_pose",
+    "build_datasets",
+    "shuffle_point_matches",
+    "load_checkpoint",
+    "save_checkpoint",
+    "StepBatchSampler",
+    "add_train_arguments",
+    "run_from_args",
+    "plot_history",
+]
+
+# former private names, kept for callers of this module
+_init_weights = init_weights
+_rng_state, _set_rng_state = rng_state, set_rng_state
+_unaugmented_poses = unaugmented_poses
+_Logger = TrainLogger
+
+
+# ----------------------------------------------------------------------------- the loop
+#: TrainConfig fields that may differ between a checkpoint and the run that resumes it: they
+#: do not change what is computed.
+RESUME_FREE_FIELDS = ("steps", "out_dir", "num_workers", "device", "tensorboard",
+                      "checkpoint_every", "checkpoint_minutes")
+
+#: Files whose presence marks a folder as holding a run.
+_RUN_FILES = ("last.pt", "model.pt", "log.csv", "config.json")
+
+
+def check_run_folder(out_dir: str | os.PathLike, overwrite: bool = False) -> None:
+    """Refuses to start a fresh run in a folder that holds one (``last.pt``, ``model.pt``,
+    ``log.csv`` or ``config.json``) unless ``overwrite``."""
+    found = [name for name in _RUN_FILES if (Path(out_dir) / name).exists()]
+    if found and not overwrite:
+        raise ValueError(f"Expected an empty or new run folder, or --resume to continue / "
+                         f"--overwrite to start afresh (got '{out_dir}' holding "
+                         f"{', '.join(found)})")
+
+
+class _StopSignals:
+    """Turns the first SIGINT / SIGTERM into a flag (the loop checkpoints and stops after the
+    step in progress); a second one raises KeyboardInterrupt as usual."""
+
+    def __init__(self) -> None:
+        self.received: str | None = None
+        self._old: dict[int, Any] = {}
+        if threading.current_thread() is not threading.main_thread():
+            return  # signal handlers can only be set from the main thread
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._old[sig] = signal.signal(sig, self._handle)
+
+    def _handle(self, signum: int, frame: Any) -> None:
+        if self.received is not None:
+            self.restore()
+            raise KeyboardInterrupt
+        self.received = signal.Signals(signum).name
+
+    def restore(self) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+        self._old = {}
+
+
+def _dist_info() -> tuple[int, int]:
+    if torch.distributed.is_available() and torch.distributed.is_initialized():
+        return torch.distributed.get_rank(), torch.distributed.get_world_size()
+    return 0, 1
+
+
+def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
+          datasets: Sequence[Any] | None = None, overwrite: bool = False) -> dict[str, Any]:
+    """Trains a :class:`~strl_pyg.StrLPose` as ``cfg`` says.
+
+    With ``resume``, continues from ``<out_dir>/last.pt`` (model, optimiser, RNG states and
+    step), which must have been written with the same config apart from
+    :data:`RESUME_FREE_FIELDS` (``steps``, ``out_dir``, ...). Without it, a run folder that
+    already holds a run is refused unless ``overwrite``.
+
+    ``last.pt`` is written atomically at every validation, every ``cfg.checkpoint_every``
+    steps, every ``cfg.checkpoint_minutes`` minutes and when SIGINT / SIGTERM arrives (the
+    step in progress finishes first; a second signal stops at once). An interrupted run
+    returns with ``result["interrupted"]`` set to the signal's name. Under
+    ``torchrun`` (``WORLD_SIZE`` > 1), the process group is set up here (gloo on CPU, nccl on
+    CUDA) and the model is wrapped in ``DistributedDataParallel``; only rank 0 writes files.
+
+    Returns:
+        A dict with the final validation metrics, the step reached, the validation history,
+        the checkpoint path and the trained ``model`` (unwrapped from DDP).
+    """
+    world_env = int(os.environ.get("WORLD_SIZE", "1"))
+    own_group = False
+    if world_env > 1 and not torch.distributed.is_initialized():
+        backend = "nccl" if cfg.device.startswith("cuda") else "gloo"
+        torch.distributed.init_process_group(backend)
+        own_group = True
+    rank, world = _dist_info()
+    device = cfg.device
+    if device.startswith("cuda") and world > 1:
+        device = f"cuda:{int(os.environ.get('LOCAL_RANK', 0))}"
+        torch.cuda.set_device(device)
+    out_dir = Path(cfg.out_dir)
+    ckpt_path = out_dir / "last.pt"
+
+    torch.manual_seed(cfg.seed)
+    np.random.seed(cfg.seed % 2**32)  # noqa: NPY002
+    random.seed(cfg.seed)
+    model_cfg = cfg.model_config()
+    model = StrLPose(model_cfg).to(device)
+    optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    loss_fn = PoseLoss(translation=model_cfg.translation)
+    geo_fn = GeometricLoss(cfg.geo_threshold_px, cfg.geo_cls_weight,
+                           cfg.geo_ess_weight) if model_cfg.geometric else None
+    start_step, history = 0, []
+    trivial_buf: list[Tensor] = []
+    if cfg.init_from and not resume:
+        init_weights(model, cfg.init_from)
+    if resume:
+        state = load_checkpoint(ckpt_path)
+        saved = TrainConfig.from_dict(state["train_config"])
+        # settings that do not change what is computed may differ (a moved run folder, more
+        # steps, other workers or checkpoint intervals)
+        free = dict.fromkeys(RESUME_FREE_FIELDS)
+        if {**asdict(saved), **free} != {**asdict(cfg), **free}:
+            diff = {k: (v, getattr(cfg, k)) for k, v in asdict(saved).items()
+                    if k not in free and getattr(cfg, k) != v}
+            raise ValueError(f"Expected the checkpoint's config to match this run "
+                             f"(got differences {{key: (checkpoint, now)}} = {diff})")
+        start_step = int(state["step"])
+        if cfg.steps < start_step:
+            raise ValueError(f"Expected --steps of at least the checkpoint's step {start_step} "
+                             f"to resume (got {cfg.steps})")
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(model.upgrade_optimizer_state(state["optimizer"], state["model"]))
+        history = state.get("history", [])
+        trivial_buf = [state["trivial_T"]] if "trivial_T" in state else []
+        set_rng_state(state["rng"])
+    elif rank == 0:
+        check_run_folder(out_dir, overwrite)
+
+    ddp_model = model
+    if world > 1:
+        ddp_model = torch.nn.parallel.DistributedDataParallel(model)
+
+    if datasets is None:
+        datasets = build_datasets(cfg)
+    train_ds, val_ds = (_InMemory(d, cfg.in_memory) for d in datasets)
+    if len(val_ds) == 0:  # refused here, not at the first validation after training steps
+        raise ValueError("Expected a non-empty validation set (got 0 pairs): training "
+                         f"validates every {cfg.val_every} steps and at the end")
+    if len(train_ds):
+        check_graph_channels(model_cfg, cfg.patch_size, train_ds[0])
+    collate = Collater(None)
+    data_seed = cfg.resolved_data_seed
+    sampler = StepBatchSampler(len(train_ds), cfg.batch_size, start_step, cfg.steps, data_seed,
+                               rank, world)
+    loader = DataLoader(_Resampled(train_ds, cfg.num_points, cfg.num_lines, data_seed,
+                                   cfg.swap_prob, cfg.outlier_augment),
+                        batch_sampler=sampler, collate_fn=collate, num_workers=cfg.num_workers)
+    val_keys = [(i, -1, i) for i in range(len(val_ds))]
+    val_loader = DataLoader(_Resampled(val_ds, cfg.num_points, cfg.num_lines, data_seed + 1),
+                            batch_size=cfg.batch_size, collate_fn=collate,
+                            sampler=val_keys, num_workers=cfg.num_workers)
+
+    if rank == 0:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    logger = TrainLogger(out_dir, rank == 0, cfg.tensorboard, start_step)
+    if rank == 0:
+        # what was used: "tensorboard" is false when it was asked for but is not installed
+        (out_dir / "config.json").write_text(
+            json.dumps({**asdict(cfg), "tensorboard": logger.tensorboard}, indent=2))
+    result: dict[str, Any] = {"step": start_step, "checkpoint": str(ckpt_path)}
+    step = start_step
+    t_start, pairs_seen = time.perf_counter(), 0
+
+    def save_last(metrics_done: bool) -> None:
+        if rank != 0:
+            return
+        trivial = torch.cat(trivial_buf)[:4096] if trivial_buf else None
+        save_checkpoint(ckpt_path, {
+            "version": CHECKPOINT_VERSION,
+            "train_config": asdict(cfg),
+            "model_config": model_cfg.to_dict(),
+            "model": model.state_dict(),
+            "optimizer": optimizer.state_dict(),
+            "step": step,
+            "rng": rng_state(),
+            "history": history,
+            **({"trivial_T": trivial} if trivial is not None else {}),
+        })
+        if metrics_done:
+            model.save(out_dir / "model.pt")  # the weights alone, for StrLPose.load
+
+    if start_step >= cfg.steps:
+        result["already_finished"] = True
+    stop = _StopSignals() if rank == 0 and start_step < cfg.steps else None
+    last_save = time.monotonic()
+    bar = tqdm(total=cfg.steps, initial=start_step, desc="train", disable=not progress or rank)
+    for batch in loader:
+        ddp_model.train()
+        batch = batch.to(device)
+        T_gt = batch[keys_.T_0TO1]
+        if sum(t.shape[0] for t in trivial_buf) < 4096:
+            trivial_buf.append(unaugmented_poses(batch).cpu())
+        out = ddp_model(batch)
+        logs = loss_fn(out, T_gt)
+        if geo_fn is not None:
+            geo_fn.ess_weight = cfg.geo_ess_weight if step >= cfg.geo_ess_start else 0.0
+            geo_logs = geo_fn(out, T_gt)
+            logs = {**logs, **{f"geo_{k}" if not k.startswith("geo_") else k: v
+                               for k, v in geo_logs.items()}}
+            logs["loss"] = logs["loss"] + geo_logs["loss"]
+        optimizer.zero_grad(set_to_none=True)
+        logs["loss"].backward()
+        if cfg.grad_clip:
+            torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+        optimizer.step()
+        step += 1
+        pairs_seen += T_gt.shape[0] * world
+        bar.update(1)
+        bar.set_postfix(loss=f"{float(logs['loss'].detach()):.3f}",
+                        rot=f"{float(logs['rot_err_deg']):.2f}",
+                        trans=f"{float(logs['trans_err_deg']):.1f}")
+        logger.log(step, "train", {k: float(v.detach()) for k, v in logs.items()})
+        if step % cfg.val_every == 0 or step == cfg.steps:
+            metrics = {}
+            if rank == 0:
+                trivial = mean_pose(torch.cat(trivial_buf)[:4096], model_cfg.translation)
+                metrics = evaluate_model(model, val_loader, loss_fn, trivial, device)
+                metrics["pairs_per_s"] = pairs_seen / (time.perf_counter() - t_start)
+                logger.log(step, "val", metrics)
+                history.append({"step": step, **metrics})
+                save_last(metrics_done=True)
+                last_save = time.monotonic()
+                bar.write(f"step {step}: val rot {metrics['rot_err_deg']:.2f} deg "
+                          f"(trivial {metrics['trivial_rot_err_deg']:.2f}), trans "
+                          f"{metrics['trans_err_deg']:.2f} deg "
+                          f"(trivial {metrics['trivial_trans_err_deg']:.2f}), "
+                          f"AUC@10 {metrics['auc10']:.3f}")
+                if "geo_rot_err_med" in metrics:
+                    bar.write(f"step {step}: geometric head median rot "
+                              f"{metrics['geo_rot_err_med']:.2f} deg, trans "
+                              f"{metrics['geo_trans_err_med']:.2f} deg, "
+                              f"AUC@10 {metrics['geo_auc10']:.3f}")
+            if world > 1:
+                torch.distributed.barrier()
+            result.update(metrics)
+        elif rank == 0 and (
+                (cfg.checkpoint_every and step % cfg.checkpoint_every == 0)
+                or (cfg.checkpoint_minutes
+                    and time.monotonic() - last_save >= 60.0 * cfg.checkpoint_minutes)
+                or stop.received):
+            save_last(metrics_done=False)
+            last_save = time.monotonic()
+        if stop is not None and stop.received:
+            result["interrupted"] = stop.received
+            break
+    bar.close()
+    if stop is not None:
+        stop.restore()
+    logger.close()
+    result["step"] = step
+    result["history"] = history
+    result["model"] = model
+    if own_group:
+        torch.distributed.destroy_process_group()
+    return result
+
+
+# ----------------------------------------------------------------------------- command line
+def _parse_value(text: str):
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
+def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
+    """Runs training from parsed :func:`add_train_arguments` flags; returns an exit code."""
+    def pairs(items):
+        out = {}
+        for item in items:
+            if "=" not in item:
+                ap.error(f"expected KEY=VALUE (got {item!r})")
+            k, v = item.split("=", 1)
+            out[k] = _parse_value(v)
+        return out
+
+    split = lambda s: None if s is None else [x.strip() for x in s.split(",")]  # noqa: E731
+    try:
+        cfg = TrainConfig(
+            dataset=args.dataset, data_root=args.data_root, cache_dir=args.cache_dir,
+            scene=pairs(args.scene), scene_kinds=split(args.scene_kinds),
+            train_pairs=args.train_pairs, val_pairs=args.val_pairs, kitti_k=args.kitti_k,
+            train_sequences=split(args.train_sequences), val_sequences=split(args.val_sequences),
+            limit=args.limit, model=args.model, model_overrides=pairs(args.set), lr=args.lr,
+            batch_size=args.batch_size, steps=args.steps, val_every=args.val_every,
+            num_points=args.num_points, num_lines=args.num_lines, patch_size=args.patch_size,
+            swap_prob=args.swap_prob, init_from=args.init_from,
+            seed=args.seed, out_dir=args.out, num_workers=args.workers, device=args.device,
+            tensorboard=not args.no_tensorboard, scene_mix=args.scene_mix,
+            matches=args.matches, outlier_augment=args.outlier_augment,
+            geo_ess_start=args.geo_ess_start, data_seed=args.data_seed,
+            checkpoint_every=args.checkpoint_every, checkpoint_minutes=args.checkpoint_minutes,
+        )
+        cfg.model_config()  # validate the model overrides before any work
+        check_device(cfg.device)
+        if args.resume and args.overwrite:
+            raise ValueError("Expected at most one of --resume and --overwrite (got both)")
+        result = train(cfg, resume=args.resume, progress=not args.no_progress,
+                       overwrite=args.overwrite)
+    except (ValueError, TypeError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    last = Path(cfg.out_dir) / "last.pt"
+    if result.get("already_finished"):
+        print(f"run already finished: '{last}' is at step {result['step']} = --steps; nothing "
+              f"to train (pass a larger --steps with --resume to continue)")
+        return 0
+    if result.get("interrupted"):
+        print(f"stopped by {result['interrupted']} at step {result['step']} of {cfg.steps}: "
+              f"kept '{last}' (model, optimiser, RNG, step); continue with the same command "
+              f"and --resume", file=sys.stderr)
+    if result.get("history"):
+        png = plot_history(result["history"], Path(cfg.out_dir) / "curves.png",
+                           log=Path(cfg.out_dir) / "log.csv")
+        print(f"curves: {png}")
+    keys = ("rot_err_deg", "trans_err_deg", "auc10", "trivial_rot_err_deg",
+            "trivial_trans_err_deg", "pairs_per_s")
+    print(json.dumps({"step": result["step"], **{k: result[k] for k in keys if k in result}}))
+    return 130 if result.get("interrupted") else 0
+
+
+def check_device(device: str) -> None:
+    """One-line ``ValueError`` for a device string torch cannot parse or that is absent."""
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError):
+        raise ValueError(f"Expected --device cpu, cuda, cuda:N or mps (got {device!r})") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"Expected --device cpu on this machine (got {device!r}: torch "
+                         f"{torch.__version__} sees no CUDA device)")
+    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
+        raise ValueError(f"Expected a CUDA device index below {torch.cuda.device_count()} "
+                         f"(got {device!r})")
+    if dev.type == "mps" and not torch.backends.mps.is_available():
+        raise ValueError(f"Expected --device cpu on this machine (got {device!r}: MPS is not "
+                         f"available)")
+    if dev.type not in ("cpu", "cuda", "mps"):
+        raise ValueError(f"Expected --device cpu, cuda, cuda:N or mps (got {device!r})")
