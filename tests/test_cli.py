@@ -187,7 +187,8 @@ def test_help_and_argument_errors_do_not_import_torch(argv, code):
 def test_import_strl_pyg_is_light_and_names_resolve_lazily():
     out, _ = _run_python(
         f"import sys, strl_pyg\nprint([m for m in {HEAVY!r} if m in sys.modules])\n"
-        "from strl_pyg import StrLPose, PairMatches\nfrom strl_pyg.data import datasets, keys\n"
+        "from strl_pyg import StrLPose, PairMatches\nfrom strl_pyg import datasets\n"
+        "from strl_pyg.data import keys\n"
         "print(StrLPose.__module__, PairMatches.__module__, datasets.__name__, keys.__name__)")
     first, second = out.splitlines()
     assert first == "[]"
@@ -291,7 +292,9 @@ def test_library_key_error_becomes_one_line(capsys, monkeypatch):
     def fail(args):
         raise KeyError("Expected keys ['points0'] in match file 'm.npz' (got [])")
 
-    monkeypatch.setattr(cli, "cmd_bench", fail)
+    from strl_pyg.cli import bench
+
+    monkeypatch.setattr(bench, "cmd_bench", fail)
     assert cli.main(["bench"]) == 2
     assert capsys.readouterr().err == "error: Expected keys ['points0'] in match file " \
                                       "'m.npz' (got [])\n"

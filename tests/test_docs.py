@@ -34,7 +34,8 @@ DOC_FILES = sorted([REPO_ROOT / "README.md", REPO_ROOT / "benchmarks" / "README.
 RUN_MARKER = "<!-- test: run -->"
 SHELL_LANGS = {"bash", "sh", "shell", "console", ""}
 #: Deprecated names that a page may mention on purpose (to say that they are deprecated).
-DEPRECATED_MENTIONS = {"docs/architecture.md": {"strl_pyg.fusion", "strl_pyg.synthetic.metrics"}}
+DEPRECATED_MENTIONS = {"docs/architecture.md": {"strl_pyg.fusion", "strl_pyg.synthetic.metrics",
+                                                "strl_pyg.pose_methods", "strl_pyg.baselines"}}
 
 _FENCE = re.compile(r"^(\s*)(```|~~~)\s*([\w+-]*)")
 _INLINE = re.compile(r"`([^`\n]+)`")
@@ -307,6 +308,10 @@ def resolve_dotted(name: str) -> str | None:
     parts = name.split(".")
     for k in range(len(parts), 0, -1):
         modname = ".".join(parts[:k])
+        from strl_pyg._compat import OLD_PATHS
+
+        if modname in OLD_PATHS:  # a 0.2 path: imports, with a DeprecationWarning
+            return f"{modname} is deprecated (now {OLD_PATHS[modname]})"
         try:
             obj = importlib.import_module(modname)
         except ModuleNotFoundError:

@@ -82,7 +82,8 @@ def test_moved_modules_keep_their_old_import_paths():
     from strl_pyg.synthetic import match_quality, metrics
 
     assert metrics.evaluate_matches is match_quality.evaluate_matches
-    from strl_pyg import checkpoints, cli, training
+    from strl_pyg import cli, training
+    from strl_pyg.training import checkpoints
 
     assert cli.default_checkpoint is checkpoints.default_checkpoint
     assert training.load_checkpoint is checkpoints.load_checkpoint

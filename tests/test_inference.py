@@ -15,10 +15,12 @@ import numpy as np
 import pytest
 import torch
 
-from strl_pyg import cli, inference, pose_methods
+from strl_pyg import cli
 from strl_pyg.data import PairMatches
 from strl_pyg.estimation.classical import BaselineResult
 from strl_pyg.geometry import Pose
+from strl_pyg.inference import estimator as inference
+from strl_pyg.inference import methods as pose_methods
 from strl_pyg.inference.estimator import (
     METHODS,
     MethodResult,
@@ -282,8 +284,12 @@ def test_a_new_method_is_one_registration(pair, monkeypatch):
 
 
 def test_the_split_modules_stay_importable_from_inference():
-    from strl_pyg import pose_input, pose_methods, pose_record
+    import strl_pyg.inference as face
+    from strl_pyg.inference import inputs as pose_input
+    from strl_pyg.inference import record as pose_record
 
+    for name in inference.__all__:  # the folder's face gives every name of its modules
+        assert getattr(face, name) is getattr(inference, name), name
     assert set(inference.__all__) == {  # inference.__all__ before the split
         "STATUSES", "RECOMMENDED_ORDER", "recommended_order", "MIN_POINTS", "ZERO_PARALLAX_PX",
         "ZERO_PARALLAX_FRACTION", "FOCAL_RANGE", "METHODS", "MethodSpec", "MethodResult",
@@ -295,10 +301,11 @@ def test_the_split_modules_stay_importable_from_inference():
     assert list(inference.METHODS) == ["regression", "opencv", "poselib", "fused", "geometric",
                                        "guided"]
     assert inference.METHODS["fused"].fn is pose_methods._fused
-    # a name the module imported in 0.1.x (gone after the split, restored)
-    from strl_pyg import baselines
+    # a name the module imported in 0.1.x (gone after the split, restored), also on the face
+    from strl_pyg.estimation import classical
 
-    assert inference.estimate_relative_pose is baselines.estimate_relative_pose
+    assert inference.estimate_relative_pose is classical.estimate_relative_pose
+    assert face.estimate_relative_pose is classical.estimate_relative_pose
 
 
 def test_method_results_hold_a_pose_only_when_ok():

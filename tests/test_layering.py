@@ -215,6 +215,36 @@ def test_no_module_level_import_cycle():
     assert cycle is None, f"module-level import cycle: {' -> '.join(cycle)}"
 
 
+def old_path_imports(package: Path = PACKAGE, roots: tuple[Path, ...] = ()) -> list[str]:
+    """Imports of 0.2 module paths (:data:`strl_pyg._compat.OLD_PATHS`) in the code itself:
+    they work, but warn, and hide which folder the code depends on."""
+    from strl_pyg._compat import OLD_PATHS
+
+    bad = []
+    for path in [*package.rglob("*.py"), *(p for r in roots for p in r.rglob("*.py"))]:
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+            bad += [f"{path.relative_to(package.parent)}:{node.lineno} imports {n}"
+                    for n in names if n in OLD_PATHS]
+    return bad
+
+
+def test_no_code_imports_an_old_module_path():
+    bad = old_path_imports(PACKAGE, (ROOT / "examples", ROOT / "benchmarks"))
+    assert not bad, "imports of deprecated 0.2 paths:\n" + "\n".join(bad)
+
+
+def test_planted_old_path_import_is_caught(tmp_path):
+    (tmp_path / "strl_pyg").mkdir()
+    (tmp_path / "strl_pyg" / "a.py").write_text("from strl_pyg.data import datasets\n")
+    assert old_path_imports(tmp_path / "strl_pyg") == [
+        "strl_pyg/a.py:1 imports strl_pyg.data.datasets"]
+
+
 def test_no_module_over_the_size_limit():
     long = {str(p.relative_to(ROOT)): n for p in PACKAGE.rglob("*.py")
             if (n := len(p.read_text().splitlines())) > MAX_LINES}

@@ -125,7 +125,7 @@ class StepBatchSampler(Sampler):
 
 def build_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
     """Training and validation datasets of pair graphs (without resampling)."""
-    from strl_pyg.data import datasets as D
+    from strl_pyg import datasets as D
 
     if cfg.dataset == "synthetic" and cfg.scene_mix is not None:
         return _mixed_datasets(cfg)
@@ -251,7 +251,7 @@ def check_sources(cfg: TrainConfig, train: Any, val: Any, matched: bool = False)
 def _mixed_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
     """Training / validation sets drawn from a named scene distribution
     (:func:`strl_pyg.synthetic.scene_distribution`: one scene configuration per seed)."""
-    from strl_pyg.data import datasets as D
+    from strl_pyg import datasets as D
     from strl_pyg.synthetic.distributions import DISTRIBUTIONS, scene_distribution
 
     if cfg.scene_mix not in DISTRIBUTIONS:
