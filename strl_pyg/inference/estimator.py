@@ -56,6 +56,7 @@ from strl_pyg.inference.inputs import (
     forward_pose,
     input_warnings,
     intrinsics_problems,
+    network_pose,  # noqa: F401  (importable from here like the module's other names)
     prepare_graph,
     prepare_matches,
     zero_parallax,
