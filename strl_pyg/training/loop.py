@@ -91,7 +91,7 @@ _Logger = TrainLogger
 # ----------------------------------------------------------------------------- the loop
 #: TrainConfig fields that may differ between a checkpoint and the run that resumes it: they
 #: do not change what is computed.
-RESUME_FREE_FIELDS = ("steps", "out_dir", "num_workers", "device", "tensorboard",
+RESUME_FREE_FIELDS = ("steps", "out_dir", "num_workers", "device", "tensorboard", "val_every",
                       "checkpoint_every", "checkpoint_minutes")
 
 #: Files whose presence marks a folder as holding a run.

@@ -1,0 +1,111 @@
+"""Training never loses work and says what it does: periodic and signal checkpoints, an
+existing run folder refused without --resume / --overwrite, a moved run folder resumes, a
+finished run says so, bad --device / --set are one line (the issue "First contact, round 3":
+before, last.pt was written only at validation, a run folder was overwritten silently, resume
+compared out_dir as a string, --resume --steps 20 on a run at step 30 exited 0 doing nothing,
+--device tpu was a 40-line traceback, an unknown --set key a TypeError)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from strl_pyg.training import TrainConfig, train
+from strl_pyg.training.loop import check_device, check_run_folder
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _cfg(out: Path, **kw) -> TrainConfig:
+    base = dict(train_pairs=4, val_pairs=2, steps=4, val_every=100, batch_size=2,
+                num_points=32, num_lines=16, scene_kinds=["boxes"], tensorboard=False,
+                model_overrides=dict(hidden=16, layers=1, heads=2), out_dir=str(out))
+    return TrainConfig(**{**base, **kw})
+
+
+def _step(path: Path) -> int:
+    return int(torch.load(path / "last.pt", weights_only=True)["step"])
+
+
+def test_last_pt_is_written_every_n_steps_not_only_at_validation(tmp_path, monkeypatch):
+    from strl_pyg.training import loop
+
+    seen = []
+    real = loop.save_checkpoint
+    monkeypatch.setattr(loop, "save_checkpoint", lambda p, s: (seen.append(s["step"]),
+                                                               real(p, s)))
+    train(_cfg(tmp_path / "run", steps=5, val_every=5, checkpoint_every=2), progress=False)
+    assert seen == [2, 4, 5]  # every 2 steps, then the validation at the end
+
+
+def test_a_signal_checkpoints_the_step_in_progress_and_resume_continues(tmp_path, monkeypatch):
+    from strl_pyg.training import loop
+
+    real = loop.TrainLogger.log
+
+    def log(self, step, split, values):  # SIGTERM arrives during step 3
+        if step == 3 and split == "train":
+            os.kill(os.getpid(), signal.SIGTERM)
+        return real(self, step, split, values)
+
+    monkeypatch.setattr(loop.TrainLogger, "log", log)
+    out = tmp_path / "run"
+    res = train(_cfg(out, steps=400, val_every=1000), progress=False)
+    monkeypatch.setattr(loop.TrainLogger, "log", real)
+    assert res["interrupted"] == "SIGTERM" and res["step"] == 3
+    assert _step(out) == res["step"]
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # handlers restored
+    more = train(_cfg(out, steps=res["step"] + 2, val_every=1000), resume=True, progress=False)
+    assert more["step"] == res["step"] + 2 and "interrupted" not in more
+
+
+def test_an_existing_run_folder_needs_resume_or_overwrite(tmp_path):
+    out = tmp_path / "run"
+    train(_cfg(out, steps=2, val_every=2), progress=False)
+    with pytest.raises(ValueError, match="--resume to continue / --overwrite to start afresh"):
+        train(_cfg(out, steps=2, val_every=2), progress=False)
+    res = train(_cfg(out, steps=2, val_every=2, seed=1), progress=False, overwrite=True)
+    assert res["step"] == 2
+    check_run_folder(tmp_path / "empty")  # a new folder is fine
+
+
+def test_a_moved_run_folder_resumes_and_a_finished_run_says_so(tmp_path):
+    out = tmp_path / "run"
+    train(_cfg(out, steps=2, val_every=2), progress=False)
+    moved = tmp_path / "elsewhere" / "run"
+    moved.parent.mkdir()
+    shutil.move(str(out), str(moved))
+    spelled = str(tmp_path / "elsewhere" / ".." / "elsewhere" / "run")  # another spelling
+    res = train(_cfg(Path(spelled), steps=3, val_every=3), resume=True, progress=False)
+    assert res["step"] == 3
+    done = train(_cfg(moved, steps=3, val_every=3), resume=True, progress=False)
+    assert done.get("already_finished") and done["step"] == 3
+    with pytest.raises(ValueError, match="at least the checkpoint's step 3"):
+        train(_cfg(moved, steps=2, val_every=2), resume=True, progress=False)
+
+
+def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(REPO / "examples" / "train.py"), *args],
+                          capture_output=True, text=True, timeout=600, cwd=cwd)
+
+
+def test_bad_device_and_unknown_set_key_are_one_line(tmp_path):
+    for device in ("tpu", "gpu"):
+        with pytest.raises(ValueError, match=rf"Expected --device cpu, cuda.*'{device}'"):
+            check_device(device)
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="sees no CUDA device"):
+            check_device("cuda")
+    res = _cli("--steps", "1", "--out", str(tmp_path / "a"), "--device", "tpu", cwd=tmp_path)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert res.stderr.startswith("error: Expected --device")
+    res = _cli("--steps", "1", "--out", str(tmp_path / "b"), "--set", "widht=64", cwd=tmp_path)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+    assert "hidden, layers" in res.stderr and "(got widht)" in res.stderr
