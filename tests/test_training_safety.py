@@ -109,3 +109,32 @@ def test_bad_device_and_unknown_set_key_are_one_line(tmp_path):
     res = _cli("--steps", "1", "--out", str(tmp_path / "b"), "--set", "widht=64", cwd=tmp_path)
     assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
     assert "hidden, layers" in res.stderr and "(got widht)" in res.stderr
+
+
+def test_a_cnn_row_on_a_mix_of_image_sizes_is_refused_before_any_matching(tmp_path):
+    """Before: torch.cat's 'Sizes of tensors must match' from the collater at the first step
+    (the +R rows batch whole images)."""
+    with pytest.raises(ValueError, match="one image size for a model with visual='cnn'"):
+        train(_cfg(tmp_path / "r", scene_mix="mixed_small", model="R"), progress=False)
+    assert not (tmp_path / "r").exists()  # refused before the run folder was made
+
+
+def test_images_of_two_sizes_in_one_cnn_batch_are_one_line():
+    from strl_pyg.data import PairMatches, build_pair_graph
+    from strl_pyg.model import StrLPoseConfig
+    from strl_pyg.training.loop import _collater
+
+    rng = torch.Generator().manual_seed(0)
+
+    def graph(h, w):
+        p0 = torch.rand(12, 2, generator=rng).numpy() * [w - 1, h - 1]
+        img = (torch.rand(h, w, generator=rng).numpy() * 255).astype("uint8")
+        m = PairMatches(p0, p0 + 0.5, image_size0=(h, w), image_size1=(h, w), image0=img,
+                        image1=img)
+        return build_pair_graph(m, keep_images=True)
+
+    collate = _collater(StrLPoseConfig.ablation("R"))
+    assert collate([graph(40, 60), graph(40, 60)]).num_graphs == 2
+    with pytest.raises(ValueError, match=r"one image size per batch .*\(got sizes \[\(32, 48\), "
+                                         r"\(40, 60\)\]\)"):
+        collate([graph(40, 60), graph(32, 48)])

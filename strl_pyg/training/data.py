@@ -258,6 +258,10 @@ def _mixed_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
         raise ValueError(f"Expected scene_mix in {tuple(DISTRIBUTIONS)} (got {cfg.scene_mix!r})")
     dist = scene_distribution(cfg.scene_mix)
     keep = cfg.model_config().visual == "cnn"
+    if keep and len(dist.sizes) > 1:  # before any matching: the batch could not be collated
+        raise ValueError(f"Expected a scene mix of one image size for a model with "
+                         f"visual='cnn' (its CNN batches whole images; e.g. --scene-mix "
+                         f"lines_small) (got '{cfg.scene_mix}' with sizes {list(dist.sizes)})")
     kw = dict(matches="frontend", cache_dir=cfg.cache_dir) if cfg.matches == "frontend" else {}
     sets = []
     for n, base in ((cfg.train_pairs, cfg.resolved_data_seed * 10_000_000),

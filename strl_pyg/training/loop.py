@@ -108,6 +108,26 @@ def check_run_folder(out_dir: str | os.PathLike, overwrite: bool = False) -> Non
                          f"{', '.join(found)})")
 
 
+def _collater(model_cfg: Any):
+    """PyG's collater; images of different sizes (a model with ``visual='cnn'`` batches whole
+    images) are a one-line ``ValueError`` instead of torch's ``torch.cat`` error."""
+    base = Collater(None)
+
+    def collate(items):
+        try:
+            return base(items)
+        except RuntimeError as err:
+            if model_cfg.visual != "cnn" or "Sizes of tensors must match" not in str(err):
+                raise
+            sizes = sorted({tuple(getattr(d, keys_.IMAGE0).shape[-2:]) for d in items
+                            if keys_.IMAGE0 in d})
+            raise ValueError(f"Expected one image size per batch for a model with "
+                             f"visual='cnn' (its CNN batches whole images) (got sizes "
+                             f"{sizes}); train on one size or use visual='pixel'") from None
+
+    return collate
+
+
 class _StopSignals:
     """Turns the first SIGINT / SIGTERM into a flag (the loop checkpoints and stops after the
     step in progress); a second one raises KeyboardInterrupt as usual."""
@@ -220,7 +240,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
                          f"validates every {cfg.val_every} steps and at the end")
     if len(train_ds):
         check_graph_channels(model_cfg, cfg.patch_size, train_ds[0])
-    collate = Collater(None)
+    collate = _collater(model_cfg)
     data_seed = cfg.resolved_data_seed
     sampler = StepBatchSampler(len(train_ds), cfg.batch_size, start_step, cfg.steps, data_seed,
                                rank, world)
