@@ -70,6 +70,7 @@ from strl_pyg.inference.methods import (
     _geometric,
     _guided,
     _regression,
+    _vp,
     have_poselib,
 )
 from strl_pyg.inference.record import STATUSES, MethodResult, PoseEstimate
@@ -162,6 +163,7 @@ register_method("poselib", _classical("poselib"), available=have_poselib)
 register_method("fused", _fused)
 register_method("geometric", _geometric)
 register_method("guided", _guided)
+register_method("vp", _vp)
 
 
 # ----------------------------------------------------------------------------- estimator

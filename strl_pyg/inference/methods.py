@@ -10,6 +10,10 @@ the context they share; :mod:`strl_pyg.inference.estimator` registers them in :d
 * ``geometric``: the weighted eight-point solve of the geometric head, refined.
 * ``guided``: the classical solver guided by the geometric head's inlier weights
   (:func:`~strl_pyg.estimation.guided.guided_estimate`).
+* ``vp``: the vanishing-point rotation of the matched lines and a 2-point translation
+  (:func:`~strl_pyg.estimation.vanishing.vanishing_point_pose`); opt-in: not in the recommended
+  order, which it made no better on the real point-poor sets
+  (``benchmarks/results_vanishing.md``).
 
 A method is ``fn(matches, context) -> MethodResult``; ``context.results`` holds the methods
 run before it. Covariances (:mod:`strl_pyg.inference.record`): the network's from its predicted
@@ -117,6 +121,26 @@ def _classical(name: str) -> MethodFn:
         return _add_bootstrap(rec, boot, ctx.bootstrap, "first-order")
 
     return fn
+
+
+def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
+    """The vanishing-point rotation and 2-point translation
+    (:func:`~strl_pyg.estimation.vanishing.vanishing_point_pose`): needs line matches, and
+    answers where the points are too few for the 5-point solvers; its covariance is the
+    first-order one of its inlier points (no bootstrap, not calibrated)."""
+    from strl_pyg.estimation.vanishing import vanishing_point_pose
+
+    if matches.num_lines == 0:
+        return MethodResult("vp", "failed", warnings=[
+            "vp needs line matches (got none: FrontendConfig(lines=True), or lines0/lines1)"])
+    res = vanishing_point_pose(matches, ctx.threshold_px, seed=ctx.seed)
+    if not res.success:
+        return MethodResult("vp", "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
+                            info=dict(res.info), warnings=[f"vp: {res.info['reason']}"])
+    rec = _with_covariance("vp", res.pose.matrix().numpy(), matches, ctx.threshold_px,
+                           time_ms=res.time_ms, info=dict(res.info), raw=res)
+    rec.info["covariance_kind"] = "first-order"
+    return rec
 
 
 def _full_forward(matches: PairMatches, ctx: MethodContext):

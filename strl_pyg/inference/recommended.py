@@ -7,8 +7,8 @@ same recommended pose but runs the methods of that order one at a time, stopping
 ``"ok"`` one (with the methods it needs: ``fused`` reads ``regression`` and a classical
 estimate, ``guided`` reuses the classical one; or at the first ``"unreliable"`` one when the
 intrinsics fail the input checks: every later pose would be too), and matches line segments
-only once a method that reads them (the network's) is about to run: the classical solvers use
-points only.
+only once a method that reads them (the network's, ``vp``) is about to run: the classical
+solvers use points only.
 
 Same pose: every method is deterministic in the matches and the seed, the point matches do not
 depend on whether lines are matched (``filter_points`` off), and a method's result depends only
@@ -27,6 +27,8 @@ __all__ = ["estimate_recommended", "estimate_methods", "methods_needed", "NETWOR
 
 #: Methods that run the network (they read line segments and image patches).
 NETWORK_METHODS = ("regression", "geometric", "guided", "fused")
+#: Methods that read line segments: the network's and the vanishing-point solver.
+LINE_METHODS = (*NETWORK_METHODS, "vp")
 #: Methods a method reads the results of (classical: the first installed of the two).
 DEPENDENCIES = {"fused": ("regression", "classical"), "guided": ("classical",)}
 
@@ -80,7 +82,7 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
     done: dict[bool, dict] = {}  # results per match set: each method runs at most once
     for name in order:
         run = methods_needed((*run, name))
-        lines = cfg.lines and any(m in NETWORK_METHODS for m in run)
+        lines = cfg.lines and any(m in LINE_METHODS for m in run)
         if lines not in matches:
             try:
                 matches[lines] = match_images(image0, image1, K0, K1,

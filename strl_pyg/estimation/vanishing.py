@@ -1,0 +1,284 @@
+"""Relative pose from few points and many lines: vanishing-point rotation, 2-point translation.
+
+A line match alone does not constrain the relative pose (two image lines always back-project
+to intersecting planes), but a family of parallel scene lines does: its vanishing direction
+``d0`` in camera 0 and ``d1`` in camera 1 satisfy ``d1 = +-R d0``. Two such families give the
+rotation; with ``R`` known, every point match gives one linear constraint on the translation
+direction (``t . (x1 x R x0) = 0``), so two point matches fix it. That is the solver of this
+module (:func:`vanishing_point_pose`), for the regime where the 5-point solvers have too few
+point matches to find or support a pose:
+
+1. **Vanishing directions of the matched lines**, found jointly in both images: RANSAC over
+   pairs of line matches (each pair, if parallel in the scene, gives ``d0`` and ``d1``), the
+   consensus being the line matches whose segments point at the vanishing point within
+   ``line_threshold_px`` in *both* images; up to three directions, greedily, each refined on
+   its lines (the null vector of their interpretation-plane normals).
+2. **Rotation hypotheses** from every pair of directions and every sign assignment that
+   keeps their angle (``R`` preserves ``d0a . d0b``), by orthogonal Procrustes.
+3. **Translation** for each rotation by 2-point RANSAC over the point matches (every pair
+   when there are few), scored by MSAC on the Sampson distance, its sign by cheirality.
+4. The best hypothesis is refined on its inlier points (:func:`~strl_pyg.geometry.essential.
+   refine_pose`, 5 degrees of freedom), kept only while the rotation stays within
+   ``max_refine_deg`` of the vanishing-point rotation (the points are few: the lines anchor it).
+
+The result is a :class:`~strl_pyg.estimation.classical.BaselineResult` (method ``"vp"``), and
+:class:`~strl_pyg.inference.PoseEstimator` checks its support on the point matches like every
+solver's (:func:`~strl_pyg.inference.support.check_support`).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+
+from strl_pyg.data.matches import PairMatches
+from strl_pyg.estimation.classical import BaselineResult, _failed, normalised_matches
+from strl_pyg.geometry import Pose
+
+__all__ = ["vanishing_directions", "vanishing_point_pose", "VP_MIN_LINES", "VP_MIN_POINTS"]
+
+#: Line matches a vanishing direction needs (in both images) to be used.
+VP_MIN_LINES = 4
+#: Point matches the translation needs at the least (two fix it; the rest check it).
+VP_MIN_POINTS = 5
+
+
+def _homogeneous(x: np.ndarray) -> np.ndarray:
+    return np.concatenate([x, np.ones(x.shape[:-1] + (1,))], axis=-1)
+
+
+def _segments(lines: np.ndarray, K: np.ndarray):
+    """Pixel endpoints ``[M, 2, 3]``, midpoints ``[M, 3]`` and unit interpretation-plane
+    normals (normalised camera coordinates) ``[M, 3]`` of ``[M, 2, 2]`` pixel segments."""
+    ph = _homogeneous(lines)
+    Kinv = np.linalg.inv(K)
+    rays = ph @ Kinv.T
+    n = np.cross(rays[:, 0], rays[:, 1])
+    n /= np.linalg.norm(n, axis=1, keepdims=True).clip(1e-300)
+    return ph, ph.mean(axis=1), n
+
+
+def _vp_residual_px(d: np.ndarray, K: np.ndarray, ends: np.ndarray, mids: np.ndarray):
+    """Pixel distance of each segment's endpoints to the line through its midpoint and the
+    vanishing point ``K d`` (``d`` ``[H, 3]``): ``[H, M]`` (the larger of the two ends)."""
+    v = d @ K.T  # [H, 3] homogeneous vanishing points (third coordinate 0 at infinity)
+    l = np.cross(mids[None], v[:, None])  # [H, M, 3]
+    norm = np.linalg.norm(l[..., :2], axis=-1).clip(1e-300)
+    dist = np.abs(np.einsum("hmk,mek->hme", l, ends)) / norm[..., None]
+    return dist.max(axis=-1)
+
+
+def vanishing_directions(matches: PairMatches, line_threshold_px: float = 2.0,
+                         max_directions: int = 3, min_lines: int = VP_MIN_LINES,
+                         max_hypotheses: int = 3000, min_angle_deg: float = 10.0,
+                         seed: int = 0) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Vanishing directions shared by the matched lines of both images (module docstring).
+
+    Returns:
+        up to ``max_directions`` tuples ``(d0, d1, inliers)``: unit directions in camera 0 and
+        camera 1 coordinates (``d1 = +-R d0``; the sign is not known) and the boolean mask of
+        the line matches that point at them in both images, strongest first.
+    """
+    if matches.num_lines < 2 or not matches.has_intrinsics:
+        return []
+    K0, K1 = np.asarray(matches.K0, float), np.asarray(matches.K1, float)
+    e0, m0, n0 = _segments(np.asarray(matches.lines0, float), K0)
+    e1, m1, n1 = _segments(np.asarray(matches.lines1, float), K1)
+    M = len(n0)
+    rng = np.random.default_rng(seed)
+    pairs = np.array(np.triu_indices(M, 1)).T
+    if len(pairs) > max_hypotheses:
+        pairs = pairs[rng.choice(len(pairs), max_hypotheses, replace=False)]
+    free = np.ones(M, dtype=bool)
+    found: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    cos_min = np.cos(np.radians(min_angle_deg))
+    for _ in range(max_directions):
+        ok = free[pairs[:, 0]] & free[pairs[:, 1]]
+        hyp = pairs[ok]
+        if len(hyp) == 0:
+            break
+        d0 = np.cross(n0[hyp[:, 0]], n0[hyp[:, 1]])
+        d1 = np.cross(n1[hyp[:, 0]], n1[hyp[:, 1]])
+        good = (np.linalg.norm(d0, axis=1) > 1e-6) & (np.linalg.norm(d1, axis=1) > 1e-6)
+        d0, d1 = d0[good], d1[good]
+        if len(d0) == 0:
+            break
+        d0 /= np.linalg.norm(d0, axis=1, keepdims=True)
+        d1 /= np.linalg.norm(d1, axis=1, keepdims=True)
+        if found:  # not (nearly) a direction already found
+            prev = np.stack([f[0] for f in found])
+            keep = (np.abs(d0 @ prev.T) < cos_min).all(axis=1)
+            d0, d1 = d0[keep], d1[keep]
+            if len(d0) == 0:
+                break
+        inl = ((_vp_residual_px(d0, K0, e0, m0) < line_threshold_px)
+               & (_vp_residual_px(d1, K1, e1, m1) < line_threshold_px) & free[None])
+        best = int(inl.sum(axis=1).argmax())
+        mask = inl[best]
+        if mask.sum() < min_lines:
+            break
+        # refine on the inlier lines: the direction closest to every interpretation plane
+        for _ in range(2):
+            d0b = np.linalg.svd(n0[mask])[2][-1]
+            d1b = np.linalg.svd(n1[mask])[2][-1]
+            new = ((_vp_residual_px(d0b[None], K0, e0, m0)[0] < line_threshold_px)
+                   & (_vp_residual_px(d1b[None], K1, e1, m1)[0] < line_threshold_px) & free)
+            if new.sum() < min_lines:
+                break
+            mask = new
+        d0b = np.linalg.svd(n0[mask])[2][-1]
+        d1b = np.linalg.svd(n1[mask])[2][-1]
+        if found and (np.abs(np.stack([f[0] for f in found]) @ d0b) >= cos_min).any():
+            break
+        found.append((d0b, d1b, mask))
+        free &= ~mask
+    return found
+
+
+def _procrustes(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The rotation ``R`` minimising ``sum |b_i - R a_i|^2`` (``a``, ``b`` ``[k, 3]``)."""
+    U, _, Vt = np.linalg.svd(b.T @ a)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    return U @ D @ Vt
+
+
+def _rotations(dirs, max_angle_error_deg: float) -> list[np.ndarray]:
+    """Rotation hypotheses of every pair of directions and sign assignment (module step 2)."""
+    out = []
+    tol = np.sin(np.radians(max_angle_error_deg))
+    for i in range(len(dirs)):
+        for j in range(i + 1, len(dirs)):
+            a0, a1 = dirs[i][0], dirs[i][1]
+            b0, b1 = dirs[j][0], dirs[j][1]
+            for sa in (1.0, -1.0):
+                for sb in (1.0, -1.0):
+                    u1, v1 = sa * a1, sb * b1
+                    if abs(a0 @ b0 - u1 @ v1) > tol:
+                        continue  # R keeps the angle between two directions
+                    c0 = np.cross(a0, b0)
+                    c1 = np.cross(u1, v1)
+                    out.append(_procrustes(np.stack([a0, b0, c0 / np.linalg.norm(c0)]),
+                                           np.stack([u1, v1, c1 / np.linalg.norm(c1)])))
+    return out
+
+
+def _sampson(R: np.ndarray, T: np.ndarray, h0: np.ndarray, h1: np.ndarray) -> np.ndarray:
+    """Sampson distances ``[P, N]`` of the matches under ``R`` and translations ``T`` ``[P, 3]``
+    (normalised units)."""
+    tx = np.zeros((len(T), 3, 3))
+    tx[:, 0, 1], tx[:, 0, 2], tx[:, 1, 2] = -T[:, 2], T[:, 1], -T[:, 0]
+    tx[:, 1, 0], tx[:, 2, 0], tx[:, 2, 1] = T[:, 2], -T[:, 1], T[:, 0]
+    E = tx @ R  # [P, 3, 3]
+    Ex0 = np.einsum("pij,nj->pni", E, h0)
+    Etx1 = np.einsum("pji,nj->pni", E, h1)
+    num = np.einsum("ni,pni->pn", h1, Ex0)
+    den = Ex0[..., 0] ** 2 + Ex0[..., 1] ** 2 + Etx1[..., 0] ** 2 + Etx1[..., 1] ** 2
+    return np.abs(num) / np.sqrt(den).clip(1e-300)
+
+
+def _in_front(R: np.ndarray, t: np.ndarray, h0: np.ndarray, h1: np.ndarray) -> np.ndarray:
+    """Whether each match triangulates in front of both cameras (midpoint of the rays)."""
+    from strl_pyg.geometry.essential import triangulated_depths
+
+    z0, z1 = triangulated_depths(torch.from_numpy(R)[None], torch.from_numpy(t)[None],
+                                 torch.from_numpy(h0[:, :2])[None],
+                                 torch.from_numpy(h1[:, :2])[None])
+    return ((z0[0] > 0) & (z1[0] > 0)).numpy()
+
+
+def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
+                         line_threshold_px: float = 2.0, max_pairs: int = 500,
+                         max_angle_error_deg: float = 3.0, max_refine_deg: float = 5.0,
+                         seed: int = 0) -> BaselineResult:
+    """``T_0to1`` from the vanishing directions of the matched lines and the point matches
+    (module docstring).
+
+    Args:
+        matches: a :class:`~strl_pyg.data.PairMatches` with ``K0``, ``K1``, at least
+            :data:`VP_MIN_POINTS` point matches and line matches.
+        threshold_px: inlier threshold on the points' Sampson distance (pixels).
+        line_threshold_px: how far (pixels) a segment's endpoints may lie from the line through
+            its midpoint and a vanishing point.
+        max_pairs: point pairs tried per rotation (all pairs when there are fewer).
+        max_angle_error_deg: how far the angle between two directions may differ between the
+            images for the pair to give a rotation.
+        max_refine_deg: the refinement on the points is kept only within this rotation of the
+            vanishing-point rotation.
+        seed: the RANSAC samples.
+
+    Returns:
+        a :class:`BaselineResult` (``success=False`` with ``info["reason"]`` when fewer than two
+        vanishing directions are shared or no translation has inliers); ``info`` holds
+        ``directions`` (how many), ``direction_lines`` (their line counts) and ``refined``.
+    """
+    if not isinstance(matches, PairMatches):
+        raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")
+    if not matches.has_intrinsics:
+        raise ValueError("Expected intrinsics K0 and K1 in the PairMatches (got none)")
+    if matches.num_points < VP_MIN_POINTS:
+        raise ValueError(f"Expected at least {VP_MIN_POINTS} point matches "
+                         f"(got {matches.num_points})")
+    if not (threshold_px > 0 and line_threshold_px > 0):
+        raise ValueError(f"Expected threshold_px > 0 and line_threshold_px > 0 "
+                         f"(got {threshold_px}, {line_threshold_px})")
+    start = time.perf_counter()
+    n = matches.num_points
+    dirs = vanishing_directions(matches, line_threshold_px, seed=seed)
+    info = {"directions": len(dirs), "direction_lines": [int(d[2].sum()) for d in dirs]}
+    rotations = _rotations(dirs, max_angle_error_deg)
+    if not rotations:
+        return _failed(n, "vp", (time.perf_counter() - start) * 1e3, **info,
+                       reason=f"{len(dirs)} vanishing direction(s) shared by the matched "
+                              "lines of both images (needs two at an angle both images agree "
+                              "on)")
+    x0, x1, focal = normalised_matches(matches)
+    h0, h1 = _homogeneous(x0.numpy()), _homogeneous(x1.numpy())
+    thr = threshold_px / focal
+    pairs = np.array(np.triu_indices(n, 1)).T
+    if len(pairs) > max_pairs:
+        rng = np.random.default_rng(seed)
+        pairs = pairs[rng.choice(len(pairs), max_pairs, replace=False)]
+    best = None  # (in front, -cost, R, t, inliers)
+    for R in rotations:
+        a = np.cross(h1, h0 @ R.T)  # t . a_k = 0 for every match
+        T = np.cross(a[pairs[:, 0]], a[pairs[:, 1]])
+        norm = np.linalg.norm(T, axis=1)
+        keep = norm > 1e-12
+        if not keep.any():
+            continue
+        T = T[keep] / norm[keep, None]
+        r = _sampson(R, T, h0, h1)
+        cost = np.minimum(r, thr) ** 2
+        k = int(cost.sum(axis=1).argmin())
+        t = T[k]
+        inl = r[k] < thr
+        if inl.sum() >= 2:  # least squares on the inliers, then the sign by cheirality
+            t = np.linalg.svd(a[inl])[2][-1]
+        front_p, front_m = _in_front(R, t, h0, h1), _in_front(R, -t, h0, h1)
+        if (front_m & inl).sum() > (front_p & inl).sum():
+            t, front_p = -t, front_m
+        score = (int((front_p & inl).sum()), -float(cost[k].sum()))
+        if best is None or score > best[:2]:
+            best = (*score, R, t, inl & front_p)
+    if best is None or best[0] < 2:
+        return _failed(n, "vp", (time.perf_counter() - start) * 1e3, **info,
+                       reason="no translation direction has two point matches in front of "
+                              "both cameras")
+    _, _, R, t, inl = best
+    refined = False
+    if inl.sum() >= 5:
+        from strl_pyg.geometry.essential import refine_pose
+        from strl_pyg.geometry.pose import rotation_angle_deg
+
+        Rr, tr = refine_pose(torch.from_numpy(R)[None], torch.from_numpy(t)[None],
+                             x0[None], x1[None], torch.from_numpy(inl.astype(float))[None])
+        Rr, tr = Rr[0].numpy(), tr[0].numpy()
+        if float(rotation_angle_deg(torch.from_numpy(Rr.T @ R))) <= max_refine_deg:
+            R, t, refined = Rr, tr, True
+    r = _sampson(R, t[None], h0, h1)[0]
+    inl = (r < thr) & _in_front(R, t, h0, h1)
+    info["refined"] = refined
+    return BaselineResult(Pose(R, t / np.linalg.norm(t)), inl,
+                          (time.perf_counter() - start) * 1e3, "vp", True, info)
