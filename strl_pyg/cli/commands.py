@@ -397,6 +397,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="time the pipeline stages on this machine")
     p.add_argument("--checkpoint", default=None)
     p.add_argument("--repeat", type=int, default=20)
+    p = sub.add_parser("export", help="the model's regression path as ONNX (needs [onnx])")
+    p.add_argument("--onnx", required=True, metavar="PATH", help="output .onnx file")
+    p.add_argument("--checkpoint", default=None, help="default: the shipped weights")
     return ap
 
 
@@ -411,6 +414,10 @@ def _dispatch(argv: list[str]) -> int:
         from strl_pyg.cli.bench import cmd_bench
 
         return cmd_bench(args)
+    if args.command == "export":
+        from strl_pyg.cli.export import cmd_export
+
+        return cmd_export(args)
     return {"demo": cmd_demo, "match": cmd_match, "predict": cmd_predict}[args.command](args)
 
 
