@@ -248,10 +248,13 @@ class AttentionConv(MessagePassing):
             return q.new_zeros(q.shape) + 0.0 * (k.sum() + v.sum())
         drop = self.dropout if self.training else 0.0
         if ls.num_graphs == 1:  # one graph: no padding, no mask
+            # as [1, H, N, D]: 3-d inputs miss the fused CPU kernel and take the math path
+            # (measured 7.6 against 2.7 ms for 768 nodes, 4 heads of 16, one thread)
             out = F.scaled_dot_product_attention(
-                q.transpose(0, 1), k.transpose(0, 1), v.transpose(0, 1), dropout_p=drop
+                q.transpose(0, 1)[None], k.transpose(0, 1)[None], v.transpose(0, 1)[None],
+                dropout_p=drop,
             )
-            return out.transpose(0, 1)
+            return out[0].transpose(0, 1)
 
         H, D = self.heads, self.head_dim
         kv = ls.to_dense(torch.cat([k.reshape(n_src, H * D), v.reshape(n_src, H * D)], -1))
