@@ -35,14 +35,41 @@ def _knn2(d_query: np.ndarray, d_train: np.ndarray, norm: int):
     return nn, ratio
 
 
+def _top2_l2(d0: np.ndarray, d1: np.ndarray):
+    """Both directions' nearest index and ratio (nearest / second nearest L2 distance) from one
+    matrix product: ``(nn01, ratio01, nn10)`` as :func:`_knn2` gives them. The product (float32)
+    only ranks the candidates; the two distances of each ratio are recomputed exactly from the
+    descriptors (float64), so a ratio differs from OpenCV's by rounding only."""
+    a = np.ascontiguousarray(d0, dtype=np.float32)
+    b = np.ascontiguousarray(d1, dtype=np.float32)
+    sq = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * (a @ b.T)  # [N0, N1]
+    nn10 = sq.argmin(axis=0)
+    if sq.shape[1] == 1:
+        nn01 = np.zeros(len(a), np.int64)
+        dist = np.linalg.norm(a.astype(np.float64) - b[0].astype(np.float64), axis=1)
+        return nn01, np.where(dist == 0, 0.0, 1.0), nn10
+    two = np.argpartition(sq, 1, axis=1)[:, :2]
+    a64, b64 = a.astype(np.float64), b.astype(np.float64)
+    dist = np.linalg.norm(a64[:, None, :] - b64[two], axis=2)  # [N0, 2] exact
+    first = dist.argmin(axis=1)
+    rows = np.arange(len(a))
+    nn01 = two[rows, first]
+    ratio = dist[rows, first] / np.maximum(dist[rows, 1 - first], 1e-12)
+    return nn01.astype(np.int64), ratio, nn10.astype(np.int64)
+
+
 def match_points(
-    gray0: np.ndarray, gray1: np.ndarray, cfg: FrontendConfig | None = None
+    gray0: np.ndarray, gray1: np.ndarray, cfg: FrontendConfig | None = None,
+    reference: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     """Detects and matches keypoints.
 
     Args:
         gray0, gray1: grey uint8 images ``[H0, W0]``, ``[H1, W1]``.
         cfg: :class:`FrontendConfig`.
+        reference: match SIFT descriptors with OpenCV's brute-force k-NN (twice, one per
+            direction) instead of one matrix product with top-2 (:func:`_top2_l2`); the two
+            agree up to float rounding of near ties.
 
     Returns:
         ``points0 [M, 2]``, ``points1 [M, 2]`` pixels, ``scores [M]`` (``1 - ratio``, higher is
@@ -59,10 +86,13 @@ def match_points(
     if d0 is None or d1 is None or len(kp0) < 2 or len(kp1) < 2:
         stats["timings_ms"] = {"points_detect": 1e3 * (t1 - t0), "points_match": 0.0}
         return (*empty, stats)
-    nn01, ratio01 = _knn2(d0, d1, norm)
+    if norm == cv2.NORM_L2 and not reference:  # one matrix product for both directions
+        nn01, ratio01, nn10 = _top2_l2(d0, d1)
+    else:  # OpenCV's brute-force k-NN, twice (the reference path; ORB's Hamming distance)
+        nn01, ratio01 = _knn2(d0, d1, norm)
+        nn10 = _knn2(d1, d0, norm)[0] if cfg.mutual else None
     keep = (nn01 >= 0) & (ratio01 < cfg.ratio)
     if cfg.mutual:
-        nn10, _ = _knn2(d1, d0, norm)
         idx = np.flatnonzero(keep)
         keep[idx] = nn10[nn01[idx]] == idx
     idx0 = np.flatnonzero(keep)

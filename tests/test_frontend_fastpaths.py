@@ -1,0 +1,50 @@
+"""The front end's fast paths against their reference paths."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from strl_pyg.frontend.config import FrontendConfig
+from strl_pyg.frontend.points import _knn2, _top2_l2, match_points
+from strl_pyg.synthetic import generate_pair
+
+
+def _grey(img: np.ndarray) -> np.ndarray:
+    return img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+
+
+def test_top2_matrix_product_equals_opencv_knn():
+    rng = np.random.default_rng(0)
+    d0 = rng.integers(0, 120, (300, 128)).astype(np.float32)
+    d1 = np.concatenate([d0[:200] + rng.normal(0, 3, (200, 128)).astype(np.float32),
+                         rng.integers(0, 120, (150, 128)).astype(np.float32)])
+    nn01, ratio01, nn10 = _top2_l2(d0, d1)
+    ref01, rratio = _knn2(d0, d1, cv2.NORM_L2)
+    ref10, _ = _knn2(d1, d0, cv2.NORM_L2)
+    np.testing.assert_array_equal(nn01, ref01)
+    np.testing.assert_array_equal(nn10, ref10)
+    np.testing.assert_allclose(ratio01, rratio, atol=1e-5)
+    assert (ratio01[:200] < 0.5).all() and (ratio01[200:] > 0.7).all()  # the planted matches
+
+
+def test_match_points_fast_equals_reference_on_a_pair():
+    pair = generate_pair(3)
+    g0, g1 = _grey(pair.image0), _grey(pair.image1)
+    fast = match_points(g0, g1, FrontendConfig())
+    ref = match_points(g0, g1, FrontendConfig(), reference=True)
+    assert len(fast[0]) > 50
+    # same matches in the same order (ties of equal ratio could swap: none here)
+    np.testing.assert_array_equal(fast[0], ref[0])
+    np.testing.assert_array_equal(fast[1], ref[1])
+    np.testing.assert_allclose(fast[2], ref[2], atol=1e-5)
+
+
+def test_single_train_descriptor():
+    d0 = np.ones((3, 128), np.float32)
+    d1 = np.ones((1, 128), np.float32)
+    nn01, ratio, nn10 = _top2_l2(d0, d1)
+    ref, rratio = _knn2(d0, d1, cv2.NORM_L2)
+    np.testing.assert_array_equal(nn01, ref)
+    np.testing.assert_allclose(ratio, rratio)
+    assert nn10.shape == (1,)
