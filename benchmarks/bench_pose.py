@@ -136,7 +136,8 @@ def _tag(config) -> str:
     import json
     from dataclasses import asdict
 
-    text = json.dumps(asdict(config), sort_keys=True, default=repr)
+    fields = config.result_fields() if hasattr(config, "result_fields") else asdict(config)
+    text = json.dumps(fields, sort_keys=True, default=repr)
     return "_fe" + hashlib.sha1(text.encode()).hexdigest()[:8]
 
 

@@ -48,3 +48,19 @@ def test_single_train_descriptor():
     np.testing.assert_array_equal(nn01, ref)
     np.testing.assert_allclose(ratio, rratio)
     assert nn10.shape == (1,)
+
+
+def test_concurrent_detection_gives_the_same_matches():
+    from strl_pyg.frontend import match_images
+
+    pair = generate_pair(4)
+    for detector in ("sift", "orb"):
+        a = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K,
+                         config=FrontendConfig(detector=detector))
+        b = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K,
+                         config=FrontendConfig(detector=detector, concurrent=False))
+        assert a.num_points > 20 and a.num_lines > 0
+        np.testing.assert_array_equal(a.points0, b.points0)
+        np.testing.assert_array_equal(a.points1, b.points1)
+        np.testing.assert_array_equal(a.lines0, b.lines0)
+        np.testing.assert_array_equal(a.lines1, b.lines1)

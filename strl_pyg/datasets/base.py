@@ -150,6 +150,8 @@ def _config_dict(config: Any) -> Any:
         from strl_pyg.frontend import FrontendConfig
 
         config = FrontendConfig()
+    if hasattr(config, "result_fields"):  # a FrontendConfig: its speed settings aside
+        return {"type": type(config).__name__, **config.result_fields()}
     if is_dataclass(config):
         return {"type": type(config).__name__, **asdict(config)}
     if isinstance(config, dict):

@@ -49,6 +49,9 @@ class FrontendConfig:
         seed: seeds OpenCV's RNG before the robust fit, for determinism. (default: 0)
         lines: detect and match line segments; ``False`` gives a points-only result (no LSD,
             for callers that use points only, e.g. the classical solvers). (default: True)
+        concurrent: detect keypoints (and line segments) of both images at once, in two
+            threads (OpenCV releases the GIL); the same result as one after the other.
+            (default: True)
     """
 
     detector: str = "sift"
@@ -76,6 +79,14 @@ class FrontendConfig:
     line_min_score: float = 0.6
     seed: int = 0
     lines: bool = True
+    concurrent: bool = True
+
+    def result_fields(self) -> dict:
+        """The fields that decide the matches (every field but ``concurrent``): what caches of
+        matches key on, so that a setting that only changes the speed keeps them valid."""
+        from dataclasses import asdict
+
+        return {k: v for k, v in asdict(self).items() if k != "concurrent"}
 
     def __post_init__(self) -> None:
         if self.detector not in ("sift", "orb"):

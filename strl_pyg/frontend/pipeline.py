@@ -12,7 +12,7 @@ import numpy as np
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.frontend.config import FrontendConfig, NoMatchesError
 from strl_pyg.frontend.lines import detect_lines, match_lines
-from strl_pyg.frontend.points import fit_fundamental, match_points
+from strl_pyg.frontend.points import fit_fundamental, match_points, on_both
 from strl_pyg.utils.images import FRONTEND_MIN_SIDE, check_image
 
 __all__ = ["match_images", "check_frontend_image"]
@@ -70,7 +70,7 @@ def match_images(
 
     t = time.perf_counter()
     if cfg.lines:
-        seg0, seg1 = detect_lines(gray0, cfg), detect_lines(gray1, cfg)
+        seg0, seg1 = on_both(lambda g: detect_lines(g, cfg), gray0, gray1, cfg.concurrent)
     else:
         seg0 = seg1 = np.zeros((0, 2, 2))
     timings["lines_detect"] = 1e3 * (time.perf_counter() - t)
