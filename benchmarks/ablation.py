@@ -223,6 +223,37 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_curves(args: argparse.Namespace) -> int:
+    """The validation history of every run so far (finished or not) as a markdown table, and
+    the curves figure: what a partial study can already say (are the curves still falling?)."""
+    import torch
+    from common import banner
+
+    root = Path(args.root)
+    lines = ["# Ablation runs so far: validation curves", "", "```", banner(), "```", "",
+             "`python benchmarks/ablation.py curves`: mean validation rotation / translation-"
+             "direction error (deg) of each run's checkpoints on the 100 held-out pairs of the "
+             "training mix; trivial: the errors of always predicting the mean training pose. "
+             "Runs of the plan that have not started are not listed.", "",
+             "| run | step | val rot | val trans | AUC@10 | trivial rot / trans |",
+             "|---|---|---|---|---|---|"]
+    for row, seed in PLAN:
+        ckpt = root / "runs" / run_name(row, seed) / "last.pt"
+        if not ckpt.exists():
+            continue
+        hist = torch.load(ckpt, map_location="cpu", weights_only=True).get("history", [])
+        for h in hist:
+            lines.append(f"| {run_name(row, seed)} | {h['step']} | {h['rot_err_deg']:.2f} | "
+                         f"{h['trans_err_deg']:.2f} | {h.get('auc10', float('nan')):.3f} | "
+                         f"{h.get('trivial_rot_err_deg', float('nan')):.2f} / "
+                         f"{h.get('trivial_trans_err_deg', float('nan')):.2f} |")
+    Path(args.out).write_text("\n".join(lines) + "\n")
+    print(f"wrote {args.out}")
+    plot_curves(root, Path(args.figure))
+    print(f"wrote {args.figure}")
+    return 0
+
+
 def plot_curves(root: Path, path: Path) -> None:
     """Validation rotation / translation errors of the key rows (seed 0) over the steps."""
     import matplotlib
@@ -272,9 +303,12 @@ def main(argv: list[str] | None = None) -> int:
     here = Path(__file__).resolve().parent
     r.add_argument("--out", default=str(here / "results_ablation.md"))
     r.add_argument("--figure", default=str(here / "figures" / "ablation_curves.png"))
+    c = sub.add_parser("curves", help="validation curves of the runs so far (table + plot)")
+    c.add_argument("--out", default=str(here / "results_ablation_curves.md"))
+    c.add_argument("--figure", default=str(here / "figures" / "ablation_curves.png"))
     args = ap.parse_args(argv)
     return {"train": cmd_train, "status": cmd_status, "eval": cmd_eval,
-            "report": cmd_report}[args.command](args)
+            "report": cmd_report, "curves": cmd_curves}[args.command](args)
 
 
 if __name__ == "__main__":

@@ -17,12 +17,10 @@ def cmd_export(args) -> int:
     except ImportError:
         raise UsageError("Expected the optional dependency onnx for the export (got none "
                          "installed): pip install 'strl-pyg[onnx]'") from None
-    from strl_pyg.inference.export import INPUT_NAMES, export_onnx, onnx_inputs
+    from strl_pyg.inference.export import INPUT_NAMES, example_graph, export_onnx, onnx_inputs
 
     model = load_model(args.checkpoint)
-    from strl_pyg.inference.export import _example_graph
-
-    example = _example_graph(model)
+    example = example_graph(model)
     path = export_onnx(model, args.onnx, example)
     shapes = ", ".join(f"{n} {list(x.shape)}" for n, x in zip(INPUT_NAMES,
                                                                onnx_inputs(model, example),

@@ -32,7 +32,8 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-__all__ = ["DensePoseModule", "onnx_inputs", "export_onnx", "INPUT_NAMES", "OUTPUT_NAMES"]
+__all__ = ["DensePoseModule", "onnx_inputs", "export_onnx", "example_graph", "INPUT_NAMES",
+           "OUTPUT_NAMES"]
 
 INPUT_NAMES = ("coords", "line_feat", "endpoint_idx", "line_edges", "visual")
 OUTPUT_NAMES = ("quaternion", "translation", "log_var")
@@ -115,7 +116,7 @@ def export_onnx(model: nn.Module, path: str | os.PathLike, example: Any = None,
     if path.suffix != ".onnx":
         raise ValueError(f"Expected a path ending in .onnx (got {str(path)!r})")
     if example is None:
-        example = _example_graph(model)
+        example = example_graph(model)
     was_training = model.training
     model.eval()
     try:
@@ -136,7 +137,7 @@ def export_onnx(model: nn.Module, path: str | os.PathLike, example: Any = None,
     return path
 
 
-def _example_graph(model: nn.Module):
+def example_graph(model: nn.Module):
     """A generated pair's graph at the checkpoint's resampled size (the export's example)."""
     from strl_pyg.inference.inputs import prepare_graph
     from strl_pyg.synthetic import generate_pair
