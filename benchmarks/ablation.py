@@ -268,6 +268,8 @@ def plot_curves(root: Path, path: Path) -> None:
         if not ckpt.exists():
             continue
         hist = torch.load(ckpt, map_location="cpu", weights_only=True).get("history", [])
+        if not hist:  # started, not yet validated
+            continue
         for ax, key in zip(axes, ("rot_err_deg", "trans_err_deg"), strict=True):
             ax.plot([h["step"] for h in hist], [h[key] for h in hist], "o-", label=row)
     for ax, title in zip(axes, ("validation rotation error (deg, mean)",
