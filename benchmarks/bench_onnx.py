@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -31,13 +30,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
 def _median_ms(fn, repeat: int) -> float:
-    fn()
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - t0) * 1e3)
-    return float(np.median(times))
+    from common import time_it
+
+    return time_it(fn, repeat, warmup=1)["median_ms"]
 
 
 def main(argv: list[str] | None = None) -> int:
