@@ -81,3 +81,18 @@ def test_cli_export(tmp_path, capsys):
     assert "fixed inputs: coords [768, 4]" in capsys.readouterr().out
     assert main(["export", "--onnx", str(tmp_path / "x.txt")]) == 2
     assert "Expected --onnx PATH ending in .onnx" in capsys.readouterr().err
+
+
+def test_a_failed_export_leaves_no_file(model, graph, tmp_path, monkeypatch):
+    pytest.importorskip("onnx")
+
+    def broken(module, args, f, **kw):
+        with open(f, "wb") as fh:  # the exporter had started writing
+            fh.write(b"partial")
+        raise RuntimeError("exporter failed")
+
+    monkeypatch.setattr(torch.onnx, "export", broken)
+    with pytest.raises(RuntimeError, match="exporter failed"):
+        export_onnx(model, tmp_path / "m.onnx", example=graph)
+    assert list(tmp_path.iterdir()) == []
+    assert not model.training

@@ -35,7 +35,7 @@ import torch
 
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.estimation.classical import BaselineResult, _failed, normalised_matches
-from strl_pyg.geometry import Pose
+from strl_pyg.geometry import Pose, pose_sampson
 
 __all__ = ["vanishing_directions", "vanishing_point_pose", "VP_MIN_LINES", "VP_MIN_POINTS"]
 
@@ -119,17 +119,18 @@ def vanishing_directions(matches: PairMatches, line_threshold_px: float = 2.0,
         mask = inl[best]
         if mask.sum() < min_lines:
             break
-        # refine on the inlier lines: the direction closest to every interpretation plane
-        for _ in range(2):
+        # refine on the inlier lines: the direction closest to every interpretation plane,
+        # its consensus again (twice), and the direction of the last consensus
+        for i in range(3):
             d0b = np.linalg.svd(n0[mask])[2][-1]
             d1b = np.linalg.svd(n1[mask])[2][-1]
+            if i == 2:
+                break
             new = ((_vp_residual_px(d0b[None], K0, e0, m0)[0] < line_threshold_px)
                    & (_vp_residual_px(d1b[None], K1, e1, m1)[0] < line_threshold_px) & free)
             if new.sum() < min_lines:
                 break
             mask = new
-        d0b = np.linalg.svd(n0[mask])[2][-1]
-        d1b = np.linalg.svd(n1[mask])[2][-1]
         if found and (np.abs(np.stack([f[0] for f in found]) @ d0b) >= cos_min).any():
             break
         found.append((d0b, d1b, mask))
@@ -164,18 +165,14 @@ def _rotations(dirs, max_angle_error_deg: float) -> list[np.ndarray]:
     return out
 
 
-def _sampson(R: np.ndarray, T: np.ndarray, h0: np.ndarray, h1: np.ndarray) -> np.ndarray:
-    """Sampson distances ``[P, N]`` of the matches under ``R`` and translations ``T`` ``[P, 3]``
-    (normalised units)."""
-    tx = np.zeros((len(T), 3, 3))
-    tx[:, 0, 1], tx[:, 0, 2], tx[:, 1, 2] = -T[:, 2], T[:, 1], -T[:, 0]
-    tx[:, 1, 0], tx[:, 2, 0], tx[:, 2, 1] = T[:, 2], -T[:, 1], T[:, 0]
-    E = tx @ R  # [P, 3, 3]
-    Ex0 = np.einsum("pij,nj->pni", E, h0)
-    Etx1 = np.einsum("pji,nj->pni", E, h1)
-    num = np.einsum("ni,pni->pn", h1, Ex0)
-    den = Ex0[..., 0] ** 2 + Ex0[..., 1] ** 2 + Etx1[..., 0] ** 2 + Etx1[..., 1] ** 2
-    return np.abs(num) / np.sqrt(den).clip(1e-300)
+def _sampson(R: np.ndarray, T: np.ndarray, x0: torch.Tensor, x1: torch.Tensor) -> np.ndarray:
+    """Sampson distances ``[P, N]`` of the matches (normalised ``[N, 2]``) under ``R`` and the
+    translations ``T`` ``[P, 3]``: the package's one Sampson under a pose
+    (:func:`~strl_pyg.geometry.pose_sampson`), batched over the hypotheses."""
+    P = len(T)
+    r = pose_sampson(torch.from_numpy(R).expand(P, 3, 3), torch.from_numpy(T),
+                     x0.expand(P, -1, -1), x1.expand(P, -1, -1))
+    return r.abs().numpy()
 
 
 def _in_front(R: np.ndarray, t: np.ndarray, h0: np.ndarray, h1: np.ndarray) -> np.ndarray:
@@ -249,7 +246,7 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
         if not keep.any():
             continue
         T = T[keep] / norm[keep, None]
-        r = _sampson(R, T, h0, h1)
+        r = _sampson(R, T, x0, x1)
         cost = np.minimum(r, thr) ** 2
         k = int(cost.sum(axis=1).argmin())
         t = T[k]
@@ -277,7 +274,7 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
         Rr, tr = Rr[0].numpy(), tr[0].numpy()
         if float(rotation_angle_deg(torch.from_numpy(Rr.T @ R))) <= max_refine_deg:
             R, t, refined = Rr, tr, True
-    r = _sampson(R, t[None], h0, h1)[0]
+    r = _sampson(R, t[None], x0, x1)[0]
     inl = (r < thr) & _in_front(R, t, h0, h1)
     info["refined"] = refined
     return BaselineResult(Pose(R, t / np.linalg.norm(t)), inl,

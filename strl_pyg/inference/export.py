@@ -119,10 +119,10 @@ def export_onnx(model: nn.Module, path: str | os.PathLike, example: Any = None,
         example = example_graph(model)
     was_training = model.training
     model.eval()
+    tmp = path.with_name(path.name + ".part")
     try:
         module = DensePoseModule(model)
         args = onnx_inputs(model, example)
-        tmp = path.with_name(path.name + ".part")
         path.parent.mkdir(parents=True, exist_ok=True)
         with torch.no_grad(), warnings.catch_warnings():
             # the tracer notes every shape test it freezes: the sizes are fixed by design
@@ -133,6 +133,7 @@ def export_onnx(model: nn.Module, path: str | os.PathLike, example: Any = None,
                               dynamo=False)
         os.replace(tmp, path)
     finally:
+        tmp.unlink(missing_ok=True)  # a failed export leaves no partial file
         model.train(was_training)
     return path
 
