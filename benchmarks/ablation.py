@@ -9,10 +9,23 @@ learning rate; only the model row and the initialisation seed differ.
     python benchmarks/ablation.py status
 
 Runs live under ``--root`` (default ``$STRL_ABLATION_ROOT`` or
-``~/.cache/strl-pyg/ablation``): ``cache/`` (the front-end match cache, built once by the
-first run and shared by all) and ``runs/<row>-s<seed>/`` (each run's ``last.pt``, ``log.csv``,
-``curves.png``). None of it belongs in the repository; the results files do
-(``benchmarks/results_ablation.md``).
+``~/.cache/strl-pyg/ablation``): ``cache/`` (the front-end match cache, built once and shared
+by all), ``eval_cache/`` (the evaluation sets' matches) and ``runs/<row>-s<seed>/`` (each run's
+``last.pt``, ``log.csv``, ``curves.png``). None of it belongs in the repository.
+
+What does belong there, and is all that a later session needs when the machine (and with it
+``--root``) is gone: :data:`RESULTS` (``benchmarks/results_ablation/``) holds, per finished run,
+its per-pair errors on every evaluation set (``runs/<run>.json``) and its validation history
+(``history/<run>.json``), plus PoseLib's errors and the pair ids of every set. A finished run
+is scored as soon as it ends (``train --eval``), so the study accumulates across sessions on
+machines that do not keep ``--root``; ``report`` and ``curves`` read only :data:`RESULTS`.
+
+Two workers (one per core) share the plan: each run is claimed by a ``claim`` file (with the
+worker's pid) before it starts, so ``train`` may be started twice::
+
+    python benchmarks/ablation.py cache --workers 2        # the training cache on both cores
+    nice -n 10 python benchmarks/ablation.py train --eval &
+    nice -n 10 python benchmarks/ablation.py train --eval &
 
 The plan (:data:`PLAN`): all nine rows with seed 0, then seeds 1 and 2 of ``baseline``, ``LP``,
 ``V`` and ``full`` (17 runs). The budget (:data:`TRAIN_ARGS`): 2000 training pairs of the
@@ -55,6 +68,8 @@ TRAIN_ARGS = [
     "--checkpoint-minutes", "5", "--no-progress", "--no-tensorboard",
 ]
 TRAIN_SCRIPT = Path(__file__).resolve().parents[1] / "examples" / "train.py"
+#: Where the results that outlive the machine go (committed): see the module docstring.
+RESULTS = Path(__file__).resolve().parent / "results_ablation"
 
 
 def run_name(row: str, seed: int) -> str:
@@ -80,28 +95,170 @@ def train_command(root: Path, row: str, seed: int) -> list[str]:
     return cmd
 
 
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, someone else's
+        return True
+    return True
+
+
+def claim(run_dir: Path) -> bool:
+    """Claims a run for this process (``True``), or ``False`` when a live process holds it. A
+    claim left by a dead process (a killed worker, a reset machine) is taken over."""
+    run_dir.mkdir(parents=True, exist_ok=True)
+    path = run_dir / "claim"
+    for _ in range(2):
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            try:
+                pid = int(path.read_text().strip() or 0)
+            except (OSError, ValueError):
+                pid = 0
+            if pid and _pid_alive(pid):
+                return False
+            path.unlink(missing_ok=True)  # stale
+            continue
+        with os.fdopen(fd, "w") as f:
+            f.write(str(os.getpid()))
+        return True
+    return False
+
+
+def release(run_dir: Path) -> None:
+    path = run_dir / "claim"
+    try:
+        if int(path.read_text().strip() or 0) == os.getpid():
+            path.unlink()
+    except (OSError, ValueError):
+        pass
+
+
+def save_history(run_dir: Path, name: str) -> None:
+    """The run's validation history (and step) into :data:`RESULTS` ``history/<name>.json``."""
+    import ablation_eval as ae
+    import torch
+
+    ckpt = run_dir / "last.pt"
+    if not ckpt.exists():
+        return
+    state = torch.load(ckpt, map_location="cpu", weights_only=True)
+    ae.save_json(RESULTS / "history" / f"{name}.json",
+                 {"step": int(state["step"]), "steps": STEPS,
+                  "history": state.get("history", [])})
+
+
+class _Scorer:
+    """Scores finished runs into :data:`RESULTS`; the evaluation sets are loaded on first use."""
+
+    def __init__(self, root: Path, threads: int, quick: bool = False) -> None:
+        self.root, self.threads, self.quick = root, threads, quick
+        self._sets = None
+
+    @property
+    def out(self) -> Path:
+        return RESULTS if not self.quick else self.root / "eval_quick"
+
+    def sets(self) -> dict:
+        import ablation_eval as ae
+
+        if self._sets is None:
+            self._sets = ae.all_sets(self.root / "eval_cache", quick=self.quick)
+            ids = {k: [pid for pid, _, _ in v] for k, v in self._sets.items()}
+            ae.check_or_save_sets(self.out / "sets.json", ids)
+            if not (self.out / "poselib.json").exists():
+                ae.save_json(self.out / "poselib.json", ae.poselib_errors(self._sets))
+        return self._sets
+
+    def score(self, row: str, seed: int, run_dir: Path) -> bool:
+        """Scores one finished run unless its results exist; ``True`` when it scored it."""
+        import ablation_eval as ae
+        import torch
+
+        from strl_pyg.model.strl_pose import StrLPose
+
+        path = self.out / "runs" / f"{run_name(row, seed)}.json"
+        if path.exists():
+            return False
+        torch.set_num_threads(self.threads)
+        sets = self.sets()
+        model = StrLPose.load(run_dir / "model.pt")
+        ae.save_json(path, ae.model_errors(model, sets))
+        print(f"[{time.strftime('%H:%M:%S')}] {run_name(row, seed)}: scored on "
+              f"{len(sets)} sets -> {path}", flush=True)
+        return True
+
+
+def cmd_cache(args: argparse.Namespace) -> int:
+    """Builds the training match cache (``--workers`` processes) and, with ``--eval``, the
+    evaluation sets' matches, PoseLib's errors and the sets' pair ids."""
+    if not args.eval_only:
+        from strl_pyg.training.config import add_train_arguments
+        from strl_pyg.training.data import build_datasets
+        from strl_pyg.training.loop import config_from_args
+
+        ap = add_train_arguments(argparse.ArgumentParser())
+        targs = ap.parse_args([*TRAIN_ARGS, "--cache-dir", str(Path(args.root) / "cache"),
+                               "--workers", str(args.workers), "--out", "unused"])
+        t0 = time.time()
+        train, val = build_datasets(config_from_args(targs, ap))
+        print(f"training cache: {len(train)} + {len(val)} pairs in {time.time() - t0:.0f} s",
+              flush=True)
+    if args.eval or args.eval_only:
+        t0 = time.time()
+        sets = _Scorer(Path(args.root), args.threads).sets()
+        print(f"evaluation sets: {sum(len(v) for v in sets.values())} pairs in "
+              f"{len(sets)} sets, {time.time() - t0:.0f} s", flush=True)
+    return 0
+
+
 def cmd_train(args: argparse.Namespace) -> int:
     root = Path(args.root)
     env = {**os.environ, "OMP_NUM_THREADS": str(args.threads),
            "MKL_NUM_THREADS": str(args.threads)}
     plan = [(r, s) for r, s in PLAN if not args.only or r in args.only]
+    scorer = _Scorer(root, args.threads) if args.eval else None
+    skipped = []
     for row, seed in plan:
-        out = root / "runs" / run_name(row, seed)
+        name = run_name(row, seed)
+        out = root / "runs" / name
+        if (RESULTS / "runs" / f"{name}.json").exists() and run_step(out) == 0:
+            continue  # trained and scored in an earlier session (its folder is gone)
         if run_step(out) >= STEPS:
+            if scorer is not None and claim(out):
+                try:
+                    scorer.score(row, seed, out)
+                finally:
+                    release(out)
             continue
-        cmd = train_command(root, row, seed)
-        print(f"[{time.strftime('%H:%M:%S')}] {run_name(row, seed)}: "
-              f"{'resume' if '--resume' in cmd else 'start'}", flush=True)
-        out.mkdir(parents=True, exist_ok=True)
-        with open(out / "train.log", "a") as log:
-            proc = subprocess.run(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
-        if proc.returncode == 130:  # stopped by a signal: checkpointed, stop the plan too
-            print(f"{run_name(row, seed)}: stopped, checkpoint kept; re-run to resume")
-            return 130
-        if proc.returncode != 0:
-            print(f"{run_name(row, seed)}: failed with exit code {proc.returncode}, see "
-                  f"{out / 'train.log'}")
-            return proc.returncode
+        if not claim(out):
+            skipped.append(name)
+            continue
+        try:
+            cmd = train_command(root, row, seed)
+            print(f"[{time.strftime('%H:%M:%S')}] {name}: "
+                  f"{'resume' if '--resume' in cmd else 'start'} (pid {os.getpid()})",
+                  flush=True)
+            with open(out / "train.log", "a") as log:
+                proc = subprocess.run(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
+            save_history(out, name)
+            if proc.returncode == 130:  # stopped by a signal: checkpointed, stop the plan too
+                print(f"{name}: stopped, checkpoint kept; re-run to resume")
+                return 130
+            if proc.returncode != 0:
+                print(f"{name}: failed with exit code {proc.returncode}, see "
+                      f"{out / 'train.log'}")
+                return proc.returncode
+            print(f"[{time.strftime('%H:%M:%S')}] {name}: finished", flush=True)
+            if scorer is not None:
+                scorer.score(row, seed, out)
+        finally:
+            release(out)
+    if skipped:
+        print(f"left to the other worker(s): {', '.join(skipped)}")
     print("plan complete" if not args.only else "selected runs complete")
     return 0
 
@@ -110,9 +267,15 @@ def cmd_status(args: argparse.Namespace) -> int:
     root = Path(args.root)
     done = 0
     for row, seed in PLAN:
-        step = run_step(root / "runs" / run_name(row, seed))
+        name = run_name(row, seed)
+        step = run_step(root / "runs" / name)
+        scored = (RESULTS / "runs" / f"{name}.json").exists()
+        if scored:
+            step = STEPS
         done += step
-        print(f"{run_name(row, seed):14s} {step:5d} / {STEPS}")
+        claimed = (root / "runs" / name / "claim").exists()
+        print(f"{name:14s} {step:5d} / {STEPS}{'  scored' if scored else ''}"
+              f"{'  (claimed)' if claimed and not scored else ''}")
     print(f"{done} of {len(PLAN) * STEPS} steps done")
     return 0
 
@@ -124,26 +287,11 @@ def _finished_runs(root: Path, min_steps: int = STEPS) -> list[tuple[str, int, P
 
 def cmd_eval(args: argparse.Namespace) -> int:
     """Scores every finished run (and PoseLib) on the evaluation sets, once per run."""
-    import ablation_eval as ae
-    import torch
-
-    from strl_pyg.model.strl_pose import StrLPose
-
-    torch.set_num_threads(args.threads)
     root = Path(args.root)
-    sets = ae.all_sets(root / "eval_cache", quick=args.quick)
-    out = root / ("eval_quick" if args.quick else "eval")
-    ids = {k: [pid for pid, _, _ in v] for k, v in sets.items()}
-    ae.save_json(out / "sets.json", ids)
-    if not (out / "poselib.json").exists():
-        ae.save_json(out / "poselib.json", ae.poselib_errors(sets))
+    scorer = _Scorer(root, args.threads, quick=args.quick)
+    scorer.sets()
     for row, seed, run in _finished_runs(root, args.min_steps):
-        path = out / f"{run_name(row, seed)}.json"
-        if path.exists():
-            continue
-        model = StrLPose.load(run / "model.pt")
-        ae.save_json(path, ae.model_errors(model, sets))
-        print(f"{run_name(row, seed)}: scored on {len(sets)} sets", flush=True)
+        scorer.score(row, seed, run)
     return 0
 
 
@@ -165,18 +313,22 @@ def cmd_report(args: argparse.Namespace) -> int:
     import ablation_eval as ae
     from common import banner
 
-    root = Path(args.root)
-    ev = root / "eval"
+    ev = Path(args.results)
+    if not (ev / "sets.json").exists() or not (ev / "poselib.json").exists():
+        print(f"error: no scored runs in '{ev}' (expected sets.json and poselib.json written by "
+              f"'ablation.py train --eval' or 'ablation.py eval')", file=sys.stderr)
+        return 2
     sets = json.loads((ev / "sets.json").read_text())
     poselib = json.loads((ev / "poselib.json").read_text())
     runs = {}
     for row, seed in PLAN:
-        path = ev / f"{run_name(row, seed)}.json"
+        path = ev / "runs" / f"{run_name(row, seed)}.json"
         if path.exists():
             runs.setdefault(row, {})[seed] = json.loads(path.read_text())
     names = list(sets)
     lines = ["# The ablation (Table 3) in our implementation", "", "```", banner(), "```", "",
-             f"`python benchmarks/ablation.py eval && python benchmarks/ablation.py report`; "
+             f"`python benchmarks/ablation.py report` (from `{_rel(ev)}`, written by "
+             f"`ablation.py train --eval`); "
              f"runs: {', '.join(f'{r} ({len(v)} seed(s))' for r, v in runs.items())}. Median "
              "rotation and translation-direction errors (deg) over the pairs where the method "
              "gave a pose, [95 % bootstrap interval over pairs] of seed 0, (range of the "
@@ -218,60 +370,87 @@ def cmd_report(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.write_text("\n".join(lines) + "\n")
     print(f"wrote {out}")
-    plot_curves(root, Path(args.figure))
+    plot_curves(_histories(ev), Path(args.figure))
     print(f"wrote {args.figure}")
     return 0
+
+
+def _rel(path: Path) -> str:
+    try:
+        return str(path.resolve().relative_to(Path(__file__).resolve().parents[1]))
+    except ValueError:
+        return str(path)
+
+
+def _histories(results: Path, root: Path | None = None) -> dict[str, list[dict]]:
+    """Validation history per run: the committed ``history/<run>.json`` files, updated from
+    the live checkpoints under ``root`` where those are further along."""
+    import json
+
+    import torch
+
+    out = {}
+    for row, seed in PLAN:
+        name = run_name(row, seed)
+        path = results / "history" / f"{name}.json"
+        if path.exists():
+            out[name] = json.loads(path.read_text())["history"]
+        ckpt = None if root is None else root / "runs" / name / "last.pt"
+        if ckpt is not None and ckpt.exists():
+            hist = torch.load(ckpt, map_location="cpu", weights_only=True).get("history", [])
+            if len(hist) > len(out.get(name, [])):
+                out[name] = hist
+    return out
 
 
 def cmd_curves(args: argparse.Namespace) -> int:
     """The validation history of every run so far (finished or not) as a markdown table, and
     the curves figure: what a partial study can already say (are the curves still falling?)."""
-    import torch
     from common import banner
 
-    root = Path(args.root)
+    hists = _histories(Path(args.results), Path(args.root))
     lines = ["# Ablation runs so far: validation curves", "", "```", banner(), "```", "",
              "`python benchmarks/ablation.py curves`: mean validation rotation / translation-"
              "direction error (deg) of each run's checkpoints on the 100 held-out pairs of the "
              "training mix; trivial: the errors of always predicting the mean training pose. "
-             "Runs of the plan that have not started are not listed.", "",
+             f"From `{_rel(Path(args.results))}/history` and any live runs; runs of the plan "
+             "that have not started are not listed.", "",
              "| run | step | val rot | val trans | AUC@10 | trivial rot / trans |",
              "|---|---|---|---|---|---|"]
-    for row, seed in PLAN:
-        ckpt = root / "runs" / run_name(row, seed) / "last.pt"
-        if not ckpt.exists():
-            continue
-        hist = torch.load(ckpt, map_location="cpu", weights_only=True).get("history", [])
+    for name, hist in hists.items():
         for h in hist:
-            lines.append(f"| {run_name(row, seed)} | {h['step']} | {h['rot_err_deg']:.2f} | "
+            lines.append(f"| {name} | {h['step']} | {h['rot_err_deg']:.2f} | "
                          f"{h['trans_err_deg']:.2f} | {h.get('auc10', float('nan')):.3f} | "
                          f"{h.get('trivial_rot_err_deg', float('nan')):.2f} / "
                          f"{h.get('trivial_trans_err_deg', float('nan')):.2f} |")
     Path(args.out).write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out}")
-    plot_curves(root, Path(args.figure))
+    plot_curves(hists, Path(args.figure))
     print(f"wrote {args.figure}")
     return 0
 
 
-def plot_curves(root: Path, path: Path) -> None:
-    """Validation rotation / translation errors of the key rows (seed 0) over the steps."""
+def plot_curves(hists: dict[str, list[dict]], path: Path) -> None:
+    """Validation rotation / translation errors of the key rows over the steps (seed 0 solid,
+    other seeds faint in the same colour)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import torch
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-    for row in ("baseline", "L", "LP", "V", "full"):
-        ckpt = root / "runs" / run_name(row, 0) / "last.pt"
-        if not ckpt.exists():
-            continue
-        hist = torch.load(ckpt, map_location="cpu", weights_only=True).get("history", [])
-        if not hist:  # started, not yet validated
-            continue
-        for ax, key in zip(axes, ("rot_err_deg", "trans_err_deg"), strict=True):
-            ax.plot([h["step"] for h in hist], [h[key] for h in hist], "o-", label=row)
+    colours = dict(zip(("baseline", "L", "LP", "V", "full"),
+                       ("tab:grey", "tab:orange", "tab:green", "tab:blue", "tab:red"),
+                       strict=True))
+    for row, colour in colours.items():
+        for seed in (0, 1, 2):
+            hist = hists.get(run_name(row, seed), [])
+            if not hist:  # not started, or not yet validated
+                continue
+            for ax, key in zip(axes, ("rot_err_deg", "trans_err_deg"), strict=True):
+                ax.plot([h["step"] for h in hist], [h[key] for h in hist],
+                        "o-" if seed == 0 else "--", color=colour, alpha=1.0 if seed == 0 else 0.4,
+                        label=row if seed == 0 else None, markersize=3)
     for ax, title in zip(axes, ("validation rotation error (deg, mean)",
                                 "validation translation-direction error (deg, mean)"),
                          strict=True):
@@ -279,7 +458,8 @@ def plot_curves(root: Path, path: Path) -> None:
         ax.set_ylabel("degrees")
         ax.set_title(title)
         ax.grid(alpha=0.3)
-        ax.legend()
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(title="row (seed 0; dashed: seeds 1-2)")
     fig.suptitle("Ablation rows on the shared budget (lines_small, front-end matches)")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -295,6 +475,13 @@ def main(argv: list[str] | None = None) -> int:
     t = sub.add_parser("train", help="train (or resume) every run of the plan")
     t.add_argument("--only", nargs="*", choices=ROWS, help="only these rows")
     t.add_argument("--threads", type=int, default=1, help="torch threads per run")
+    t.add_argument("--eval", action="store_true",
+                   help="score each run as soon as it finishes (results into RESULTS)")
+    k = sub.add_parser("cache", help="build the training match cache (and the evaluation sets)")
+    k.add_argument("--workers", type=int, default=2, help="processes for the training cache")
+    k.add_argument("--eval", action="store_true", help="also the evaluation sets")
+    k.add_argument("--eval-only", action="store_true", help="only the evaluation sets")
+    k.add_argument("--threads", type=int, default=1, help="torch threads")
     sub.add_parser("status", help="steps done per run")
     e = sub.add_parser("eval", help="score the finished runs and PoseLib on every set")
     e.add_argument("--threads", type=int, default=1, help="torch threads")
@@ -303,13 +490,15 @@ def main(argv: list[str] | None = None) -> int:
                    help="score runs that reached this step (default: the plan's)")
     r = sub.add_parser("report", help="write the results table and the curves plot")
     here = Path(__file__).resolve().parent
+    r.add_argument("--results", default=str(RESULTS), help="the scored runs")
     r.add_argument("--out", default=str(here / "results_ablation.md"))
     r.add_argument("--figure", default=str(here / "figures" / "ablation_curves.png"))
     c = sub.add_parser("curves", help="validation curves of the runs so far (table + plot)")
     c.add_argument("--out", default=str(here / "results_ablation_curves.md"))
     c.add_argument("--figure", default=str(here / "figures" / "ablation_curves.png"))
+    c.add_argument("--results", default=str(RESULTS), help="the committed histories")
     args = ap.parse_args(argv)
-    return {"train": cmd_train, "status": cmd_status, "eval": cmd_eval,
+    return {"train": cmd_train, "cache": cmd_cache, "status": cmd_status, "eval": cmd_eval,
             "report": cmd_report, "curves": cmd_curves}[args.command](args)
 
 

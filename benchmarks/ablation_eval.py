@@ -38,8 +38,10 @@ REAL_SETS = ("kitti06", "demon", "dino")
 FEW_KEYPOINTS = 40
 
 
-def point_poor_pairs(cache: Path, n: int = POINT_POOR_PAIRS) -> list[tuple[str, Any, np.ndarray]]:
-    """The ``point_poor`` set (see the module docstring)."""
+def point_poor_pairs(cache: Path, n: int = POINT_POOR_PAIRS, seed0: int = POINT_POOR_SEED
+                     ) -> list[tuple[str, Any, np.ndarray]]:
+    """The ``point_poor`` set (see the module docstring); another ``seed0`` gives another
+    split selected the same way (``bench_vanishing.py --fit``'s calibration split)."""
     from bench_pose import _cached
 
     from strl_pyg.frontend import NoMatchesError, match_images
@@ -48,7 +50,7 @@ def point_poor_pairs(cache: Path, n: int = POINT_POOR_PAIRS) -> list[tuple[str, 
 
     dist = eval_distribution("low_texture", kinds=("street", "indoor", "boxes"))
     out = []
-    for seed in range(POINT_POOR_SEED, POINT_POOR_SEED + POINT_POOR_MAX_CANDIDATES):
+    for seed in range(seed0, seed0 + POINT_POOR_MAX_CANDIDATES):
         if len(out) == n:
             break
         p = generate_pair(seed, dist.config(seed))
@@ -133,6 +135,20 @@ def save_json(path: Path, obj: Any) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_open(path, "w") as f:
         json.dump(obj, f)
+
+
+def check_or_save_sets(path: Path, ids: dict[str, list[str]]) -> None:
+    """Writes the sets' pair ids, or checks them against the ones already written: runs scored
+    in another session must have been scored on the same pairs (else one error line)."""
+    if path.exists():
+        old = json.loads(path.read_text())
+        if old != ids:
+            diff = [k for k in sorted(set(old) | set(ids)) if old.get(k) != ids.get(k)]
+            raise SystemExit(f"error: the evaluation sets differ from the ones the committed "
+                             f"results were scored on ({path}): sets {diff}; delete the results "
+                             f"folder to start the study over")
+        return
+    save_json(path, ids)
 
 
 # ----------------------------------------------------------------------------- report

@@ -1,22 +1,29 @@
-"""The vanishing-point solver (``vp``) where points are too few, beside PoseLib, on the same
-matches (issue "Do lines help?", item 4).
+"""The line solvers where points are too few (``vp``, ``vp_checked``), beside PoseLib and the
+recommended pose, on the same matches (issue "Do lines help?", item 4).
 
-    python benchmarks/bench_vanishing.py --out benchmarks/results_vanishing.md
+    python benchmarks/bench_vanishing.py --fit 100 --out benchmarks/results_vanishing.md
 
 For every pair of the point-poor sets (``point_poor``: generated pairs with <= 30 point and
 >= 20 line matches; ``kitti06_kp40`` / ``demon_kp40`` / ``dino_kp40``: the real slices with the
-front end limited to 40 keypoints per image) and of the full real sets (where ``vp`` must not
-make the recommended pose worse), it scores:
+front end limited to 40 keypoints per image) and of the full real sets (where a line solver
+must not make the answer worse), it scores:
 
 - ``PoseLib``: PoseLib's raw pose (any pose it returns);
 - ``vp``: :func:`~strl_pyg.estimation.vanishing.vanishing_point_pose`'s raw pose;
-- ``recommended (no vp)`` and ``recommended``: :class:`~strl_pyg.inference.PoseEstimator`'s
-  recommended pose (the shipped model, every method) without and with ``vp`` in the order; a
-  pose that is not ``"ok"`` counts as no pose.
+- ``vp_checked``: the method of that name when ``"ok"`` (PoseLib's pose, or vp's where the
+  points are few and the lines' strongest vanishing direction contradicts PoseLib's rotation);
+- ``recommended``: :class:`~strl_pyg.inference.PoseEstimator`'s recommended pose (the shipped
+  model and order, every method but the line solvers), and ``recommended (vp_checked
+  first)``: the same with ``vp_checked`` in front of the order. A pose that is not ``"ok"``
+  counts as no pose.
+
+``--fit N`` first fits ``vp_checked``'s two constants (angle, support slack) on N point-poor
+pairs of other seeds (the calibration split, :data:`CALIBRATION_SEED`) and prints the grid; the
+evaluation sets play no part in it.
 
 AUC@20 of max(rotation, translation) error with no pose = 180 deg, [95 % bootstrap interval
-over pairs]; medians over the pairs with a pose; the paired AUC difference recommended - PoseLib
-with its paired-bootstrap interval.
+over pairs]; medians over the pairs with a pose; the paired AUC differences to PoseLib with
+their paired-bootstrap intervals.
 """
 
 from __future__ import annotations
@@ -30,11 +37,19 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-METHODS = ("PoseLib", "vp", "recommended (no vp)", "recommended")
+METHODS = ("PoseLib", "vp", "vp_checked", "recommended", "recommended (vp_checked first)")
+#: The calibration split of ``--fit``: point-poor pairs selected like ``point_poor`` from other
+#: seeds (``point_poor`` starts at 2,100,000 and tries at most 1500).
+CALIBRATION_SEED = 2_300_000
+#: The grid of ``--fit``: (VP_CHECK_ANGLE_DEG, VP_CHECK_SUPPORT_SLACK).
+FIT_ANGLES = (2.0, 3.0, 5.0, 8.0, 10.0, 15.0)
+FIT_SLACKS = (0, 1, 2, 3, 5, 1000)
 
 
 def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:
-    """``method -> [(rot, trans) or None]`` over ``pairs``."""
+    """``method -> [(rot, trans) or None]`` over ``pairs``: PoseLib's and vp's raw poses
+    (any pose they return), ``vp_checked`` when ``"ok"`` (support-checked), the shipped
+    recommended pose, and the recommended pose with ``vp_checked`` in front of the order."""
     import bench_pose as bp
 
     from strl_pyg.estimation.classical import estimate_relative_pose
@@ -42,29 +57,81 @@ def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:
     from strl_pyg.inference import PoseEstimator
     from strl_pyg.inference.estimator import METHODS as REGISTRY
 
-    without = tuple(m for m in REGISTRY if m != "vp" and REGISTRY[m].available())
+    lines_only = ("vp", "vp_checked")
+    without = tuple(m for m in REGISTRY if m not in lines_only and REGISTRY[m].available())
     est_without = PoseEstimator(model, methods=without)
-    est_with = PoseEstimator(model, methods=(*without, "vp"))
-    out = {k: [] for k in METHODS}
+    est_with = PoseEstimator(model, methods=(*without, *lines_only))
+    out = {k: [] for k in (*METHODS, "recommended_method", "vp_checked_source")}
     for _, m, T in tqdm(pairs, desc="pairs", disable=not progress, leave=False):
         if m is None or m.num_points < 5:
-            for k in METHODS:
+            for k in out:
                 out[k].append(None)
             continue
+        err = lambda T_est, T=T: list(bp.errors(np.asarray(T_est), T))  # noqa: E731
         res = estimate_relative_pose(m, "poselib")
-        out["PoseLib"].append(list(bp.errors(res.T_0to1.matrix().numpy(), T))
-                              if res.success else None)
+        out["PoseLib"].append(err(res.T_0to1.matrix().numpy()) if res.success else None)
         res = vanishing_point_pose(m) if m.num_lines else None
-        out["vp"].append(list(bp.errors(res.T_0to1.matrix().numpy(), T))
+        out["vp"].append(err(res.T_0to1.matrix().numpy())
                          if res is not None and res.success else None)
+        # the recommended pose without the line solvers in the run (their refusals would
+        # keep the regression out of it), then the line solvers on the same results
         a = est_without.estimate(m)
         b = est_with.estimate(m, known=a.methods)
-        for k, e in (("recommended (no vp)", a), ("recommended", b)):
-            ok = e.pose.status == "ok"
-            out[k].append(list(bp.errors(e.pose.T_0to1, T)) if ok else None)
-            if k == "recommended":
-                out.setdefault("recommended_method", []).append(e.pose.method if ok else None)
+        vc = b.methods["vp_checked"]
+        out["vp_checked"].append(err(vc.T_0to1) if vc.status == "ok" else None)
+        out["vp_checked_source"].append(vc.info.get("source") if vc.status == "ok" else None)
+        rec = a.pose if a.pose.status == "ok" else None
+        out["recommended"].append(err(rec.T_0to1) if rec is not None else None)
+        out["recommended_method"].append(rec.method if rec is not None else None)
+        first = vc if vc.status == "ok" else rec
+        out["recommended (vp_checked first)"].append(err(first.T_0to1) if first is not None
+                                                    else None)
     return out
+
+
+def fit(cache: Path, n: int) -> tuple[float, int, str]:
+    """Fits (VP_CHECK_ANGLE_DEG, VP_CHECK_SUPPORT_SLACK) on the calibration split: the grid
+    point with the highest AUC@20 of ``vp_checked`` (no supported pose = 180 deg); ties go to
+    the larger angle, then the smaller slack (the pose closer to PoseLib's). Returns the fit
+    and a markdown table of the grid."""
+    import ablation_eval as ae
+    import bench_pose as bp
+
+    from strl_pyg.inference import PoseEstimator
+    from strl_pyg.inference import methods as M
+    from strl_pyg.inference.support import check_support
+
+    pairs = ae.point_poor_pairs(cache, n, seed0=CALIBRATION_SEED)
+    est = PoseEstimator(methods=("poselib", "vp"))
+    base = [(m, T, est.estimate(m).methods) for _, m, T in tqdm(pairs, desc="calibration")]
+    saved = (M.VP_CHECK_ANGLE_DEG, M.VP_CHECK_SUPPORT_SLACK)
+    grid = {}
+    try:
+        for ang in FIT_ANGLES:
+            for slack in FIT_SLACKS:
+                M.VP_CHECK_ANGLE_DEG, M.VP_CHECK_SUPPORT_SLACK = ang, slack
+                worst = []
+                for m, T, known in base:
+                    rec = check_support(M._vp_checked(m, M.MethodContext(results=dict(known))),
+                                        m)
+                    worst.append(max(bp.errors(rec.T_0to1, T)) if rec.status == "ok"
+                                 else 180.0)
+                grid[ang, slack] = _auc(np.array(worst))
+    finally:
+        M.VP_CHECK_ANGLE_DEG, M.VP_CHECK_SUPPORT_SLACK = saved
+    poselib = _auc(np.array([max(bp.errors(k["poselib"].T_0to1, T))
+                             if k["poselib"].status == "ok" else 180.0 for _, T, k in base]))
+    best = max(grid, key=lambda g: (round(grid[g], 6), g[0], -g[1]))
+    lines = [f"Calibration split: {len(pairs)} point-poor pairs (seeds from {CALIBRATION_SEED}); "
+             f"AUC@20 (%) of vp_checked, no supported pose = 180 deg; PoseLib (supported) "
+             f"{poselib:.1f}. Rows: VP_CHECK_ANGLE_DEG, columns: VP_CHECK_SUPPORT_SLACK "
+             f"(1000: no support condition). Fit: {best}.", "",
+             "| angle \\ slack | " + " | ".join(str(s) for s in FIT_SLACKS) + " |",
+             "|---" * (len(FIT_SLACKS) + 1) + "|"]
+    for ang in FIT_ANGLES:
+        lines.append(f"| {ang:g} | " + " | ".join(f"{grid[ang, s]:.1f}" for s in FIT_SLACKS)
+                     + " |")
+    return best[0], best[1], "\n".join(lines)
 
 
 def _worst(rows: list) -> np.ndarray:
@@ -106,8 +173,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--point-poor", type=int, default=ae.POINT_POOR_PAIRS,
                     help="pairs of the generated point_poor set")
     ap.add_argument("--out", default=None, help="write the markdown table here")
+    ap.add_argument("--fit", type=int, default=0, metavar="N",
+                    help="first fit vp_checked's angle and slack on N calibration pairs and "
+                         "print the grid (the package's constants are not changed: set them "
+                         "in strl_pyg/inference/methods.py)")
     args = ap.parse_args(argv)
     cache = Path(args.cache)
+    fit_text = ""
+    if args.fit:
+        from strl_pyg.inference import methods as M
+
+        ang, slack, fit_text = fit(cache, args.fit)
+        print(fit_text)
+        if (ang, slack) != (M.VP_CHECK_ANGLE_DEG, M.VP_CHECK_SUPPORT_SLACK):
+            print(f"note: the fit ({ang}, {slack}) differs from the package's "
+                  f"({M.VP_CHECK_ANGLE_DEG}, {M.VP_CHECK_SUPPORT_SLACK})")
     few = FrontendConfig(max_keypoints=ae.FEW_KEYPOINTS)
     sets = {"point_poor": ae.point_poor_pairs(cache, args.point_poor),
             "kitti06_kp40": bp.kitti_pairs(1, cache, config=few),
@@ -126,8 +206,9 @@ def main(argv: list[str] | None = None) -> int:
              "(%) of max(rotation, translation) error, no pose (or a non-ok recommended "
              "pose) = 180 deg, [95 % bootstrap interval]; median max-error (deg) over the "
              "pairs with a pose, and how many of the pairs have one.", "",
-             "| set | pairs | " + " | ".join(METHODS) + " | recommended - PoseLib (AUC) |",
-             "|---|---" + "|---" * len(METHODS) + "|---|"]
+             "| set | pairs | " + " | ".join(METHODS) + " | recommended - PoseLib (AUC) | "
+             "recommended (vp_checked first) - PoseLib |",
+             "|---|---" + "|---" * len(METHODS) + "|---|---|"]
     for name, sc in scores.items():
         cells = []
         for k in METHODS:
@@ -136,13 +217,22 @@ def main(argv: list[str] | None = None) -> int:
             have = [max(r) for r in sc[k] if r is not None]
             med = f"{np.median(have):.1f}" if have else "-"
             cells.append(f"{a:.1f} [{lo:.1f}-{hi:.1f}]; med {med} ({len(have)})")
-        d, lo, hi = paired_auc_diff(_worst(sc["recommended"]), _worst(sc["PoseLib"]))
+        diffs = []
+        for k in ("recommended", "recommended (vp_checked first)"):
+            d, lo, hi = paired_auc_diff(_worst(sc[k]), _worst(sc["PoseLib"]))
+            diffs.append(f"{d:+.1f} [{lo:+.1f}-{hi:+.1f}]")
         lines.append(f"| {name} | {len(sc['PoseLib'])} | " + " | ".join(cells)
-                     + f" | {d:+.1f} [{lo:+.1f}-{hi:+.1f}] |")
-    lines += ["", "Which method gave the recommended pose: " + "; ".join(
-        f"{name}: " + ", ".join(f"{m} {c}" for m, c in zip(*np.unique(
-            [str(x) for x in sc["recommended_method"]], return_counts=True), strict=True))
-        for name, sc in scores.items())]
+                     + " | " + " | ".join(diffs) + " |")
+
+    def counts(key):
+        return "; ".join(f"{name}: " + ", ".join(f"{m} {c}" for m, c in zip(*np.unique(
+            [str(x) for x in sc[key]], return_counts=True), strict=True))
+            for name, sc in scores.items())
+
+    lines += ["", f"Which method gave the recommended pose: {counts('recommended_method')}.",
+              "", f"Whose pose vp_checked gave: {counts('vp_checked_source')}."]
+    if fit_text:
+        lines += ["", "## The fit of vp_checked's two constants", "", fit_text]
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out:

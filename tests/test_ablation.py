@@ -81,3 +81,75 @@ def test_the_plan_covers_every_row_and_three_seeds_of_the_key_ones(tmp_path):
     run.mkdir(parents=True)
     (run / "last.pt").write_bytes(b"")
     assert "--resume" in ab.train_command(tmp_path, "LP+V", 1)
+
+
+def test_a_run_is_claimed_by_one_live_worker_and_a_dead_workers_claim_is_taken_over(tmp_path):
+    import os
+    import subprocess
+
+    ab = _ablation_module()
+    run = tmp_path / "runs" / "full-s0"
+    assert ab.claim(run)
+    assert (run / "claim").read_text() == str(os.getpid())
+    # a second worker (another live pid) holding the claim keeps it
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        (run / "claim").write_text(str(other.pid))
+        assert not ab.claim(run)
+        ab.release(run)  # not ours: left alone
+        assert (run / "claim").read_text() == str(other.pid)
+    finally:
+        other.kill()
+        other.wait()
+    # the worker died (machine reset, kill -9): its claim is stale and is taken over
+    assert ab.claim(run)
+    ab.release(run)
+    assert not (run / "claim").exists()
+
+
+def test_scored_sets_must_match_the_committed_ones(tmp_path):
+    _ablation_module()
+    import ablation_eval as ae
+
+    ids = {"point_poor": ["point_poor/2100001"], "kitti06": ["kitti06/0-1"]}
+    ae.check_or_save_sets(tmp_path / "sets.json", ids)
+    ae.check_or_save_sets(tmp_path / "sets.json", ids)  # same pairs: fine
+    with pytest.raises(SystemExit, match=r"differ .* sets \['kitti06'\]"):
+        ae.check_or_save_sets(tmp_path / "sets.json", {**ids, "kitti06": ["kitti06/1-2"]})
+
+
+def test_report_and_curves_read_only_the_committed_results(tmp_path):
+    """A later session on a fresh machine (no run folders) still writes Table 3 and the curves
+    from the small committed files; a run scored as seed 0 and 1 shows the seeds' spread."""
+    import json
+
+    ab = _ablation_module()
+    res = tmp_path / "results"
+    (res / "runs").mkdir(parents=True)
+    (res / "history").mkdir()
+    sets = {"point_poor": ["a", "b", "c", "d"], "kitti06": ["e", "f", "g", "h"]}
+    (res / "sets.json").write_text(json.dumps(sets))
+    errs = lambda k: {n: [[k * (i + 1), 2 * k * (i + 1)] for i in range(4)] for n in sets}  # noqa: E731
+    (res / "poselib.json").write_text(json.dumps({n: [[1, 1], None, [3, 3], [4, 4]] for n in sets}))
+    (res / "runs" / "full-s0.json").write_text(json.dumps(errs(1.0)))
+    (res / "runs" / "full-s1.json").write_text(json.dumps(errs(2.0)))
+    (res / "runs" / "baseline-s0.json").write_text(json.dumps(errs(4.0)))
+    hist = [{"step": 250 * k, "rot_err_deg": 9.0 - k, "trans_err_deg": 80.0 - k} for k in (1, 2)]
+    (res / "history" / "full-s0.json").write_text(json.dumps({"step": 500, "history": hist}))
+    out, fig = tmp_path / "t3.md", tmp_path / "c.png"
+    assert ab.main(["--root", str(tmp_path / "gone"), "report", "--results", str(res),
+                    "--out", str(out), "--figure", str(fig)]) == 0
+    text = out.read_text()
+    # full: seed 0 median rotation 2.50 over [1, 2, 3, 4], seeds' medians 2.50 and 5.00
+    assert "| full | 2.50 [" in text and "(seeds 2.50-5.00)" in text
+    assert "| baseline | 10.00 [" in text
+    # full vs baseline: every pair's ratio is 1/4
+    assert "| full vs baseline | rot | 0.25 [0.25-0.25]" in text
+    assert fig.stat().st_size > 0
+    out2 = tmp_path / "curves.md"
+    assert ab.main(["--root", str(tmp_path / "gone"), "curves", "--results", str(res),
+                    "--out", str(out2), "--figure", str(fig)]) == 0
+    assert "| full-s0 | 500 | 7.00 | 78.00 |" in out2.read_text()
+    # nothing scored: one line, exit 2
+    assert ab.main(["report", "--results", str(tmp_path / "none"), "--out", str(out),
+                    "--figure", str(fig)]) == 2

@@ -181,3 +181,104 @@ def test_vp_is_opt_in_and_leaves_the_recommended_pose_alone():
     m, _, _ = manhattan_pair(0, n_points=12, noise=0.2)
     est = PoseEstimator(methods=("opencv", "vp"), bootstrap=0).estimate(m)
     assert est.methods["vp"].status == "ok" and est.pose.method == "opencv"
+
+
+# ----------------------------------------------------------------------------- vp_checked
+def _base() -> str:
+    from strl_pyg.estimation.classical import have_poselib
+
+    return "poselib" if have_poselib() else "opencv"
+
+
+def _planted(name: str, R: np.ndarray, t: np.ndarray, support: int):
+    from strl_pyg.inference.record import MethodResult
+
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    return MethodResult(name, "ok", T, info={"support_inliers": support})
+
+
+def _rot_err(T: np.ndarray, R: np.ndarray) -> float:
+    return float(rotation_angle_deg(torch.from_numpy(np.asarray(T)[:3, :3].T @ R)))
+
+
+def test_vp_checked_takes_vp_where_the_classical_rotation_contradicts_the_lines():
+    """A planted classical pose 20 deg off (as a 5-point solve on a handful of points may be)
+    and as well supported as vp's: the lines' vanishing direction contradicts it, so
+    vp_checked answers with vp's pose; a right classical pose is kept as it is."""
+    from strl_pyg.inference.methods import VP_CHECK_ANGLE_DEG, MethodContext, _vp_checked
+
+    m, R, t = manhattan_pair(1, n_points=15, noise=0.3)
+    ctx = MethodContext(bootstrap=0)
+    vp = PoseEstimator(methods=("vp",), bootstrap=0).estimate(m).methods["vp"]
+    assert vp.status == "ok" and _rot_err(vp.T_0to1, R) < 2.0
+    off = cv2.Rodrigues(np.array([0.0, np.radians(20.0), 0.0]))[0] @ R
+    ctx.results = {_base(): _planted(_base(), off, t, vp.info["support_inliers"]), "vp": vp}
+    res = _vp_checked(m, ctx)
+    assert res.status == "ok" and res.info["source"] == "vp"
+    assert res.info["line_angle_deg"] > VP_CHECK_ANGLE_DEG
+    np.testing.assert_array_equal(res.T_0to1, vp.T_0to1)
+    # the same pose but right: kept, and the check says how close it was
+    ctx.results[_base()] = _planted(_base(), R, t, vp.info["support_inliers"])
+    res = _vp_checked(m, ctx)
+    assert res.info["source"] == _base() and res.info["line_angle_deg"] < 1.0
+    np.testing.assert_array_equal(res.T_0to1, ctx.results[_base()].T_0to1)
+
+
+def test_vp_checked_keeps_a_classical_pose_that_fits_clearly_more_points():
+    from strl_pyg.inference.methods import VP_CHECK_SUPPORT_SLACK, MethodContext, _vp_checked
+
+    m, R, t = manhattan_pair(1, n_points=15, noise=0.3)
+    vp = PoseEstimator(methods=("vp",), bootstrap=0).estimate(m).methods["vp"]
+    off = cv2.Rodrigues(np.array([0.0, np.radians(20.0), 0.0]))[0] @ R
+    more = vp.info["support_inliers"] + VP_CHECK_SUPPORT_SLACK + 1
+    ctx = MethodContext(bootstrap=0, results={_base(): _planted(_base(), off, t, more),
+                                              "vp": vp})
+    res = _vp_checked(m, ctx)
+    assert res.info["source"] == _base() and "fits fewer point matches" in res.info["reason"]
+
+
+def test_vp_checked_is_the_classical_pose_where_points_are_many_or_lines_absent():
+    from strl_pyg.inference.methods import VP_CHECK_MAX_POINTS
+
+    base = _base()
+    m, _, _ = manhattan_pair(0, n_points=VP_CHECK_MAX_POINTS + 10, noise=0.3)
+    est = PoseEstimator(methods=(base, "vp_checked"), bootstrap=0).estimate(m)
+    vc, cv = est.methods["vp_checked"], est.methods[base]
+    assert vc.status == cv.status == "ok" and vc.info["source"] == base
+    np.testing.assert_array_equal(vc.T_0to1, cv.T_0to1)
+    pts = PairMatches(m.points0[:15], m.points1[:15], image_size0=SIZE, image_size1=SIZE,
+                      K0=K, K1=K)
+    vc = PoseEstimator(methods=("vp_checked",), bootstrap=0).estimate(pts).methods["vp_checked"]
+    assert "no line matches" in vc.info["reason"]
+
+
+def test_vp_checked_alone_runs_what_it_reads_and_gives_the_same_pose():
+    m, R, _ = manhattan_pair(2, n_points=14, noise=0.3)
+    alone = PoseEstimator(methods=("vp_checked",), bootstrap=0).estimate(m)
+    full = PoseEstimator(methods=(_base(), "vp", "vp_checked"),
+                         bootstrap=0).estimate(m)
+    a, b = alone.methods["vp_checked"], full.methods["vp_checked"]
+    assert a.status == b.status == "ok" and a.info["source"] == b.info["source"]
+    np.testing.assert_allclose(a.T_0to1, b.T_0to1, atol=1e-9)
+    assert _rot_err(a.T_0to1, R) < 3.0
+
+
+def test_vp_checked_random_matches_and_identical_images_are_not_ok():
+    rng = np.random.default_rng(4)
+    rand = PairMatches(rng.uniform(0, 400, (15, 2)), rng.uniform(0, 400, (15, 2)),
+                       rng.uniform(0, 400, (50, 2, 2)), rng.uniform(0, 400, (50, 2, 2)),
+                       image_size0=SIZE, image_size1=SIZE, K0=K, K1=K)
+    est = PoseEstimator(methods=("vp_checked",), bootstrap=0).estimate(rand)
+    assert est.methods["vp_checked"].status in ("failed", "degenerate")
+    m, _, _ = manhattan_pair(0, n_points=15)
+    same = PairMatches(m.points0, m.points0, m.lines0, m.lines0, image_size0=SIZE,
+                       image_size1=SIZE, K0=K, K1=K)
+    est = PoseEstimator(methods=("vp_checked",), bootstrap=0).estimate(same)
+    assert est.methods["vp_checked"].status == "degenerate"
+
+
+def test_vp_checked_is_opt_in():
+    from strl_pyg.model.strl_pose import StrLPose
+
+    assert "vp_checked" not in recommended_order(StrLPose.from_pretrained())

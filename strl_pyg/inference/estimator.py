@@ -71,6 +71,7 @@ from strl_pyg.inference.methods import (
     _guided,
     _regression,
     _vp,
+    _vp_checked,
     have_poselib,
 )
 from strl_pyg.inference.record import STATUSES, MethodResult, PoseEstimate
@@ -164,6 +165,7 @@ register_method("fused", _fused)
 register_method("geometric", _geometric)
 register_method("guided", _guided)
 register_method("vp", _vp)
+register_method("vp_checked", _vp_checked)
 
 
 # ----------------------------------------------------------------------------- estimator

@@ -14,6 +14,8 @@ the context they share; :mod:`strl_pyg.inference.estimator` registers them in :d
   (:func:`~strl_pyg.estimation.vanishing.vanishing_point_pose`); opt-in: not in the recommended
   order, which it made no better on the real point-poor sets
   (``benchmarks/results_vanishing.md``).
+* ``vp_checked`` (:func:`_vp_checked`): the classical pose, replaced by ``vp``'s where the
+  points are few and the lines' strongest vanishing direction contradicts its rotation; opt-in.
 
 A method is ``fn(matches, context) -> MethodResult``; ``context.results`` holds the methods
 run before it. Covariances (:mod:`strl_pyg.inference.record`): the network's from its predicted
@@ -141,6 +143,92 @@ def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
                            time_ms=res.time_ms, info=dict(res.info), raw=res)
     rec.info["covariance_kind"] = "first-order"
     return rec
+
+
+#: Point matches at or below which ``vp_checked`` consults the lines (the point-poor regime of
+#: the evaluation set ``point_poor``); above it ``vp_checked`` is the classical pose.
+VP_CHECK_MAX_POINTS = 30
+#: How far (deg) the classical rotation may carry the strongest vanishing direction shared by
+#: both images' lines (``d1 = +-R d0``) from where the second image sees it before
+#: ``vp_checked`` turns to ``vp``'s pose; fitted with :data:`VP_CHECK_SUPPORT_SLACK` on a
+#: calibration split (``benchmarks/bench_vanishing.py --fit``).
+VP_CHECK_ANGLE_DEG = 5.0
+#: ``vp``'s pose replaces the classical one only while it is supported by at least this many
+#: fewer point matches than the classical pose (fitted with :data:`VP_CHECK_ANGLE_DEG`).
+VP_CHECK_SUPPORT_SLACK = 2
+
+
+def _result_of(name: str, matches: PairMatches, ctx: MethodContext) -> MethodResult:
+    """The record of ``name`` (``"poselib"``, ``"opencv"`` or ``"vp"``) from the methods run
+    before, else run here; ``info["support_inliers"]`` counted as the support check counts."""
+    from strl_pyg.inference.support import check_support
+
+    res = ctx.results.get(name)
+    if res is None:
+        res = (_vp if name == "vp" else _classical(name))(matches, ctx)
+    if res.status == "ok" and "support_inliers" not in res.info:
+        res = check_support(res, matches, ctx.threshold_px, min_inlier_ratio=0.0,
+                            min_inliers=0, min_in_front=0.0)
+    return res
+
+
+def _vp_checked(matches: PairMatches, ctx: MethodContext) -> MethodResult:
+    """The classical pose, checked against the lines where the points are few: with at most
+    :data:`VP_CHECK_MAX_POINTS` point matches, when the classical rotation contradicts the
+    strongest vanishing direction of the matched lines by more than :data:`VP_CHECK_ANGLE_DEG`
+    and ``vp``'s pose (whose rotation comes from those directions) is supported by about as
+    many point matches (:data:`VP_CHECK_SUPPORT_SLACK`), ``vp``'s pose; ``vp``'s also where the
+    classical solver gives none. ``info["source"]`` names the pose taken, ``info["reason"]``
+    why; the covariance is that pose's own record's."""
+    from strl_pyg.estimation.vanishing import vanishing_directions
+
+    start = time.perf_counter()
+    base = "poselib" if have_poselib() else "opencv"
+    cls = _result_of(base, matches, ctx)
+    info: dict[str, Any] = {"classical": base}
+
+    def take(rec: MethodResult, reason: str) -> MethodResult:
+        ms = (time.perf_counter() - start) * 1e3
+        if rec.status != "ok":
+            return MethodResult("vp_checked", rec.status, time_ms=ms, info={**info,
+                                "reason": reason}, warnings=[f"vp_checked: {reason}"]
+                                + [w for w in rec.warnings if w not in reason])
+        return MethodResult("vp_checked", "ok", rec.T_0to1, rec.covariance,
+                            list(rec.warnings), ms, rec.num_inliers,
+                            info={**info, "source": rec.method, "reason": reason,
+                                  "covariance": rec.info.get("covariance")}, raw=rec.raw)
+
+    if matches.num_points > VP_CHECK_MAX_POINTS:
+        return take(cls, f"{matches.num_points} point matches (> {VP_CHECK_MAX_POINTS}): the "
+                         f"{base} pose as it is")
+    if matches.num_lines == 0:
+        return take(cls, "no line matches to check the pose against")
+    vp = _result_of("vp", matches, ctx)
+    if cls.status != "ok":
+        return take(vp, f"{base} gave no supported pose" + (
+            "; vp's pose" if vp.status == "ok" else "; nor did vp"))
+    dirs = vanishing_directions(matches, seed=ctx.seed)
+    if not dirs:
+        return take(cls, "no vanishing direction shared by both images' lines")
+    d0, d1, lines = dirs[0]
+    R = np.asarray(cls.T_0to1, dtype=np.float64)[:3, :3]
+    angle = float(np.degrees(np.arccos(np.clip(abs(float(d1 @ (R @ d0))), 0.0, 1.0))))
+    info.update(line_angle_deg=angle, direction_lines=int(lines.sum()))
+    if angle <= VP_CHECK_ANGLE_DEG:
+        return take(cls, f"the {base} rotation agrees with the lines' strongest vanishing "
+                         f"direction ({angle:.1f} deg)")
+    if vp.status != "ok":
+        return take(cls, f"the {base} rotation is {angle:.1f} deg off the lines' vanishing "
+                         f"direction, but vp has no supported pose")
+    s_cls, s_vp = cls.info["support_inliers"], vp.info["support_inliers"]
+    info.update(support_classical=s_cls, support_vp=s_vp)
+    if s_vp < s_cls - VP_CHECK_SUPPORT_SLACK:
+        return take(cls, f"the {base} rotation is {angle:.1f} deg off the lines' vanishing "
+                         f"direction, but vp's pose fits fewer point matches ({s_vp} against "
+                         f"{s_cls})")
+    return take(vp, f"the {base} rotation is {angle:.1f} deg off the lines' strongest "
+                    f"vanishing direction ({int(lines.sum())} lines); vp's pose fits {s_vp} "
+                    f"point matches against {s_cls}")
 
 
 def _full_forward(matches: PairMatches, ctx: MethodContext):

@@ -28,9 +28,10 @@ __all__ = ["estimate_recommended", "estimate_methods", "methods_needed", "NETWOR
 #: Methods that run the network (they read line segments and image patches).
 NETWORK_METHODS = ("regression", "geometric", "guided", "fused")
 #: Methods that read line segments: the network's and the vanishing-point solver.
-LINE_METHODS = (*NETWORK_METHODS, "vp")
+LINE_METHODS = (*NETWORK_METHODS, "vp", "vp_checked")
 #: Methods a method reads the results of (classical: the first installed of the two).
-DEPENDENCIES = {"fused": ("regression", "classical"), "guided": ("classical",)}
+DEPENDENCIES = {"fused": ("regression", "classical"), "guided": ("classical",),
+                "vp_checked": ("classical", "vp")}
 
 
 def _classical() -> str:

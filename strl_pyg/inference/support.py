@@ -25,7 +25,7 @@ MIN_INLIER_RATIO = 0.1
 MIN_SUPPORT_INLIERS = 12
 SUPPORT_BAND = 2.0
 #: The methods whose poses need that support (their inliers are counted on the point matches).
-SUPPORT_CHECKED = ("poselib", "opencv", "guided", "geometric", "fused", "vp")
+SUPPORT_CHECKED = ("poselib", "opencv", "guided", "geometric", "fused", "vp", "vp_checked")
 #: Of the point matches within the support band of a checked pose, at least this fraction must
 #: triangulate in front of both cameras, else the pose is ``"unreliable"``. The Sampson
 #: distance cannot tell ``t`` from ``-t`` (nor a twisted decomposition): on the 47 dino pairs

@@ -365,8 +365,9 @@ def _parse_value(text: str):
         return text
 
 
-def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
-    """Runs training from parsed :func:`add_train_arguments` flags; returns an exit code."""
+def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> TrainConfig:
+    """The :class:`TrainConfig` of parsed :func:`add_train_arguments` flags (``ValueError`` /
+    ``TypeError`` on bad values; a malformed ``KEY=VALUE`` is ``ap.error``)."""
     def pairs(items):
         out = {}
         for item in items:
@@ -377,22 +378,27 @@ def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
         return out
 
     split = lambda s: None if s is None else [x.strip() for x in s.split(",")]  # noqa: E731
+    return TrainConfig(
+        dataset=args.dataset, data_root=args.data_root, cache_dir=args.cache_dir,
+        scene=pairs(args.scene), scene_kinds=split(args.scene_kinds),
+        train_pairs=args.train_pairs, val_pairs=args.val_pairs, kitti_k=args.kitti_k,
+        train_sequences=split(args.train_sequences), val_sequences=split(args.val_sequences),
+        limit=args.limit, model=args.model, model_overrides=pairs(args.set), lr=args.lr,
+        batch_size=args.batch_size, steps=args.steps, val_every=args.val_every,
+        num_points=args.num_points, num_lines=args.num_lines, patch_size=args.patch_size,
+        swap_prob=args.swap_prob, init_from=args.init_from,
+        seed=args.seed, out_dir=args.out, num_workers=args.workers, device=args.device,
+        tensorboard=not args.no_tensorboard, scene_mix=args.scene_mix,
+        matches=args.matches, outlier_augment=args.outlier_augment,
+        geo_ess_start=args.geo_ess_start, data_seed=args.data_seed,
+        checkpoint_every=args.checkpoint_every, checkpoint_minutes=args.checkpoint_minutes,
+    )
+
+
+def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
+    """Runs training from parsed :func:`add_train_arguments` flags; returns an exit code."""
     try:
-        cfg = TrainConfig(
-            dataset=args.dataset, data_root=args.data_root, cache_dir=args.cache_dir,
-            scene=pairs(args.scene), scene_kinds=split(args.scene_kinds),
-            train_pairs=args.train_pairs, val_pairs=args.val_pairs, kitti_k=args.kitti_k,
-            train_sequences=split(args.train_sequences), val_sequences=split(args.val_sequences),
-            limit=args.limit, model=args.model, model_overrides=pairs(args.set), lr=args.lr,
-            batch_size=args.batch_size, steps=args.steps, val_every=args.val_every,
-            num_points=args.num_points, num_lines=args.num_lines, patch_size=args.patch_size,
-            swap_prob=args.swap_prob, init_from=args.init_from,
-            seed=args.seed, out_dir=args.out, num_workers=args.workers, device=args.device,
-            tensorboard=not args.no_tensorboard, scene_mix=args.scene_mix,
-            matches=args.matches, outlier_augment=args.outlier_augment,
-            geo_ess_start=args.geo_ess_start, data_seed=args.data_seed,
-            checkpoint_every=args.checkpoint_every, checkpoint_minutes=args.checkpoint_minutes,
-        )
+        cfg = config_from_args(args, ap)
         cfg.model_config()  # validate the model overrides before any work
         check_device(cfg.device)
         if args.resume and args.overwrite:
