@@ -86,9 +86,11 @@ def all_sets(cache: Path, quick: bool = False) -> dict[str, list]:
 
 
 def _errors(T_est: np.ndarray, T_gt: np.ndarray) -> tuple[float, float]:
+    """Rotation and translation-direction errors (deg), to 1e-4 deg (the results files are
+    committed: the digits beyond say nothing)."""
     import bench_pose as bp
 
-    return bp.errors(T_est, T_gt)
+    return tuple(round(float(e), 4) for e in bp.errors(T_est, T_gt))
 
 
 def poselib_errors(sets: dict[str, list]) -> dict[str, list]:
