@@ -44,23 +44,32 @@ def point_poor_pairs(cache: Path, n: int = POINT_POOR_PAIRS, seed0: int = POINT_
     split selected the same way (``bench_vanishing.py --fit``'s calibration split)."""
     from bench_pose import _cached
 
+    from strl_pyg.data.matches import PairMatches
     from strl_pyg.frontend import NoMatchesError, match_images
     from strl_pyg.synthetic import generate_pair
     from strl_pyg.synthetic.distributions import eval_distribution
+
+    def wanted(m) -> bool:
+        lines = 0 if m.lines0 is None else len(m.lines0)
+        return m.num_points <= 30 and lines >= 20
 
     dist = eval_distribution("low_texture", kinds=("street", "indoor", "boxes"))
     out = []
     for seed in range(seed0, seed0 + POINT_POOR_MAX_CANDIDATES):
         if len(out) == n:
             break
+        path = cache / f"pp_{seed}.npz"
+        # a candidate matched before and not wanted is not rendered again (most are not:
+        # about 1 in 12 is point-poor); the wanted ones are, for their ground-truth pose
+        if path.is_file() and not wanted(PairMatches.load(path)):
+            continue
         p = generate_pair(seed, dist.config(seed))
         try:
             m = _cached(cache, f"pp_{seed}", lambda p=p: match_images(
                 p.image0, p.image1, K0=p.K, K1=p.K))
         except (NoMatchesError, RuntimeError):
             continue
-        lines = 0 if m.lines0 is None else len(m.lines0)
-        if m.num_points <= 30 and lines >= 20:
+        if wanted(m):
             out.append((f"point_poor/{seed}", m, np.asarray(p.T_0to1, dtype=np.float64)))
     return out
 

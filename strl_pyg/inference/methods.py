@@ -152,10 +152,10 @@ VP_CHECK_MAX_POINTS = 30
 #: both images' lines (``d1 = +-R d0``) from where the second image sees it before
 #: ``vp_checked`` turns to ``vp``'s pose; fitted with :data:`VP_CHECK_SUPPORT_SLACK` on a
 #: calibration split (``benchmarks/bench_vanishing.py --fit``).
-VP_CHECK_ANGLE_DEG = 5.0
+VP_CHECK_ANGLE_DEG = 2.0
 #: ``vp``'s pose replaces the classical one only while it is supported by at least this many
 #: fewer point matches than the classical pose (fitted with :data:`VP_CHECK_ANGLE_DEG`).
-VP_CHECK_SUPPORT_SLACK = 2
+VP_CHECK_SUPPORT_SLACK = 3
 
 
 def _result_of(name: str, matches: PairMatches, ctx: MethodContext) -> MethodResult:
