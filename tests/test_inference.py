@@ -134,7 +134,7 @@ def test_the_graph_follows_the_stored_resample_counts(pair):
 # ----------------------------------------------------------------------------- the estimate
 def test_estimate_gives_a_recommended_pose_and_every_method(estimate, pair, model):
     names = ["regression", "opencv"] + (["poselib"] if HAVE_POSELIB else []) + [
-        "fused", "geometric", "guided", "vp"]
+        "fused", "geometric", "guided", "vp", "vp_checked"]
     assert list(estimate.methods) == names
     pose = estimate.pose
     assert pose.status == "ok" and not pose.warnings
@@ -299,7 +299,7 @@ def test_the_split_modules_stay_importable_from_inference():
         for name in mod.__all__:  # one object, two import paths
             assert getattr(inference, name) is getattr(mod, name), name
     assert list(inference.METHODS) == ["regression", "opencv", "poselib", "fused", "geometric",
-                                       "guided", "vp"]
+                                       "guided", "vp", "vp_checked"]
     assert inference.METHODS["fused"].fn is pose_methods._fused
     # a name the module imported in 0.1.x (gone after the split, restored), also on the face
     from strl_pyg.estimation import classical
