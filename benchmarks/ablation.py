@@ -359,7 +359,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     lines += ["## Paired comparisons (seed 0): median ratio a / b [95 % paired bootstrap]", "",
               "| a vs b | error | " + " | ".join(names) + " |",
               "|---|---" + "|---" * len(names) + "|"]
-    for a, b in (("full", "baseline"), ("LP", "L")):
+    for a, b in (("full", "baseline"), ("LP", "L"), ("LP", "baseline")):
         if a in runs and b in runs:
             for which, label in ((0, "rot"), (1, "trans")):
                 cells = []
