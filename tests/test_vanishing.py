@@ -282,3 +282,22 @@ def test_vp_checked_is_opt_in():
     from strl_pyg.model.strl_pose import StrLPose
 
     assert "vp_checked" not in recommended_order(StrLPose.from_pretrained())
+
+
+def test_vp_and_vp_checked_find_the_directions_once_and_vp_is_unchanged(monkeypatch):
+    """The directions are shared through the estimate's context (found once per pair); vp's
+    pose equals the solver called on its own (the reference path)."""
+    from strl_pyg.estimation import vanishing
+
+    m, _, _ = manhattan_pair(1, n_points=15, noise=0.3)
+    ref = vanishing_point_pose(m)
+    calls = []
+    real = vanishing.vanishing_directions
+    monkeypatch.setattr(vanishing, "vanishing_directions",
+                        lambda *a, **k: calls.append(1) or real(*a, **k))
+    est = PoseEstimator(methods=(_base(), "vp", "vp_checked"), bootstrap=0).estimate(m)
+    assert len(calls) == 1
+    vp = est.methods["vp"]
+    assert vp.status == "ok"
+    np.testing.assert_array_equal(vp.T_0to1, ref.T_0to1.matrix().numpy())
+    assert "line_angle_deg" in est.methods["vp_checked"].info

@@ -188,7 +188,7 @@ def _in_front(R: np.ndarray, t: np.ndarray, h0: np.ndarray, h1: np.ndarray) -> n
 def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
                          line_threshold_px: float = 2.0, max_pairs: int = 500,
                          max_angle_error_deg: float = 3.0, max_refine_deg: float = 5.0,
-                         seed: int = 0) -> BaselineResult:
+                         seed: int = 0, directions: list | None = None) -> BaselineResult:
     """``T_0to1`` from the vanishing directions of the matched lines and the point matches
     (module docstring).
 
@@ -204,6 +204,8 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
         max_refine_deg: the refinement on the points is kept only within this rotation of the
             vanishing-point rotation.
         seed: the RANSAC samples.
+        directions: :func:`vanishing_directions` of ``matches`` (with ``line_threshold_px`` and
+            ``seed``) when the caller has them already; computed here when ``None``.
 
     Returns:
         a :class:`BaselineResult` (``success=False`` with ``info["reason"]`` when fewer than two
@@ -222,7 +224,8 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
                          f"(got {threshold_px}, {line_threshold_px})")
     start = time.perf_counter()
     n = matches.num_points
-    dirs = vanishing_directions(matches, line_threshold_px, seed=seed)
+    dirs = (vanishing_directions(matches, line_threshold_px, seed=seed) if directions is None
+            else directions)
     info = {"directions": len(dirs), "direction_lines": [int(d[2].sum()) for d in dirs]}
     rotations = _rotations(dirs, max_angle_error_deg)
     if not rotations:

@@ -135,7 +135,8 @@ def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     if matches.num_lines == 0:
         return MethodResult("vp", "failed", warnings=[
             "vp needs line matches (got none: FrontendConfig(lines=True), or lines0/lines1)"])
-    res = vanishing_point_pose(matches, ctx.threshold_px, seed=ctx.seed)
+    res = vanishing_point_pose(matches, ctx.threshold_px, seed=ctx.seed,
+                               directions=_vanishing_directions(matches, ctx))
     if not res.success:
         return MethodResult("vp", "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
                             info=dict(res.info), warnings=[f"vp: {res.info['reason']}"])
@@ -143,6 +144,16 @@ def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
                            time_ms=res.time_ms, info=dict(res.info), raw=res)
     rec.info["covariance_kind"] = "first-order"
     return rec
+
+
+def _vanishing_directions(matches: PairMatches, ctx: MethodContext) -> list:
+    """The matched lines' vanishing directions (default thresholds, ``ctx.seed``), found once
+    per pair and shared by ``vp`` and ``vp_checked``."""
+    from strl_pyg.estimation.vanishing import vanishing_directions
+
+    if "vanishing_directions" not in ctx.cache:
+        ctx.cache["vanishing_directions"] = vanishing_directions(matches, seed=ctx.seed)
+    return ctx.cache["vanishing_directions"]
 
 
 #: Point matches at or below which ``vp_checked`` consults the lines (the point-poor regime of
@@ -179,9 +190,8 @@ def _vp_checked(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     and ``vp``'s pose (whose rotation comes from those directions) is supported by about as
     many point matches (:data:`VP_CHECK_SUPPORT_SLACK`), ``vp``'s pose; ``vp``'s also where the
     classical solver gives none. ``info["source"]`` names the pose taken, ``info["reason"]``
-    why; the covariance is that pose's own record's."""
-    from strl_pyg.estimation.vanishing import vanishing_directions
-
+    why; the covariance is that pose's own record's (calibrated when that record was:
+    ``info["calibration_scale"]``)."""
     start = time.perf_counter()
     base = "poselib" if have_poselib() else "opencv"
     cls = _result_of(base, matches, ctx)
@@ -196,7 +206,9 @@ def _vp_checked(matches: PairMatches, ctx: MethodContext) -> MethodResult:
         return MethodResult("vp_checked", "ok", rec.T_0to1, rec.covariance,
                             list(rec.warnings), ms, rec.num_inliers,
                             info={**info, "source": rec.method, "reason": reason,
-                                  "covariance": rec.info.get("covariance")}, raw=rec.raw)
+                                  "covariance": rec.info.get("covariance"),
+                                  "calibration_scale": rec.info.get("calibration_scale")},
+                            raw=rec.raw)
 
     if matches.num_points > VP_CHECK_MAX_POINTS:
         return take(cls, f"{matches.num_points} point matches (> {VP_CHECK_MAX_POINTS}): the "
@@ -207,7 +219,7 @@ def _vp_checked(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     if cls.status != "ok":
         return take(vp, f"{base} gave no supported pose" + (
             "; vp's pose" if vp.status == "ok" else "; nor did vp"))
-    dirs = vanishing_directions(matches, seed=ctx.seed)
+    dirs = _vanishing_directions(matches, ctx)
     if not dirs:
         return take(cls, "no vanishing direction shared by both images' lines")
     d0, d1, lines = dirs[0]
