@@ -40,6 +40,22 @@ def test_match_points_fast_equals_reference_on_a_pair():
     np.testing.assert_allclose(fast[2], ref[2], atol=1e-5)
 
 
+def test_top2_reverse_direction_takes_the_first_of_tied_rows():
+    # duplicated query descriptors tie exactly in the reverse direction: the fast path must pick
+    # the first row, as the column-wise argmin of the same float32 distances does
+    rng = np.random.default_rng(1)
+    base = rng.integers(0, 120, (40, 128)).astype(np.float32)
+    d0 = np.concatenate([base, base[::-1], base[:7]])  # every row appears 2-3 times
+    # integer descriptors: every product and distance is exact in float32, so ties are exact
+    d1 = base[rng.permutation(40)] + rng.integers(-2, 3, (40, 128)).astype(np.float32)
+    nn01, ratio01, nn10 = _top2_l2(d0, d1)
+    sq = ((d0 * d0).sum(1)[:, None] + (d1 * d1).sum(1)[None, :]) - 2.0 * (d0 @ d1.T)
+    np.testing.assert_array_equal(nn10, sq.argmin(axis=0))
+    assert nn10.max() < 40  # the first copy of each row
+    np.testing.assert_array_equal(nn01, sq.argmin(axis=1))
+    np.testing.assert_allclose(ratio01[:40], ratio01[40:80][::-1], rtol=1e-12)
+
+
 def test_single_train_descriptor():
     d0 = np.ones((3, 128), np.float32)
     d1 = np.ones((1, 128), np.float32)

@@ -55,22 +55,41 @@ def _top2_l2(d0: np.ndarray, d1: np.ndarray):
     """Both directions' nearest index and ratio (nearest / second nearest L2 distance) from one
     matrix product: ``(nn01, ratio01, nn10)`` as :func:`_knn2` gives them. The product (float32)
     only ranks the candidates; the two distances of each ratio are recomputed exactly from the
-    descriptors (float64), so a ratio differs from OpenCV's by rounding only."""
+    descriptors (float64), so a ratio differs from OpenCV's by rounding only.
+
+    Costs one ``[N0, N1]`` float32 matrix beside the product (built in place) and row-wise
+    (contiguous) reductions only: the two nearest by two ``argmin`` passes, the reverse
+    direction's nearest from the column minima (a column-wise ``argmin`` and ``argpartition``
+    were 70 % of the time on a 2048 x 2048 KITTI pair)."""
     a = np.ascontiguousarray(d0, dtype=np.float32)
     b = np.ascontiguousarray(d1, dtype=np.float32)
-    sq = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * (a @ b.T)  # [N0, N1]
-    nn10 = sq.argmin(axis=0)
+    prod = a @ b.T  # [N0, N1]
+    prod *= 2.0  # exact: the same float32 values as (|a|^2 + |b|^2) - 2 a.b computed apart
+    sq = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :]
+    sq -= prod
+    del prod
+    # the reverse direction: each column's minimum (a row-wise pass), then the first row that
+    # reaches it (flat hits are in row order), as ``sq.argmin(axis=0)`` without its slow strided
+    # reduction
+    col_min = sq.min(axis=0)
+    hit_row, hit_col = np.divmod(np.flatnonzero(sq == col_min[None, :]), sq.shape[1])
+    cols, first_hit = np.unique(hit_col, return_index=True)
+    nn10 = np.zeros(sq.shape[1], np.int64)
+    nn10[cols] = hit_row[first_hit]
+    rows = np.arange(len(a))
     if sq.shape[1] == 1:
         nn01 = np.zeros(len(a), np.int64)
         dist = np.linalg.norm(a.astype(np.float64) - b[0].astype(np.float64), axis=1)
-        return nn01, np.where(dist == 0, 0.0, 1.0), nn10
-    two = np.argpartition(sq, 1, axis=1)[:, :2]
+        return nn01, np.where(dist == 0, 0.0, 1.0), nn10.astype(np.int64)
+    first = sq.argmin(axis=1)
+    sq[rows, first] = np.inf  # the second nearest: the nearest of the others
+    second = sq.argmin(axis=1)
+    two = np.stack([first, second], axis=1)
     a64, b64 = a.astype(np.float64), b.astype(np.float64)
     dist = np.linalg.norm(a64[:, None, :] - b64[two], axis=2)  # [N0, 2] exact
-    first = dist.argmin(axis=1)
-    rows = np.arange(len(a))
-    nn01 = two[rows, first]
-    ratio = dist[rows, first] / np.maximum(dist[rows, 1 - first], 1e-12)
+    pick = dist.argmin(axis=1)
+    nn01 = two[rows, pick]
+    ratio = dist[rows, pick] / np.maximum(dist[rows, 1 - pick], 1e-12)
     return nn01.astype(np.int64), ratio, nn10.astype(np.int64)
 
 
