@@ -5,7 +5,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["FrontendConfig", "NoMatchesError"]
+__all__ = ["FrontendConfig", "NoMatchesError", "LINE_MATCHERS"]
+
+#: The line matchers of :class:`FrontendConfig` ``line_matcher``.
+LINE_MATCHERS = ("epipolar", "descriptor")
 
 
 class NoMatchesError(ValueError):
@@ -52,6 +55,15 @@ class FrontendConfig:
         concurrent: detect keypoints (and line segments) of both images at once, in two
             threads (OpenCV releases the GIL); the same result as one after the other.
             (default: True)
+        line_matcher: ``"epipolar"`` (default): segments matched under the fundamental matrix
+            of the point matches and clipped to their common part, so endpoint ``k`` matches
+            endpoint ``k`` (needs >= 8 point matches); ``"descriptor"``: band descriptors
+            without a fundamental matrix (:func:`~strl_pyg.frontend.lines.match_lines_by_descriptor`),
+            also below 8 point matches, segments as detected: their endpoints do *not*
+            correspond (``info["line_endpoints"]``), so only the line solvers (``vp``,
+            ``vp_checked``) may read them; the network methods refuse them. Measured in
+            ``benchmarks/results_line_matchers.md``: better on real street pairs with very few
+            points, worse where an F from 8-30 points exists.
     """
 
     detector: str = "sift"
@@ -80,13 +92,19 @@ class FrontendConfig:
     seed: int = 0
     lines: bool = True
     concurrent: bool = True
+    line_matcher: str = "epipolar"
 
     def result_fields(self) -> dict:
         """The fields that decide the matches (every field but ``concurrent``): what caches of
-        matches key on, so that a setting that only changes the speed keeps them valid."""
+        matches key on, so that a setting that only changes the speed keeps them valid. A field
+        added later (``line_matcher``) enters only when it differs from its default, so the
+        caches of earlier versions keep their keys."""
         from dataclasses import asdict
 
-        return {k: v for k, v in asdict(self).items() if k != "concurrent"}
+        out = {k: v for k, v in asdict(self).items() if k != "concurrent"}
+        if out["line_matcher"] == "epipolar":
+            del out["line_matcher"]
+        return out
 
     def __post_init__(self) -> None:
         if self.detector not in ("sift", "orb"):
@@ -101,6 +119,9 @@ class FrontendConfig:
                 "Expected line_samples >= 2 and line_profile >= 1 "
                 f"(got {self.line_samples}, {self.line_profile})"
             )
+        if self.line_matcher not in LINE_MATCHERS:
+            raise ValueError(f"Expected line_matcher in {LINE_MATCHERS} "
+                             f"(got {self.line_matcher!r})")
         if not 0.0 < self.lsd_scale <= 1.0:
             raise ValueError(f"Expected lsd_scale in (0, 1] (got {self.lsd_scale})")
 

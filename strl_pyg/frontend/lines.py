@@ -25,7 +25,7 @@ import numpy as np
 from strl_pyg.frontend.config import FrontendConfig
 from strl_pyg.frontend.line_descriptors import line_descriptor_scores
 
-__all__ = ["detect_lines", "candidate_pairs", "match_lines"]
+__all__ = ["detect_lines", "candidate_pairs", "match_lines", "match_lines_by_descriptor"]
 
 
 def detect_lines(gray: np.ndarray, cfg: FrontendConfig | None = None) -> np.ndarray:
@@ -190,3 +190,64 @@ def match_lines(
     if len(chosen) == 0:
         return empty
     return c0[chosen], c1[chosen], scores[chosen]
+
+
+def match_lines_by_descriptor(
+    lines0: np.ndarray,
+    lines1: np.ndarray,
+    gray0: np.ndarray,
+    gray1: np.ndarray,
+    cfg: FrontendConfig | None = None,
+    guide: tuple[np.ndarray, np.ndarray] | None = None,
+    ratio: float = 0.85,
+    min_guide_points: int = 3,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Matches LSD segments without a fundamental matrix: mutual nearest neighbours of their
+    :func:`~strl_pyg.frontend.line_descriptors.band_descriptors` that pass a ratio test.
+
+    The segments are returned as detected (not clipped: without epipolar geometry their
+    endpoints do not correspond; only their supporting lines and orientations do, which is what
+    the vanishing-point solver reads). With ``guide`` point matches (at least
+    ``min_guide_points``), a candidate must also lie near where the nearest point matches'
+    median displacement predicts it in image 1 (``cfg.line_guide_tol`` of the diagonal).
+
+    Returns:
+        ``lines0 [L, 2, 2]``, ``lines1 [L, 2, 2]`` and ``scores [L]`` (cosine similarity of the
+        descriptors, in ``[0, 1]``), best first, at most ``cfg.max_lines``.
+    """
+    from strl_pyg.frontend.line_descriptors import band_descriptors
+
+    cfg = cfg or FrontendConfig()
+    empty = np.zeros((0, 2, 2)), np.zeros((0, 2, 2)), np.zeros(0)
+    if len(lines0) == 0 or len(lines1) == 0:
+        return empty
+    if not 0.0 < ratio <= 1.0:
+        raise ValueError(f"Expected ratio in (0, 1] (got {ratio})")
+    a, b = band_descriptors(lines0, gray0), band_descriptors(lines1, gray1)
+    sq = np.maximum(2.0 - 2.0 * (a @ b.T), 0.0)  # unit descriptors: squared L2 distance
+    if guide is not None and len(guide[0]) >= min_guide_points:
+        k = min(int(cfg.line_guide_k), len(guide[0]))
+        pred = _guided_midpoints(lines0, guide[0], guide[1], k)
+        if pred is not None:
+            P1, D1 = lines1[:, 0], lines1[:, 1] - lines1[:, 0]
+            n1 = np.stack([-D1[:, 1], D1[:, 0]], axis=1) / np.linalg.norm(D1, axis=1)[:, None]
+            dist = np.abs(np.einsum("ijk,jk->ij", pred[:, None, :] - P1[None], n1))
+            sq = np.where(dist <= cfg.line_guide_tol * float(np.hypot(*gray1.shape[:2])),
+                          sq, np.inf)
+    dist = np.sqrt(sq)
+    rows = np.arange(len(a))
+    nn01 = dist.argmin(axis=1)
+    nn10 = dist.argmin(axis=0)
+    best = dist[rows, nn01]
+    if dist.shape[1] > 1:
+        second = np.partition(dist, 1, axis=1)[:, 1]
+    else:
+        second = np.full(len(a), np.inf)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        keep = np.isfinite(best) & (nn10[nn01] == rows) & (best < ratio * second)
+    i0 = np.flatnonzero(keep)
+    i1 = nn01[i0]
+    score = 1.0 - best[i0] ** 2 / 2.0
+    order = np.lexsort((i0, -score))[: int(cfg.max_lines)]
+    i0, i1 = i0[order], i1[order]
+    return lines0[i0].copy(), lines1[i1].copy(), score[order]

@@ -11,7 +11,7 @@ import numpy as np
 
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.frontend.config import FrontendConfig, NoMatchesError
-from strl_pyg.frontend.lines import detect_lines, match_lines
+from strl_pyg.frontend.lines import detect_lines, match_lines, match_lines_by_descriptor
 from strl_pyg.frontend.points import fit_fundamental, match_points, on_both
 from strl_pyg.utils.images import FRONTEND_MIN_SIDE, check_image
 
@@ -46,8 +46,10 @@ def match_images(
         matches endpoint ``k``), ``point_scores`` (``1 - ratio``), ``line_scores`` (NCC), the
         grey images attached, and ``info`` holding ``timings_ms`` per stage
         (``points_detect``, ``points_match``, ``geometry``, ``lines_detect``, ``lines_match``,
-        ``total``), counts, ``lines_status`` and the configuration. Lines need a fundamental
-        matrix from at least 8 point matches; without one the result has points only.
+        ``total``), counts, ``lines_status``, ``line_endpoints`` (``"corresponding"``, or
+        ``"as detected"`` from the descriptor matcher) and the configuration. The default
+        (epipolar) line matcher needs a fundamental matrix from at least 8 point matches;
+        without one the result has points only.
 
     Raises:
         TypeError, ValueError: invalid images.
@@ -80,6 +82,9 @@ def match_images(
         l0 = l1 = np.zeros((0, 2, 2))
         l_scores = np.zeros(0)
         status = "skipped: lines=False in the FrontendConfig"
+    elif cfg.line_matcher == "descriptor":
+        l0, l1, l_scores = match_lines_by_descriptor(seg0, seg1, gray0, gray1, cfg)
+        status = "ok (descriptor matcher: endpoints as detected, not corresponding)"
     elif F is None:
         l0 = l1 = np.zeros((0, 2, 2))
         l_scores = np.zeros(0)
@@ -105,6 +110,8 @@ def match_images(
         "segments1": len(seg1),
         "point_geometric_inliers": int(inl.sum()),
         "lines_status": status,
+        "line_endpoints": ("as detected" if cfg.line_matcher == "descriptor"
+                           else "corresponding"),
         "config": asdict(cfg),
     }
     return PairMatches(

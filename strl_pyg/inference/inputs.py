@@ -19,11 +19,25 @@ import numpy as np
 import torch
 
 from strl_pyg.data.matches import PairMatches
+from strl_pyg.inference.recommended import NETWORK_METHODS
 
 __all__ = [
     "ZERO_PARALLAX_PX", "ZERO_PARALLAX_FRACTION", "FOCAL_RANGE", "NORMALISED_K_MAX",
     "prepare_matches", "prepare_graph", "forward_pose", "input_warnings",
-    "intrinsics_problems", "zero_parallax", "network_pose"]
+    "intrinsics_problems", "zero_parallax", "network_pose", "unmatched_endpoints"]
+
+
+def unmatched_endpoints(matches: PairMatches, method: str) -> str | None:
+    """Why ``method`` (a network method: it reads line endpoint ``k`` as matching endpoint
+    ``k``) cannot read ``matches``' lines when they come from the descriptor matcher
+    (``info["line_endpoints"] == "as detected"``); ``None`` when it can."""
+    if (method not in NETWORK_METHODS or not matches.num_lines
+            or matches.info.get("line_endpoints") != "as detected"):
+        return None
+    return (f"{method} reads line endpoints as correspondences (endpoint k matches endpoint "
+            "k), but these lines come from the descriptor matcher (endpoints as detected, "
+            "info['line_endpoints']); match them with FrontendConfig(line_matcher='epipolar') "
+            "or use the line solvers (vp, vp_checked)")
 
 #: Zero parallax: at least this fraction of the point matches moved less than this many
 #: pixels (image 1 re-expressed in image 0's camera when both K are known).

@@ -1,0 +1,138 @@
+"""The line matcher that needs no fundamental matrix (band descriptors)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from strl_pyg.frontend import FrontendConfig
+from strl_pyg.frontend.line_descriptors import band_descriptors
+from strl_pyg.frontend.lines import detect_lines, match_lines_by_descriptor
+from strl_pyg.synthetic import generate_pair
+
+
+def _scene(seed: int = 0, shape=(240, 320)) -> np.ndarray:
+    """Grey image with rectangles of distinct contrasts (edges of many orientations)."""
+    rng = np.random.default_rng(seed)
+    img = np.full(shape, 90, np.uint8)
+    for _ in range(12):
+        x0, y0 = rng.integers(10, shape[1] - 80), rng.integers(10, shape[0] - 60)
+        w, h = rng.integers(25, 70), rng.integers(20, 50)
+        cv2.rectangle(img, (int(x0), int(y0)), (int(x0 + w), int(y0 + h)),
+                      int(rng.integers(0, 256)), -1)
+    return cv2.GaussianBlur(img, (0, 0), 0.8)
+
+
+def test_band_descriptors_shape_norm_and_empty():
+    g = _scene()
+    segs = detect_lines(g)
+    d = band_descriptors(segs, g)
+    assert d.shape == (len(segs), 72) and len(segs) > 10
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-9)
+    assert band_descriptors(np.zeros((0, 2, 2)), g).shape == (0, 72)
+
+
+def test_a_fragment_describes_like_its_segment():
+    # the descriptor pools along the segment: the middle 60 % of an edge is closer to the whole
+    # edge than any other segment is (on a rendered scene: the plain step edges of _scene all
+    # describe alike, a limit of any band descriptor)
+    img = generate_pair(5).image0
+    g = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img
+    segs = detect_lines(g)[:40]
+    frag = segs[:, :1] + np.array([0.2, 0.8])[None, :, None] * (segs[:, 1:] - segs[:, :1])
+    a, b = band_descriptors(segs, g), band_descriptors(frag, g)
+    dist = np.linalg.norm(a[:, None] - b[None], axis=2)
+    assert (dist.argmin(axis=0) == np.arange(len(segs))).mean() >= 0.8  # measured 0.9
+
+
+def test_a_shifted_image_matches_every_segment_to_its_shifted_copy():
+    g0 = _scene(2, (260, 340))
+    shift = np.array([7.0, 4.0])
+    g1 = np.full_like(g0, 90)
+    g1[4:, 7:] = g0[:-4, :-7]
+    s0, s1 = detect_lines(g0[20:-20, 20:-20]) + 20, detect_lines(g1[20:-20, 20:-20]) + 20
+    l0, l1, sc = match_lines_by_descriptor(s0, s1, g0, g1)
+    assert len(l0) >= 10
+    # each match is the same edge: the image-1 segment lies on the shifted image-0 segment
+    d = l1[:, 1] - l1[:, 0]
+    n = np.stack([-d[:, 1], d[:, 0]], 1) / np.linalg.norm(d, axis=1, keepdims=True)
+    off = np.abs(np.einsum("ikj,ij->ik", l0 + shift - l1[:, :1], n))
+    assert (off.max(axis=1) < 1.5).mean() >= 0.9
+    assert (np.diff(sc) <= 0).all() and ((sc >= 0) & (sc <= 1)).all()
+
+
+def test_generated_pair_matches_follow_the_true_geometry():
+    pair = generate_pair(5)
+    g0 = cv2.cvtColor(pair.image0, cv2.COLOR_RGB2GRAY) if pair.image0.ndim == 3 else pair.image0
+    g1 = cv2.cvtColor(pair.image1, cv2.COLOR_RGB2GRAY) if pair.image1.ndim == 3 else pair.image1
+    s0, s1 = detect_lines(g0), detect_lines(g1)
+    l0, l1, _ = match_lines_by_descriptor(s0, s1, g0, g1)
+    assert len(l0) >= 10
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from bench_line_matchers import _gt_F, consistent
+
+    K = np.asarray(pair.K, dtype=np.float64)
+    c = consistent(l0, l1, _gt_F(np.asarray(pair.T_0to1, dtype=np.float64), K, K))
+    assert (c >= 0).sum() >= 5
+    assert (c == 1).sum() / (c >= 0).sum() >= 0.8
+    # at random the same check passes far less often
+    rng = np.random.default_rng(0)
+    cr = consistent(l0, l1[rng.permutation(len(l1))],
+                    _gt_F(np.asarray(pair.T_0to1, dtype=np.float64), K, K))
+    assert (cr == 1).sum() / max((cr >= 0).sum(), 1) < 0.5
+
+
+def test_no_segments_and_bad_ratio():
+    g = _scene(3)
+    s = detect_lines(g)
+    empty = match_lines_by_descriptor(np.zeros((0, 2, 2)), s, g, g)
+    assert [len(x) for x in empty] == [0, 0, 0]
+    with pytest.raises(ValueError, match="ratio in"):
+        match_lines_by_descriptor(s, s, g, g, FrontendConfig(), ratio=1.5)
+
+
+def test_config_line_matcher_and_cache_key():
+    assert "line_matcher" not in FrontendConfig().result_fields()  # earlier caches keep keys
+    assert FrontendConfig(line_matcher="descriptor").result_fields()["line_matcher"] == \
+        "descriptor"
+    with pytest.raises(ValueError, match="line_matcher in"):
+        FrontendConfig(line_matcher="lbd")
+
+
+def test_match_images_descriptor_matcher_below_eight_points():
+    from strl_pyg.frontend import match_images
+
+    pair = generate_pair(5)
+    few = dict(max_keypoints=12)
+    epi = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K,
+                       config=FrontendConfig(**few))
+    desc = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K,
+                        config=FrontendConfig(line_matcher="descriptor", **few))
+    assert epi.num_points < 8 and epi.num_lines == 0  # no F: the epipolar matcher has none
+    assert desc.num_points == epi.num_points and desc.num_lines >= 10
+    assert desc.info["line_endpoints"] == "as detected"
+    assert epi.info["line_endpoints"] == "corresponding"
+
+
+def test_network_methods_refuse_descriptor_lines():
+    from dataclasses import replace
+
+    from strl_pyg.frontend import match_images
+    from strl_pyg.inference import PoseEstimator
+
+    pair = generate_pair(6)
+    m = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K,
+                     config=FrontendConfig(line_matcher="descriptor"))
+    assert m.num_points >= 8 and m.num_lines > 0
+    est = PoseEstimator(methods=["regression", "poselib"]).estimate(m)
+    reg = est.methods["regression"]
+    assert reg.status == "failed" and "descriptor matcher" in reg.warnings[0]
+    assert est.methods["poselib"].status == "ok"  # points only: unaffected
+    # the same matches flagged as corresponding run the network as before
+    ok = PoseEstimator(methods=["regression"]).estimate(
+        replace(m, info={**m.info, "line_endpoints": "corresponding"}))
+    assert ok.methods["regression"].status == "ok"
