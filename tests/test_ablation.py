@@ -153,3 +153,19 @@ def test_report_and_curves_read_only_the_committed_results(tmp_path):
     # nothing scored: one line, exit 2
     assert ab.main(["report", "--results", str(tmp_path / "none"), "--out", str(out),
                     "--figure", str(fig)]) == 2
+
+
+def test_the_results_that_must_outlive_the_machine_are_not_git_ignored():
+    # the study's committed results (runs/<run>.json, history/, sets, PoseLib) were once
+    # matched by the ignore pattern "runs/" and silently left out of every commit
+    import shutil
+    import subprocess
+
+    repo = Path(__file__).resolve().parents[1]
+    if shutil.which("git") is None or not (repo / ".git").exists():
+        pytest.skip("not a git checkout")
+    for rel in ("runs/full-s0.json", "history/full-s0.json", "sets.json", "poselib.json"):
+        path = f"benchmarks/results_ablation/{rel}"
+        out = subprocess.run(["git", "check-ignore", "--no-index", "-v", path], cwd=repo,
+                             capture_output=True, text=True)
+        assert out.returncode == 1, f"{path} is git-ignored: {out.stdout.strip()}"
