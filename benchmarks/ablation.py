@@ -192,6 +192,28 @@ class _Scorer:
         return True
 
 
+    def score_reference(self, name: str) -> bool:
+        """Scores the shipped checkpoint ``name`` (not trained on this study's budget: the
+        figure the study's ``full`` rows must beat before their weights would be shipped)."""
+        import ablation_eval as ae
+        import torch
+
+        from strl_pyg.model.strl_pose import StrLPose
+
+        path = self.out / "reference" / f"{name}.json"
+        if path.exists():
+            return False
+        if name not in StrLPose.PRETRAINED:
+            raise SystemExit(f"error: expected a shipped checkpoint in "
+                             f"{sorted(StrLPose.PRETRAINED)} (got {name!r})")
+        torch.set_num_threads(self.threads)
+        sets = self.sets()
+        ae.save_json(path, ae.model_errors(StrLPose.from_pretrained(name), sets))
+        print(f"[{time.strftime('%H:%M:%S')}] shipped '{name}': scored on {len(sets)} sets "
+              f"-> {path}", flush=True)
+        return True
+
+
 def cmd_cache(args: argparse.Namespace) -> int:
     """Builds the training match cache (``--workers`` processes) and, with ``--eval``, the
     evaluation sets' matches, PoseLib's errors and the sets' pair ids."""
@@ -292,6 +314,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     scorer.sets()
     for row, seed, run in _finished_runs(root, args.min_steps):
         scorer.score(row, seed, run)
+    if args.reference:
+        scorer.score_reference(args.reference)
     return 0
 
 
@@ -325,6 +349,8 @@ def cmd_report(args: argparse.Namespace) -> int:
         path = ev / "runs" / f"{run_name(row, seed)}.json"
         if path.exists():
             runs.setdefault(row, {})[seed] = json.loads(path.read_text())
+    refs = {p.stem: json.loads(p.read_text())
+            for p in sorted((ev / "reference").glob("*.json"))}
     names = list(sets)
     lines = ["# The ablation (Table 3) in our implementation", "", "```", banner(), "```", "",
              f"`python benchmarks/ablation.py report` (from `{_rel(ev)}`, written by "
@@ -343,6 +369,9 @@ def cmd_report(args: argparse.Namespace) -> int:
             seeds = [runs[row][s] for s in sorted(runs[row])]
             lines.append(f"| {row} | " + " | ".join(
                 _cell([e[n] for e in seeds], which) for n in names) + " |")
+        for ref, errs in refs.items():
+            lines.append(f"| shipped `{ref}` (reference) | " + " | ".join(
+                _cell([errs[n]], which) for n in names) + " |")
         lines.append("| PoseLib | " + " | ".join(_cell([poselib[n]], which) for n in names)
                      + " |")
         lines.append("")
@@ -353,18 +382,25 @@ def cmd_report(args: argparse.Namespace) -> int:
             lines.append(f"| {row} | " + " | ".join(
                 f"{100 * ae.auc20(ae._rows(runs[row][min(runs[row])][n])[2]):.1f}"
                 for n in names) + " |")
+    for ref, errs in refs.items():
+        lines.append(f"| shipped `{ref}` (reference) | " + " | ".join(
+            f"{100 * ae.auc20(ae._rows(errs[n])[2]):.1f}" for n in names) + " |")
     lines.append("| PoseLib | " + " | ".join(
         f"{100 * ae.auc20(ae._rows(poselib[n])[2]):.1f}" for n in names) + " |")
     lines.append("")
     lines += ["## Paired comparisons (seed 0): median ratio a / b [95 % paired bootstrap]", "",
               "| a vs b | error | " + " | ".join(names) + " |",
               "|---|---" + "|---" * len(names) + "|"]
-    for a, b in (("full", "baseline"), ("LP", "L"), ("LP", "baseline")):
-        if a in runs and b in runs:
+    pairs = [(a, b, runs.get(a, {}).get(0), runs.get(b, {}).get(0))
+             for a, b in (("full", "baseline"), ("LP", "L"), ("LP", "baseline"))]
+    pairs += [("full", f"shipped `{ref}`", runs.get("full", {}).get(0), errs)
+              for ref, errs in refs.items()]
+    for a, b, ea, eb in pairs:
+        if ea is not None and eb is not None:
             for which, label in ((0, "rot"), (1, "trans")):
                 cells = []
                 for n in names:
-                    r, lo, hi, k = ae.paired_ratio(runs[a][0][n], runs[b][0][n], which)
+                    r, lo, hi, k = ae.paired_ratio(ea[n], eb[n], which)
                     cells.append(f"{r:.2f} [{lo:.2f}-{hi:.2f}]" if k else "-")
                 lines.append(f"| {a} vs {b} | {label} | " + " | ".join(cells) + " |")
     out = Path(args.out)
@@ -488,6 +524,10 @@ def main(argv: list[str] | None = None) -> int:
     e.add_argument("--quick", action="store_true", help="4 pairs per set (a smoke run)")
     e.add_argument("--min-steps", type=int, default=STEPS,
                    help="score runs that reached this step (default: the plan's)")
+    e.add_argument("--reference", nargs="?", const="geometric", default=None,
+                   metavar="NAME",
+                   help="also score a shipped checkpoint (StrLPose.PRETRAINED name, default "
+                        "'geometric') as a reference row, once (reference/<NAME>.json)")
     r = sub.add_parser("report", help="write the results table and the curves plot")
     here = Path(__file__).resolve().parent
     r.add_argument("--results", default=str(RESULTS), help="the scored runs")

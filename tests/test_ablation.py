@@ -134,6 +134,8 @@ def test_report_and_curves_read_only_the_committed_results(tmp_path):
     (res / "runs" / "full-s0.json").write_text(json.dumps(errs(1.0)))
     (res / "runs" / "full-s1.json").write_text(json.dumps(errs(2.0)))
     (res / "runs" / "baseline-s0.json").write_text(json.dumps(errs(4.0)))
+    (res / "reference").mkdir()
+    (res / "reference" / "geometric.json").write_text(json.dumps(errs(0.5)))
     hist = [{"step": 250 * k, "rot_err_deg": 9.0 - k, "trans_err_deg": 80.0 - k} for k in (1, 2)]
     (res / "history" / "full-s0.json").write_text(json.dumps({"step": 500, "history": hist}))
     out, fig = tmp_path / "t3.md", tmp_path / "c.png"
@@ -145,11 +147,17 @@ def test_report_and_curves_read_only_the_committed_results(tmp_path):
     assert "| baseline | 10.00 [" in text
     # full vs baseline: every pair's ratio is 1/4
     assert "| full vs baseline | rot | 0.25 [0.25-0.25]" in text
+    # the shipped checkpoint as a reference row, and full against it (every ratio 2)
+    assert "| shipped `geometric` (reference) | 1.25 [" in text
+    assert "| full vs shipped `geometric` | trans | 2.00 [2.00-2.00]" in text
     assert fig.stat().st_size > 0
     out2 = tmp_path / "curves.md"
     assert ab.main(["--root", str(tmp_path / "gone"), "curves", "--results", str(res),
                     "--out", str(out2), "--figure", str(fig)]) == 0
     assert "| full-s0 | 500 | 7.00 | 78.00 |" in out2.read_text()
+    # the shipped checkpoint must be one the package ships
+    with pytest.raises(SystemExit, match="expected a shipped checkpoint"):
+        ab._Scorer(tmp_path, 1).score_reference("nope")
     # nothing scored: one line, exit 2
     assert ab.main(["report", "--results", str(tmp_path / "none"), "--out", str(out),
                     "--figure", str(fig)]) == 2
