@@ -80,3 +80,17 @@ def test_concurrent_detection_gives_the_same_matches():
         np.testing.assert_array_equal(a.points1, b.points1)
         np.testing.assert_array_equal(a.lines0, b.lines0)
         np.testing.assert_array_equal(a.lines1, b.lines1)
+
+
+def test_k_nearest_by_partition_equals_the_stable_sort():
+    # the line guidance's k nearest point matches: a partition instead of a full sort, the same
+    # set as the stable argsort (ties by the lower column), also with many exact ties
+    from strl_pyg.frontend.lines import _k_nearest
+
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        n, m = int(rng.integers(1, 30)), int(rng.integers(1, 40))
+        k = int(rng.integers(1, m + 1))
+        d2 = rng.integers(0, 6, (n, m)).astype(float)
+        ref = np.sort(np.argsort(d2, axis=1, kind="stable")[:, :k], axis=1)
+        np.testing.assert_array_equal(_k_nearest(d2, k), ref)

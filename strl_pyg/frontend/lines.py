@@ -60,9 +60,24 @@ def _guided_midpoints(lines0, p0, p1, k: int):
         return None
     mid = lines0.mean(1)
     d2 = ((mid[:, None, :] - p0[None, :, :]) ** 2).sum(-1)
-    nearest = np.argsort(d2, axis=1, kind="stable")[:, :k]
+    nearest = _k_nearest(d2, k)
     shift = np.median((p1 - p0)[nearest], axis=1)
     return mid + shift
+
+
+def _k_nearest(d2: np.ndarray, k: int) -> np.ndarray:
+    """Per row of ``d2 [N, M]``, the columns of its ``k`` smallest values, ties broken by the
+    lower column (the set ``np.argsort(d2, kind="stable")[:, :k]`` gives, in column order),
+    ``[N, k]``, by a partition instead of a full sort."""
+    if k >= d2.shape[1]:
+        return np.broadcast_to(np.arange(d2.shape[1]), d2.shape).copy()
+    kth = np.partition(d2, k - 1, axis=1)[:, k - 1 : k]  # the k-th smallest value per row
+    less = d2 < kth
+    # of the values equal to the k-th, the lowest columns that complete k
+    equal = d2 == kth
+    need = k - less.sum(axis=1, keepdims=True)
+    take = less | (equal & (np.cumsum(equal, axis=1) <= need))
+    return np.nonzero(take)[1].reshape(len(d2), k)
 
 
 def candidate_pairs(
