@@ -25,9 +25,9 @@ Per matcher: line matches per pair, the fraction of them consistent with the gro
 epipolar geometry (the epipolar lines of one segment's endpoints cut the other's supporting
 line over at least a quarter of it; segments within 10 deg of their epipolar lines cannot be
 judged and are left out; beside it, in brackets, the same check of the same
-segments paired at random, its chance level), and the pose of the vanishing-point solver (``vp``, >= 5 point
-matches) from those lines and the same points, beside PoseLib on the points: AUC@20 of
-max(rotation, translation) error with no pose = 180 deg, [95 % bootstrap interval over pairs].
+segments paired at random, its chance level), and the pose of the vanishing-point solver
+(``vp``, >= 5 point matches) from those lines and the same points, beside PoseLib on the
+points: AUC@20 of max(rotation, translation) error with no pose = 180 deg, [95 % bootstrap interval over pairs].
 """
 
 from __future__ import annotations
@@ -206,7 +206,8 @@ def table(name: str, res: dict) -> list[str]:
         a = _auc(res[f"vp ({k})"])
         got = sum(p is not None for p in res[f"vp ({k})"])
         out.append(f"| vp, {k} lines | {np.median(res[f'lines ({k})']):.0f} | "
-                   f"{100 * frac:.0f} % of {right[:, 1].sum()} judged ({100 * chance:.0f} %) | {got} | "
+                   f"{100 * frac:.0f} % of {right[:, 1].sum()} judged "
+                   f"({100 * chance:.0f} %) | {got} | "
                    f"{100 * a[0]:.1f} [{100 * a[1]:.1f}, {100 * a[2]:.1f}] | "
                    "{:+.1f} [{:+.1f}, {:+.1f}] |".format(
                        *(100 * np.array(_paired_diff(res[f"vp ({k})"], res["PoseLib"])))))

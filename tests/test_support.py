@@ -116,3 +116,30 @@ def test_classical_only_estimator_uses_the_shipped_calibration(model):
     given = PoseEstimator(model, methods=["opencv"]).estimate(pair.matches).methods["opencv"]
     assert alone.info["calibration_scale"] == model.metadata["calibration"]["opencv"]
     np.testing.assert_allclose(alone.covariance, given.covariance, rtol=1e-12)
+
+
+@pytest.mark.parametrize("method", ["geometric", "fused", "vp_checked"])
+def test_the_gate_refuses_a_planted_wrong_pose_on_few_points(method):
+    """Where points are few, a pose from the network (or a line solver) is given only if the
+    point matches support it: on 15 clean matches the true pose passes the check and a planted
+    wrong one (10 deg off, another translation direction) is refused with a reason."""
+    import torch
+
+    from strl_pyg.geometry import Pose
+    from strl_pyg.geometry.manifold import so3_exp
+    from strl_pyg.inference.record import MethodResult
+    from strl_pyg.inference.support import check_support
+
+    pair = generate_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.3))
+    m = pair.matches
+    few = m.select(point_index=np.linspace(0, m.num_points - 1, 15).astype(int))
+    T = np.asarray(pair.T_0to1, dtype=np.float64)
+    right = check_support(MethodResult(method, "ok", T), few)
+    assert right.status == "ok" and right.info["support_inliers"] >= 14
+    gt = Pose.from_matrix(torch.as_tensor(T))
+    R = so3_exp(torch.tensor([0.0, 0.17, 0.0], dtype=torch.float64)) @ gt.R
+    t = torch.tensor([1.0, 0.3, 0.2], dtype=torch.float64)
+    wrong = check_support(MethodResult(method, "ok", Pose(R, t / t.norm()).matrix().numpy()),
+                          few)
+    assert wrong.status == "failed" and wrong.info["unsupported"]
+    assert "do not support this pose" in wrong.warnings[-1]

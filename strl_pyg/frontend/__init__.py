@@ -26,8 +26,12 @@ from __future__ import annotations
 from strl_pyg.data.matches import PairMatches as PairMatches  # the result type
 from strl_pyg.frontend.config import LINE_MATCHERS, FrontendConfig, NoMatchesError
 from strl_pyg.frontend.line_descriptors import band_descriptors, line_descriptor_scores
-from strl_pyg.frontend.lines import (candidate_pairs, detect_lines, match_lines,
-                                     match_lines_by_descriptor)
+from strl_pyg.frontend.lines import (
+    candidate_pairs,
+    detect_lines,
+    match_lines,
+    match_lines_by_descriptor,
+)
 from strl_pyg.frontend.pipeline import check_frontend_image, match_images
 from strl_pyg.frontend.points import fit_fundamental, match_points
 from strl_pyg.geometry.epipolar import epipolar_residuals, fundamental_from_pose

@@ -58,8 +58,9 @@ class FrontendConfig:
         line_matcher: ``"epipolar"`` (default): segments matched under the fundamental matrix
             of the point matches and clipped to their common part, so endpoint ``k`` matches
             endpoint ``k`` (needs >= 8 point matches); ``"descriptor"``: band descriptors
-            without a fundamental matrix (:func:`~strl_pyg.frontend.lines.match_lines_by_descriptor`),
-            also below 8 point matches, segments as detected: their endpoints do *not*
+            without a fundamental matrix
+            (:func:`~strl_pyg.frontend.lines.match_lines_by_descriptor`), also below 8 point
+            matches, segments as detected: their endpoints do *not*
             correspond (``info["line_endpoints"]``), so only the line solvers (``vp``,
             ``vp_checked``) may read them; the network methods refuse them. Measured in
             ``benchmarks/results_line_matchers.md``: better on real street pairs with very few
