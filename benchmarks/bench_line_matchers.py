@@ -27,7 +27,8 @@ line over at least a quarter of it; segments within 10 deg of their epipolar lin
 judged and are left out; beside it, in brackets, the same check of the same
 segments paired at random, its chance level), and the pose of the vanishing-point solver
 (``vp``, >= 5 point matches) from those lines and the same points, beside PoseLib on the
-points: AUC@20 of max(rotation, translation) error with no pose = 180 deg, [95 % bootstrap interval over pairs].
+points: AUC@20 of max(rotation, translation) error with no pose = 180 deg, [95 % bootstrap
+interval over pairs].
 """
 
 from __future__ import annotations
