@@ -191,7 +191,6 @@ class _Scorer:
               f"{len(sets)} sets -> {path}", flush=True)
         return True
 
-
     def score_reference(self, name: str) -> bool:
         """Scores the shipped checkpoint ``name`` (not trained on this study's budget: the
         figure the study's ``full`` rows must beat before their weights would be shipped)."""

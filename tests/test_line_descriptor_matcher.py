@@ -11,6 +11,9 @@ from strl_pyg.frontend.line_descriptors import band_descriptors
 from strl_pyg.frontend.lines import detect_lines, match_lines_by_descriptor
 from strl_pyg.synthetic import generate_pair
 
+#: sha1 of the default FrontendConfig's result fields before the descriptor matcher was added
+DEFAULT_FIELDS_SHA = "3fdee2614eec"
+
 
 def _scene(seed: int = 0, shape=(240, 320)) -> np.ndarray:
     """Grey image with rectangles of distinct contrasts (edges of many orientations)."""
@@ -62,26 +65,24 @@ def test_a_shifted_image_matches_every_segment_to_its_shifted_copy():
     assert (np.diff(sc) <= 0).all() and ((sc >= 0) & (sc <= 1)).all()
 
 
-def test_generated_pair_matches_follow_the_true_geometry():
+def test_generated_pair_matches_follow_the_true_geometry(monkeypatch):
     pair = generate_pair(5)
     g0 = cv2.cvtColor(pair.image0, cv2.COLOR_RGB2GRAY) if pair.image0.ndim == 3 else pair.image0
     g1 = cv2.cvtColor(pair.image1, cv2.COLOR_RGB2GRAY) if pair.image1.ndim == 3 else pair.image1
     s0, s1 = detect_lines(g0), detect_lines(g1)
     l0, l1, _ = match_lines_by_descriptor(s0, s1, g0, g1)
     assert len(l0) >= 10
-    import sys
     from pathlib import Path
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from bench_line_matchers import _gt_F, consistent
 
     K = np.asarray(pair.K, dtype=np.float64)
     c = consistent(l0, l1, _gt_F(np.asarray(pair.T_0to1, dtype=np.float64), K, K))
     assert (c >= 0).sum() >= 5
     assert (c == 1).sum() / (c >= 0).sum() >= 0.8
-    # at random the same check passes far less often
-    rng = np.random.default_rng(0)
-    cr = consistent(l0, l1[rng.permutation(len(l1))],
+    # each segment paired with another's match, the same check passes far less often
+    cr = consistent(l0, np.roll(l1, 1, axis=0),
                     _gt_F(np.asarray(pair.T_0to1, dtype=np.float64), K, K))
     assert (cr == 1).sum() / max((cr >= 0).sum(), 1) < 0.5
 
@@ -91,12 +92,52 @@ def test_no_segments_and_bad_ratio():
     s = detect_lines(g)
     empty = match_lines_by_descriptor(np.zeros((0, 2, 2)), s, g, g)
     assert [len(x) for x in empty] == [0, 0, 0]
-    with pytest.raises(ValueError, match="ratio in"):
-        match_lines_by_descriptor(s, s, g, g, FrontendConfig(), ratio=1.5)
+    with pytest.raises(ValueError, match="line_descriptor_ratio in"):
+        FrontendConfig(line_descriptor_ratio=1.5)
+    # one candidate in image 1: no second nearest, no ratio, no match (it was kept before)
+    assert len(match_lines_by_descriptor(s[:5], s[:1], g, g)[0]) == 0
+    assert len(match_lines_by_descriptor(s[:5], s[:2], g, g)[0]) >= 1  # itself: exact
+
+
+@pytest.mark.parametrize("bad, msg", [
+    (np.zeros((3, 2)), "shape \\[N, 2, 2\\]"),
+    (np.array([[[0.0, 0.0], [np.nan, 5.0]]]), "finite"),
+    (np.array([[[10.0, 10.0], [10.0, 10.0]]]), "at least 1 px long"),
+])
+def test_band_descriptors_bad_input_is_one_line(bad, msg):
+    g = _scene(4)
+    with pytest.raises(ValueError, match=msg):
+        band_descriptors(bad, g)
+    with pytest.raises(ValueError, match="grey image"):
+        band_descriptors(detect_lines(g)[:3], np.dstack([g, g, g]))
+
+
+def test_guidance_narrows_the_candidates_and_keeps_the_ratio_test():
+    pair = generate_pair(5)
+    g0 = cv2.cvtColor(pair.image0, cv2.COLOR_RGB2GRAY) if pair.image0.ndim == 3 else pair.image0
+    g1 = cv2.cvtColor(pair.image1, cv2.COLOR_RGB2GRAY) if pair.image1.ndim == 3 else pair.image1
+    s0, s1 = detect_lines(g0), detect_lines(g1)
+    m = pair.matches
+    guide = (np.asarray(m.points0), np.asarray(m.points1))
+    free = match_lines_by_descriptor(s0, s1, g0, g1)
+    guided = match_lines_by_descriptor(s0, s1, g0, g1, guide=guide)
+    key = lambda out: {(tuple(a.ravel()), tuple(b.ravel())) for a, b in zip(*out[:2], strict=True)}  # noqa: E731
+    assert 0 < len(guided[0]) and key(guided) <= key(free)  # a subset: never a looser match
+    # a guide that points elsewhere (all displacements 200 px off) leaves almost nothing
+    wrong = match_lines_by_descriptor(s0, s1, g0, g1, guide=(guide[0], guide[1] + 200.0))
+    assert len(wrong[0]) < len(guided[0]) / 2
 
 
 def test_config_line_matcher_and_cache_key():
-    assert "line_matcher" not in FrontendConfig().result_fields()  # earlier caches keep keys
+    import hashlib
+    import json
+
+    fields = FrontendConfig().result_fields()
+    # earlier caches keep their keys: the default's fields hash as before line_matcher existed
+    # (a new field must not enter the default key unnoticed)
+    text = json.dumps(fields, sort_keys=True, default=repr)
+    assert hashlib.sha1(text.encode()).hexdigest()[:12] == DEFAULT_FIELDS_SHA
+    assert "line_matcher" not in fields and "line_descriptor_ratio" not in fields
     assert FrontendConfig(line_matcher="descriptor").result_fields()["line_matcher"] == \
         "descriptor"
     with pytest.raises(ValueError, match="line_matcher in"):
@@ -136,3 +177,22 @@ def test_network_methods_refuse_descriptor_lines():
     ok = PoseEstimator(methods=["regression"]).estimate(
         replace(m, info={**m.info, "line_endpoints": "corresponding"}))
     assert ok.methods["regression"].status == "ok"
+
+
+def test_graph_and_datasets_refuse_descriptor_lines(tmp_path):
+    # every path into the network, not only PoseEstimator: prepare_graph (network_pose, the
+    # evaluation, the CLI) and the training datasets
+    from strl_pyg.datasets.synthetic import SyntheticPairs
+    from strl_pyg.frontend import match_images
+    from strl_pyg.inference.inputs import prepare_graph
+    from strl_pyg.model.strl_pose import StrLPose
+
+    pair = generate_pair(6)
+    m = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K,
+                     config=FrontendConfig(line_matcher="descriptor"))
+    assert not m.line_endpoints_correspond and pair.matches.line_endpoints_correspond
+    with pytest.raises(ValueError, match="descriptor matcher"):
+        prepare_graph(m, StrLPose.from_pretrained())
+    with pytest.raises(ValueError, match="line_matcher='epipolar' for a dataset"):
+        SyntheticPairs(4, matches="frontend", cache_dir=tmp_path,
+                             frontend_config=FrontendConfig(line_matcher="descriptor"))

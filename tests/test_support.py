@@ -120,9 +120,10 @@ def test_classical_only_estimator_uses_the_shipped_calibration(model):
 
 @pytest.mark.parametrize("method", ["geometric", "fused", "vp_checked"])
 def test_the_gate_refuses_a_planted_wrong_pose_on_few_points(method):
-    """Where points are few, a pose from the network (or a line solver) is given only if the
-    point matches support it: on 15 clean matches the true pose passes the check and a planted
-    wrong one (10 deg off, another translation direction) is refused with a reason."""
+    """The support check that PoseEstimator applies to these methods' records: on 15 clean
+    point matches the true pose passes and a planted wrong one (10 deg off, another
+    translation direction) is refused with a reason (the estimator's wiring of the check is
+    tested above and in test_vanishing)."""
     import torch
 
     from strl_pyg.geometry import Pose

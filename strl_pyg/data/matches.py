@@ -22,7 +22,19 @@ __all__ = [
     "MatchFileKeyError",
     "OUT_OF_IMAGE_TOLERANCE",
     "MIN_LINE_LENGTH",
+    "LINE_ENDPOINTS",
+    "ENDPOINTS_CORRESPONDING",
+    "ENDPOINTS_AS_DETECTED",
 ]
+
+#: ``PairMatches.info`` key saying whether the lines' endpoints correspond, and its values:
+#: ``"corresponding"`` (endpoint ``k`` matches endpoint ``k``: the front end's epipolar
+#: matcher clips both segments to their common part) or ``"as detected"`` (the descriptor
+#: matcher: the segments match as lines, their endpoints are where the detector ended them).
+#: Absent means corresponding (external match lists, generated scenes).
+LINE_ENDPOINTS = "line_endpoints"
+ENDPOINTS_CORRESPONDING = "corresponding"
+ENDPOINTS_AS_DETECTED = "as detected"
 
 #: A coordinate may lie this many pixels outside ``[0, W - 1] x [0, H - 1]`` (detectors and
 #: projections of generated scenes place points on the border, sub-pixel refinement nudges
@@ -139,7 +151,10 @@ class PairMatches:
     Args:
         points0, points1: Matched points, ``[Np, 2]`` pixels; row ``i`` of both is one match.
         lines0, lines1: Matched segments, ``[Nl, 2, 2]`` pixels; endpoint ``k`` of line ``i`` in
-            image 0 matches endpoint ``k`` of line ``i`` in image 1.
+            image 0 matches endpoint ``k`` of line ``i`` in image 1, unless
+            ``info["line_endpoints"] == "as detected"`` (:data:`ENDPOINTS_AS_DETECTED`: the front
+            end's descriptor matcher, whose segments match as lines but whose endpoints do not
+            correspond; :attr:`line_endpoints_correspond` is then ``False``).
         image_size0, image_size1: ``(H, W)``; taken from the images when omitted.
         point_scores, line_scores: Optional confidences ``[Np]``, ``[Nl]``.
         K0, K1: Optional intrinsics ``[3, 3]`` (pixels), last row ``[0, 0, 1]``.
@@ -252,6 +267,12 @@ class PairMatches:
     @property
     def num_lines(self) -> int:
         return len(self.lines0)
+
+    @property
+    def line_endpoints_correspond(self) -> bool:
+        """Whether endpoint ``k`` of each line in image 0 matches endpoint ``k`` in image 1
+        (``False`` only when ``info["line_endpoints"]`` is :data:`ENDPOINTS_AS_DETECTED`)."""
+        return self.info.get(LINE_ENDPOINTS) != ENDPOINTS_AS_DETECTED
 
     @property
     def has_intrinsics(self) -> bool:

@@ -145,6 +145,17 @@ def load_pair_images(
     return img0, img1, K0, K1
 
 
+def _check_training_frontend(config: Any) -> None:
+    """Refuses a front end whose lines' endpoints do not correspond (the descriptor matcher):
+    the model reads endpoint ``k`` of a line as matching endpoint ``k``."""
+    matcher = getattr(config, "line_matcher", "epipolar")
+    if matcher != "epipolar":
+        raise ValueError(
+            f"Expected a FrontendConfig with line_matcher='epipolar' for a dataset (got "
+            f"{matcher!r}): the model reads line endpoint k as matching endpoint k, which only "
+            "the epipolar matcher's clipped segments satisfy")
+
+
 def _config_dict(config: Any) -> Any:
     if config is None:
         from strl_pyg.frontend import FrontendConfig
@@ -351,6 +362,7 @@ class PairDataset(CachedPairDataset):
         self.records = list(records)[:limit]
         self.image_size = image_size
         self.grayscale = grayscale
+        _check_training_frontend(frontend_config)
         self.frontend_config = frontend_config
         self.patch_size = patch_size
         self.keep_images = keep_images

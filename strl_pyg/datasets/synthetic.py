@@ -27,7 +27,13 @@ from torch_geometric.data import HeteroData
 
 from strl_pyg.data.graph import build_pair_graph
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.datasets.base import PAIR_ID, SUBSET, CachedPairDataset, _config_dict
+from strl_pyg.datasets.base import (
+    PAIR_ID,
+    SUBSET,
+    CachedPairDataset,
+    _check_training_frontend,
+    _config_dict,
+)
 from strl_pyg.datasets.cache import CacheBuildReport, cache_key
 
 __all__ = ["SyntheticPairs", "InfiniteSyntheticPairs", "MATCH_SOURCES"]
@@ -153,6 +159,7 @@ class SyntheticPairs(CachedPairDataset):
         self.seed = _check_seed(seed)
         self.scene_config = _scene_config(scene_config)
         self.matches = matches
+        _check_training_frontend(frontend_config)
         self.frontend_config = frontend_config
         self.patch_size = patch_size
         self.keep_images = keep_images

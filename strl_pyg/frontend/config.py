@@ -64,7 +64,9 @@ class FrontendConfig:
             correspond (``info["line_endpoints"]``), so only the line solvers (``vp``,
             ``vp_checked``) may read them; the network methods refuse them. Measured in
             ``benchmarks/results_line_matchers.md``: better on real street pairs with very few
-            points, worse where an F from 8-30 points exists.
+            points, worse where an F from 8-30 points exists. (default: ``"epipolar"``)
+        line_descriptor_ratio: Lowe's ratio test of the descriptor matcher (nearest / second
+            nearest descriptor distance). (default: 0.85)
     """
 
     detector: str = "sift"
@@ -94,17 +96,20 @@ class FrontendConfig:
     lines: bool = True
     concurrent: bool = True
     line_matcher: str = "epipolar"
+    line_descriptor_ratio: float = 0.85
 
     def result_fields(self) -> dict:
         """The fields that decide the matches (every field but ``concurrent``): what caches of
         matches key on, so that a setting that only changes the speed keeps them valid. A field
         added later (``line_matcher``) enters only when it differs from its default, so the
-        caches of earlier versions keep their keys."""
+        caches of earlier versions keep their keys; so do the descriptor matcher's settings,
+        which change nothing with the epipolar matcher."""
         from dataclasses import asdict
 
         out = {k: v for k, v in asdict(self).items() if k != "concurrent"}
         if out["line_matcher"] == "epipolar":
-            del out["line_matcher"]
+            for k in ("line_matcher", "line_descriptor_ratio"):
+                del out[k]
         return out
 
     def __post_init__(self) -> None:
@@ -120,6 +125,9 @@ class FrontendConfig:
                 "Expected line_samples >= 2 and line_profile >= 1 "
                 f"(got {self.line_samples}, {self.line_profile})"
             )
+        if not 0.0 < self.line_descriptor_ratio <= 1.0:
+            raise ValueError(f"Expected line_descriptor_ratio in (0, 1] "
+                             f"(got {self.line_descriptor_ratio})")
         if self.line_matcher not in LINE_MATCHERS:
             raise ValueError(f"Expected line_matcher in {LINE_MATCHERS} "
                              f"(got {self.line_matcher!r})")

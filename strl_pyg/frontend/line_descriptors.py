@@ -75,9 +75,20 @@ def band_descriptors(lines: np.ndarray, gray: np.ndarray, bands: int = 9, band_w
     deviation over the positions, each half normalised, clipped at 0.4 and normalised again.
     Means and deviations along the segment do not depend on where it starts or ends, so two
     fragments of one edge of different lengths describe alike."""
-    lines = np.asarray(lines, dtype=np.float64).reshape(-1, 2, 2)
-    if len(lines) == 0:
+    lines = np.asarray(lines, dtype=np.float64)
+    if lines.size == 0:
         return np.zeros((0, 8 * bands))
+    if lines.ndim != 3 or lines.shape[1:] != (2, 2):
+        raise ValueError(f"Expected segments of shape [N, 2, 2] (got {list(lines.shape)})")
+    if not np.isfinite(lines).all():
+        raise ValueError("Expected finite segment endpoints (got NaN or inf)")
+    length = np.linalg.norm(lines[:, 1] - lines[:, 0], axis=1)
+    if (length < 1.0).any():
+        raise ValueError(f"Expected segments at least 1 px long (got {int((length < 1).sum())} "
+                         f"shorter, the shortest {length.min():.3g} px)")
+    gray = np.asarray(gray)
+    if gray.ndim != 2:
+        raise ValueError(f"Expected a grey image [H, W] (got shape {list(gray.shape)})")
     g = _blurred(gray)
     gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3) / 8.0
     gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3) / 8.0

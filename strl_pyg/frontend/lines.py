@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from strl_pyg.frontend.config import FrontendConfig
-from strl_pyg.frontend.line_descriptors import line_descriptor_scores
+from strl_pyg.frontend.line_descriptors import band_descriptors, line_descriptor_scores
 
 __all__ = ["detect_lines", "candidate_pairs", "match_lines", "match_lines_by_descriptor"]
 
@@ -214,55 +214,57 @@ def match_lines_by_descriptor(
     gray1: np.ndarray,
     cfg: FrontendConfig | None = None,
     guide: tuple[np.ndarray, np.ndarray] | None = None,
-    ratio: float = 0.85,
     min_guide_points: int = 3,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Matches LSD segments without a fundamental matrix: mutual nearest neighbours of their
-    :func:`~strl_pyg.frontend.line_descriptors.band_descriptors` that pass a ratio test.
+    :func:`~strl_pyg.frontend.line_descriptors.band_descriptors` that pass Lowe's ratio test
+    (``cfg.line_descriptor_ratio``, against the second nearest of *all* segments of image 1)
+    and score at least ``cfg.line_min_score`` (cosine similarity). A segment with a single
+    candidate has no ratio and is not matched.
 
     The segments are returned as detected (not clipped: without epipolar geometry their
     endpoints do not correspond; only their supporting lines and orientations do, which is what
     the vanishing-point solver reads). With ``guide`` point matches (at least
-    ``min_guide_points``), a candidate must also lie near where the nearest point matches'
-    median displacement predicts it in image 1 (``cfg.line_guide_tol`` of the diagonal).
+    ``min_guide_points``), the nearest neighbour must also lie near where the nearest point
+    matches' median displacement predicts it in image 1 (``cfg.line_guide_tol`` of the
+    diagonal); the guidance only narrows the candidates, the ratio test stays as strict.
 
     Returns:
         ``lines0 [L, 2, 2]``, ``lines1 [L, 2, 2]`` and ``scores [L]`` (cosine similarity of the
-        descriptors, in ``[0, 1]``), best first, at most ``cfg.max_lines``.
+        descriptors), best first, at most ``cfg.max_lines``.
     """
-    from strl_pyg.frontend.line_descriptors import band_descriptors
-
     cfg = cfg or FrontendConfig()
     empty = np.zeros((0, 2, 2)), np.zeros((0, 2, 2)), np.zeros(0)
-    if len(lines0) == 0 or len(lines1) == 0:
+    a, b = band_descriptors(lines0, gray0), band_descriptors(lines1, gray1)  # checks inputs
+    if len(a) == 0 or len(b) < 2:
         return empty
-    if not 0.0 < ratio <= 1.0:
-        raise ValueError(f"Expected ratio in (0, 1] (got {ratio})")
-    a, b = band_descriptors(lines0, gray0), band_descriptors(lines1, gray1)
-    sq = np.maximum(2.0 - 2.0 * (a @ b.T), 0.0)  # unit descriptors: squared L2 distance
+    lines0 = np.asarray(lines0, dtype=np.float64).reshape(-1, 2, 2)
+    lines1 = np.asarray(lines1, dtype=np.float64).reshape(-1, 2, 2)
+    dist = np.sqrt(np.maximum(2.0 - 2.0 * (a @ b.T), 0.0))  # unit descriptors: L2 distance
+    rows = np.arange(len(a))
+    # the ratio's second nearest: over every segment of image 1, guided or not
+    two = np.partition(dist, 1, axis=1)
+    nearest_any, second = two[:, 0], two[:, 1]
+    cand = dist
     if guide is not None and len(guide[0]) >= min_guide_points:
         k = min(int(cfg.line_guide_k), len(guide[0]))
         pred = _guided_midpoints(lines0, guide[0], guide[1], k)
-        if pred is not None:
-            P1, D1 = lines1[:, 0], lines1[:, 1] - lines1[:, 0]
-            n1 = np.stack([-D1[:, 1], D1[:, 0]], axis=1) / np.linalg.norm(D1, axis=1)[:, None]
-            dist = np.abs(np.einsum("ijk,jk->ij", pred[:, None, :] - P1[None], n1))
-            sq = np.where(dist <= cfg.line_guide_tol * float(np.hypot(*gray1.shape[:2])),
-                          sq, np.inf)
-    dist = np.sqrt(sq)
-    rows = np.arange(len(a))
-    nn01 = dist.argmin(axis=1)
-    nn10 = dist.argmin(axis=0)
-    best = dist[rows, nn01]
-    if dist.shape[1] > 1:
-        second = np.partition(dist, 1, axis=1)[:, 1]
-    else:
-        second = np.full(len(a), np.inf)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        keep = np.isfinite(best) & (nn10[nn01] == rows) & (best < ratio * second)
+        P1, D1 = lines1[:, 0], lines1[:, 1] - lines1[:, 0]
+        n1 = np.stack([-D1[:, 1], D1[:, 0]], axis=1) / np.linalg.norm(D1, axis=1)[:, None]
+        off = np.abs(np.einsum("ijk,jk->ij", pred[:, None, :] - P1[None], n1))
+        near = off <= cfg.line_guide_tol * float(np.hypot(*gray1.shape[:2]))
+        cand = np.where(near, dist, np.inf)
+    nn01 = cand.argmin(axis=1)
+    nn10 = cand.argmin(axis=0)
+    best = cand[rows, nn01]
+    # the chosen one must be the nearest of all (guidance does not promote a second best)
+    keep = (np.isfinite(best) & (best <= nearest_any) & (nn10[nn01] == rows)
+            & (best < cfg.line_descriptor_ratio * second))
     i0 = np.flatnonzero(keep)
     i1 = nn01[i0]
     score = 1.0 - best[i0] ** 2 / 2.0
+    good = score >= cfg.line_min_score
+    i0, i1, score = i0[good], i1[good], score[good]
     order = np.lexsort((i0, -score))[: int(cfg.max_lines)]
     i0, i1 = i0[order], i1[order]
     return lines0[i0].copy(), lines1[i1].copy(), score[order]

@@ -9,7 +9,12 @@ from typing import Any
 
 import numpy as np
 
-from strl_pyg.data.matches import PairMatches
+from strl_pyg.data.matches import (
+    ENDPOINTS_AS_DETECTED,
+    ENDPOINTS_CORRESPONDING,
+    LINE_ENDPOINTS,
+    PairMatches,
+)
 from strl_pyg.frontend.config import FrontendConfig, NoMatchesError
 from strl_pyg.frontend.lines import detect_lines, match_lines, match_lines_by_descriptor
 from strl_pyg.frontend.points import fit_fundamental, match_points, on_both
@@ -43,7 +48,9 @@ def match_images(
 
     Returns:
         :class:`PairMatches` with ``points0/1 [Np, 2]``, ``lines0/1 [Nl, 2, 2]`` (endpoint ``k``
-        matches endpoint ``k``), ``point_scores`` (``1 - ratio``), ``line_scores`` (NCC), the
+        matches endpoint ``k``; not with ``line_matcher="descriptor"``), ``point_scores``
+        (``1 - ratio``), ``line_scores`` (NCC; the descriptors' cosine similarity with
+        ``line_matcher="descriptor"``), the
         grey images attached, and ``info`` holding ``timings_ms`` per stage
         (``points_detect``, ``points_match``, ``geometry``, ``lines_detect``, ``lines_match``,
         ``total``), counts, ``lines_status``, ``line_endpoints`` (``"corresponding"``, or
@@ -84,7 +91,8 @@ def match_images(
         status = "skipped: lines=False in the FrontendConfig"
     elif cfg.line_matcher == "descriptor":
         l0, l1, l_scores = match_lines_by_descriptor(seg0, seg1, gray0, gray1, cfg)
-        status = "ok (descriptor matcher: endpoints as detected, not corresponding)"
+        status = (f"ok (descriptor matcher: {len(l0)} matches, endpoints as detected, not "
+                  "corresponding)")
     elif F is None:
         l0 = l1 = np.zeros((0, 2, 2))
         l_scores = np.zeros(0)
@@ -110,8 +118,8 @@ def match_images(
         "segments1": len(seg1),
         "point_geometric_inliers": int(inl.sum()),
         "lines_status": status,
-        "line_endpoints": ("as detected" if cfg.line_matcher == "descriptor"
-                           else "corresponding"),
+        LINE_ENDPOINTS: (ENDPOINTS_AS_DETECTED if cfg.line_matcher == "descriptor"
+                         else ENDPOINTS_CORRESPONDING),
         "config": asdict(cfg),
     }
     return PairMatches(

@@ -31,8 +31,8 @@ def unmatched_endpoints(matches: PairMatches, method: str) -> str | None:
     """Why ``method`` (a network method: it reads line endpoint ``k`` as matching endpoint
     ``k``) cannot read ``matches``' lines when they come from the descriptor matcher
     (``info["line_endpoints"] == "as detected"``); ``None`` when it can."""
-    if (method not in NETWORK_METHODS or not matches.num_lines
-            or matches.info.get("line_endpoints") != "as detected"):
+    if method not in NETWORK_METHODS or not matches.num_lines or \
+            matches.line_endpoints_correspond:
         return None
     return (f"{method} reads line endpoints as correspondences (endpoint k matches endpoint "
             "k), but these lines come from the descriptor matcher (endpoints as detected, "
@@ -88,6 +88,9 @@ def prepare_graph(matches: PairMatches, model: torch.nn.Module, seed: int = 0,
     from strl_pyg.data.graph import build_pair_graph
     from strl_pyg.data.transforms import FixedSizeResample
 
+    if matches.num_lines and not matches.line_endpoints_correspond:
+        raise ValueError(unmatched_endpoints(matches, "regression").replace(
+            "regression reads", "The network reads", 1))
     m, p = prepare_matches(matches, model)
     data = build_pair_graph(m, patch_size=p, keep_images=model.config.visual == "cnn")
     if isinstance(resample, str) and resample == "model":
