@@ -59,6 +59,10 @@ MULTI_SEED_ROWS = ("baseline", "LP", "V", "full")
 #: (row, seed) in training order: the comparisons the issue asks for first.
 PLAN = ([(r, 0) for r in ("full", "baseline", "LP", "L", "V", "V+W", "LP+V", "R", "LP+R")]
         + [(r, s) for s in (1, 2) for r in MULTI_SEED_ROWS])
+#: The paired comparisons of the report: the issue's two (full vs baseline, LP vs L), then one
+#: per finding of the paper (L alone slightly worse than baseline, LP and V better, W on V).
+COMPARISONS = (("full", "baseline"), ("LP", "L"), ("L", "baseline"), ("LP", "baseline"),
+               ("V", "baseline"), ("V+W", "V"), ("full", "LP"))
 STEPS = 2000
 TRAIN_ARGS = [
     "--scene-mix", "lines_small", "--matches", "frontend",
@@ -391,7 +395,7 @@ def cmd_report(args: argparse.Namespace) -> int:
               "| a vs b | error | " + " | ".join(names) + " |",
               "|---|---" + "|---" * len(names) + "|"]
     pairs = [(a, b, runs.get(a, {}).get(0), runs.get(b, {}).get(0))
-             for a, b in (("full", "baseline"), ("LP", "L"), ("LP", "baseline"))]
+             for a, b in COMPARISONS]
     pairs += [("full", f"shipped `{ref}`", runs.get("full", {}).get(0), errs)
               for ref, errs in refs.items()]
     for a, b, ea, eb in pairs:
