@@ -27,6 +27,11 @@ worker's pid) before it starts, so ``train`` may be started twice::
     nice -n 10 python benchmarks/ablation.py train --eval &
     nice -n 10 python benchmarks/ablation.py train --eval &
 
+The shipped checkpoint, scored once on the same sets, is the reference row that a ``full`` run
+must beat before its weights would be shipped::
+
+    python benchmarks/ablation.py eval --reference        # results_ablation/reference/
+
 The plan (:data:`PLAN`): all nine rows with seed 0, then seeds 1 and 2 of ``baseline``, ``LP``,
 ``V`` and ``full`` (17 runs). The budget (:data:`TRAIN_ARGS`): 2000 training pairs of the
 ``lines_small`` mix (all four scene kinds at 240x320, low texture 35 %), front-end matches
