@@ -184,28 +184,27 @@ class _Scorer:
 
     def score(self, row: str, seed: int, run_dir: Path) -> bool:
         """Scores one finished run unless its results exist; ``True`` when it scored it."""
-        import ablation_eval as ae
-        import torch
-
         from strl_pyg.model.strl_pose import StrLPose
 
         path = self.out / "runs" / f"{run_name(row, seed)}.json"
         if path.exists():
             return False
+        self._save(path, lambda: StrLPose.load(run_dir / "model.pt"), run_name(row, seed))
+        return True
+
+    def _save(self, path: Path, load_model, label: str) -> None:
+        import ablation_eval as ae
+        import torch
+
         torch.set_num_threads(self.threads)
         sets = self.sets()
-        model = StrLPose.load(run_dir / "model.pt")
-        ae.save_json(path, ae.model_errors(model, sets))
-        print(f"[{time.strftime('%H:%M:%S')}] {run_name(row, seed)}: scored on "
-              f"{len(sets)} sets -> {path}", flush=True)
-        return True
+        ae.save_json(path, ae.model_errors(load_model(), sets))
+        print(f"[{time.strftime('%H:%M:%S')}] {label}: scored on {len(sets)} sets -> {path}",
+              flush=True)
 
     def score_reference(self, name: str) -> bool:
         """Scores the shipped checkpoint ``name`` (not trained on this study's budget: the
         figure the study's ``full`` rows must beat before their weights would be shipped)."""
-        import ablation_eval as ae
-        import torch
-
         from strl_pyg.model.strl_pose import StrLPose
 
         path = self.out / "reference" / f"{name}.json"
@@ -214,11 +213,7 @@ class _Scorer:
         if name not in StrLPose.PRETRAINED:
             raise SystemExit(f"error: expected a shipped checkpoint in "
                              f"{sorted(StrLPose.PRETRAINED)} (got {name!r})")
-        torch.set_num_threads(self.threads)
-        sets = self.sets()
-        ae.save_json(path, ae.model_errors(StrLPose.from_pretrained(name), sets))
-        print(f"[{time.strftime('%H:%M:%S')}] shipped '{name}': scored on {len(sets)} sets "
-              f"-> {path}", flush=True)
+        self._save(path, lambda: StrLPose.from_pretrained(name), f"shipped '{name}'")
         return True
 
 

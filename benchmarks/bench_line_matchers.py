@@ -56,12 +56,6 @@ def _root() -> Path:
                                Path.home() / ".cache" / "strl-pyg" / "ablation"))
 
 
-def _gt_F(T: np.ndarray, K0: np.ndarray, K1: np.ndarray) -> np.ndarray:
-    from strl_pyg.geometry.epipolar import fundamental_from_pose
-
-    return fundamental_from_pose(T, K0, K1)
-
-
 def consistent(l0: np.ndarray, l1: np.ndarray, F: np.ndarray,
                min_overlap: float = 0.5) -> np.ndarray:
     """Per line match: 1 consistent with ``F``, 0 not, -1 cannot be judged (a segment within
@@ -137,6 +131,7 @@ def score(pairs, progress=True) -> dict:
     from strl_pyg.estimation.classical import estimate_relative_pose
     from strl_pyg.estimation.vanishing import VP_MIN_POINTS, vanishing_point_pose
     from strl_pyg.frontend import FrontendConfig
+    from strl_pyg.geometry.epipolar import fundamental_from_pose
 
     cfg = FrontendConfig()
     res = {"PoseLib": [], **{f"vp ({k})": [] for k in MATCHERS},
@@ -145,7 +140,7 @@ def score(pairs, progress=True) -> dict:
            "points": []}
     for _, m, T in tqdm(pairs, disable=not progress, desc="pairs"):
         K0, K1 = np.asarray(m.K0, dtype=np.float64), np.asarray(m.K1, dtype=np.float64)
-        F = _gt_F(T, K0, K1)
+        F = fundamental_from_pose(T, K0, K1)
         res["points"].append(m.num_points)
         pl = None
         if m.num_points >= 5:

@@ -75,15 +75,17 @@ def test_generated_pair_matches_follow_the_true_geometry(monkeypatch):
     from pathlib import Path
 
     monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from bench_line_matchers import _gt_F, consistent
+    from bench_line_matchers import consistent
+
+    from strl_pyg.geometry.epipolar import fundamental_from_pose
 
     K = np.asarray(pair.K, dtype=np.float64)
-    c = consistent(l0, l1, _gt_F(np.asarray(pair.T_0to1, dtype=np.float64), K, K))
+    c = consistent(l0, l1, fundamental_from_pose(pair.T_0to1, K, K))
     assert (c >= 0).sum() >= 5
     assert (c == 1).sum() / (c >= 0).sum() >= 0.8
     # each segment paired with another's match, the same check passes far less often
     cr = consistent(l0, np.roll(l1, 1, axis=0),
-                    _gt_F(np.asarray(pair.T_0to1, dtype=np.float64), K, K))
+                    fundamental_from_pose(pair.T_0to1, K, K))
     assert (cr == 1).sum() / max((cr >= 0).sum(), 1) < 0.5
 
 

@@ -65,6 +65,16 @@ def _guided_midpoints(lines0, p0, p1, k: int):
     return mid + shift
 
 
+def _near_prediction(pred: np.ndarray, lines1: np.ndarray, image_size1: tuple[int, int],
+                     cfg: FrontendConfig) -> np.ndarray:
+    """``[N0, N1]``: whether segment ``j``'s supporting line passes within
+    ``cfg.line_guide_tol`` of image 1's diagonal of the predicted midpoint ``pred[i]``."""
+    P1, D1 = lines1[:, 0], lines1[:, 1] - lines1[:, 0]
+    n1 = np.stack([-D1[:, 1], D1[:, 0]], axis=1) / np.linalg.norm(D1, axis=1)[:, None]
+    dist = np.abs(np.einsum("ijk,jk->ij", pred[:, None, :] - P1[None], n1))
+    return dist <= cfg.line_guide_tol * float(np.hypot(*image_size1))
+
+
 def _k_nearest(d2: np.ndarray, k: int) -> np.ndarray:
     """Per row of ``d2 [N, M]``, the columns of its ``k`` smallest values, ties broken by the
     lower column (the set ``np.argsort(d2, kind="stable")[:, :k]`` gives, in column order),
@@ -127,10 +137,7 @@ def candidate_pairs(
     if guide is not None:
         pred = _guided_midpoints(lines0, guide[0], guide[1], int(cfg.line_guide_k))
         if pred is not None:
-            n1 = np.stack([-D1[:, 1], D1[:, 0]], axis=1) / len1[:, None]
-            dist = np.abs(np.einsum("ijk,jk->ij", pred[:, None, :] - P1[None], n1))
-            tol = cfg.line_guide_tol * float(np.hypot(*image_size1))
-            ok &= dist <= tol
+            ok &= _near_prediction(pred, lines1, image_size1, cfg)
     i0, i1 = np.nonzero(ok)
     flip = sa[i0, i1] > sb[i0, i1]
     lo, hi = lo[i0, i1], hi[i0, i1]
@@ -249,11 +256,7 @@ def match_lines_by_descriptor(
     if guide is not None and len(guide[0]) >= min_guide_points:
         k = min(int(cfg.line_guide_k), len(guide[0]))
         pred = _guided_midpoints(lines0, guide[0], guide[1], k)
-        P1, D1 = lines1[:, 0], lines1[:, 1] - lines1[:, 0]
-        n1 = np.stack([-D1[:, 1], D1[:, 0]], axis=1) / np.linalg.norm(D1, axis=1)[:, None]
-        off = np.abs(np.einsum("ijk,jk->ij", pred[:, None, :] - P1[None], n1))
-        near = off <= cfg.line_guide_tol * float(np.hypot(*gray1.shape[:2]))
-        cand = np.where(near, dist, np.inf)
+        cand = np.where(_near_prediction(pred, lines1, gray1.shape[:2], cfg), dist, np.inf)
     nn01 = cand.argmin(axis=1)
     nn10 = cand.argmin(axis=0)
     best = cand[rows, nn01]

@@ -59,7 +59,6 @@ from strl_pyg.inference.inputs import (
     network_pose,  # noqa: F401  (importable from here like the module's other names)
     prepare_graph,
     prepare_matches,
-    unmatched_endpoints,
     zero_parallax,
 )
 from strl_pyg.inference.methods import (
@@ -314,8 +313,6 @@ class PoseEstimator:
             elif n < spec.min_points:
                 res = MethodResult(name, "degenerate", warnings=[
                     f"too few point matches for {name}: {n} (needs {spec.min_points})"])
-            elif why := unmatched_endpoints(matches, name):
-                res = MethodResult(name, "failed", warnings=[why])
             elif spec.needs_intrinsics and not matches.has_intrinsics:
                 res = MethodResult(name, "failed",
                                    warnings=[f"{name} needs intrinsics K0, K1 (got none)"])

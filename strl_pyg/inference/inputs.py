@@ -19,25 +19,11 @@ import numpy as np
 import torch
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.inference.recommended import NETWORK_METHODS
 
 __all__ = [
     "ZERO_PARALLAX_PX", "ZERO_PARALLAX_FRACTION", "FOCAL_RANGE", "NORMALISED_K_MAX",
     "prepare_matches", "prepare_graph", "forward_pose", "input_warnings",
-    "intrinsics_problems", "zero_parallax", "network_pose", "unmatched_endpoints"]
-
-
-def unmatched_endpoints(matches: PairMatches, method: str) -> str | None:
-    """Why ``method`` (a network method: it reads line endpoint ``k`` as matching endpoint
-    ``k``) cannot read ``matches``' lines when they come from the descriptor matcher
-    (``info["line_endpoints"] == "as detected"``); ``None`` when it can."""
-    if method not in NETWORK_METHODS or not matches.num_lines or \
-            matches.line_endpoints_correspond:
-        return None
-    return (f"{method} reads line endpoints as correspondences (endpoint k matches endpoint "
-            "k), but these lines come from the descriptor matcher (endpoints as detected, "
-            "info['line_endpoints']); match them with FrontendConfig(line_matcher='epipolar') "
-            "or use the line solvers (vp, vp_checked)")
+    "intrinsics_problems", "zero_parallax", "network_pose"]
 
 #: Zero parallax: at least this fraction of the point matches moved less than this many
 #: pixels (image 1 re-expressed in image 0's camera when both K are known).
@@ -88,9 +74,14 @@ def prepare_graph(matches: PairMatches, model: torch.nn.Module, seed: int = 0,
     from strl_pyg.data.graph import build_pair_graph
     from strl_pyg.data.transforms import FixedSizeResample
 
+    # every network method (regression, the geometric head, guided, fused through regression)
+    # comes through here, so this one check is what refuses descriptor-matched lines
     if matches.num_lines and not matches.line_endpoints_correspond:
-        raise ValueError(unmatched_endpoints(matches, "regression").replace(
-            "regression reads", "The network reads", 1))
+        raise ValueError(
+            "Expected lines whose endpoint k matches endpoint k (got lines from the descriptor "
+            "matcher, info['line_endpoints'] == 'as detected'): the network reads endpoints as "
+            "correspondences; match with FrontendConfig(line_matcher='epipolar') or use the "
+            "line solvers (vp, vp_checked)")
     m, p = prepare_matches(matches, model)
     data = build_pair_graph(m, patch_size=p, keep_images=model.config.visual == "cnn")
     if isinstance(resample, str) and resample == "model":
