@@ -94,3 +94,46 @@ def test_k_nearest_by_partition_equals_the_stable_sort():
         d2 = rng.integers(0, 6, (n, m)).astype(float)
         ref = np.sort(np.argsort(d2, axis=1, kind="stable")[:, :k], axis=1)
         np.testing.assert_array_equal(_k_nearest(d2, k), ref)
+
+
+def test_products_through_torch_equal_numpys():
+    import pytest
+
+    from strl_pyg.utils.products import matmul
+
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(300, 3)), rng.normal(size=(3, 250))
+    np.testing.assert_allclose(matmul(a, b), a @ b, rtol=1e-12, atol=1e-12)
+    assert matmul(a, b).dtype == np.float64
+    # integer-valued float32 (SIFT descriptors): every partial sum is exact, so equal bit for bit
+    d0 = rng.integers(0, 256, (200, 128)).astype(np.float32)
+    d1 = rng.integers(0, 256, (180, 128)).astype(np.float32)
+    ref = (d0.astype(np.int64) @ d1.T.astype(np.int64)).astype(np.float32)
+    np.testing.assert_array_equal(matmul(d0, d1.T), ref)
+    ro = np.broadcast_to(d0[:1], (4, 128))  # read-only view: copied, not refused
+    np.testing.assert_array_equal(matmul(ro, d1.T), ref[[0, 0, 0, 0]])
+    assert matmul(np.zeros((0, 3)), b).shape == (0, 250)
+    with pytest.raises(ValueError, match=r"Expected a \[N, K\] and b \[K, M\] \(got \(300, 3\) "
+                                         r"and \(2, 250\)\)"):
+        matmul(a, b[:2])
+    with pytest.raises(ValueError, match="Expected two float32 or two float64 arrays"):
+        matmul(a.astype(np.float32), b)
+
+
+def test_line_candidates_through_torch_equal_numpys_products(monkeypatch):
+    from strl_pyg.frontend import lines as fl
+    from strl_pyg.frontend.lines import candidate_pairs, detect_lines
+    from strl_pyg.frontend.points import fit_fundamental
+
+    pair = generate_pair(5)
+    cfg = FrontendConfig()
+    g0, g1 = _grey(pair.image0), _grey(pair.image1)
+    p0, p1, _, _ = match_points(g0, g1, cfg)
+    F, inl = fit_fundamental(p0, p1, cfg)
+    s0, s1 = detect_lines(g0, cfg), detect_lines(g1, cfg)
+    fast = candidate_pairs(s0, s1, F, g1.shape, cfg, (p0[inl], p1[inl]))
+    monkeypatch.setattr(fl, "matmul", lambda a, b: a @ b)  # the reference: NumPy's BLAS
+    ref = candidate_pairs(s0, s1, F, g1.shape, cfg, (p0[inl], p1[inl]))
+    assert len(fast[0]) > 20
+    for x, y in zip(fast, ref, strict=True):
+        np.testing.assert_allclose(x, y, rtol=0, atol=1e-9)

@@ -38,6 +38,43 @@ def test_bootstrap_is_seeded_psd_and_grows_with_the_noise(pair):
     assert np.trace(c) > 5 * np.trace(a)  # 6x the pixel noise: a much less stable solution
 
 
+def _serial_bootstrap(m, pose, method, n, thr, seed):
+    """The bootstrap as one loop (the code before the resamples were threaded)."""
+    from strl_pyg.estimation.fusion import pose_to_tangent, tangent_basis
+
+    R0, t0 = pose.R.double(), pose.t.double() / pose.t.double().norm()
+    basis, rng, xs = tangent_basis(t0), np.random.default_rng(seed), []
+    for b in range(n):
+        idx = rng.integers(0, m.num_points, m.num_points)
+        sample = replace(m, points0=m.points0[idx], points1=m.points1[idx],
+                         point_scores=None if m.point_scores is None else m.point_scores[idx],
+                         lines0=None, lines1=None, line_scores=None, image0=None, image1=None)
+        res = estimate_relative_pose(sample, method, thr, seed=seed + b + 1)
+        if res.success:
+            xs.append(pose_to_tangent(res.pose, R0, t0, basis).numpy())
+    X = np.asarray(xs)
+    return X.T @ X / len(X)
+
+
+@pytest.mark.parametrize("method", ["opencv", "poselib"])
+def test_bootstrap_in_threads_equals_the_serial_loop(pair, method):
+    if method == "poselib":
+        pytest.importorskip("poselib")
+    rng = np.random.default_rng(1)
+    m = pair.matches
+    H, W = m.image_size1
+    m = replace(m, points1=np.clip(m.points1 + rng.normal(0, 2.0, m.points1.shape), 0,
+                                   [W - 1, H - 1]))  # noisy: the resamples disagree
+    res = estimate_relative_pose(m, method, threshold_px=3.0)
+    ref = _serial_bootstrap(m, res.pose, method, 8, 3.0, 5)
+    assert np.trace(ref) > 0
+    for workers in (None, 1, 2, 3, 8, 20):
+        got = bootstrap_covariance(m, res.pose, method, 8, 3.0, seed=5, workers=workers)
+        assert np.array_equal(got, ref), workers
+    with pytest.raises(ValueError, match=r"Expected workers as an integer >= 1 or None \(got 0\)"):
+        bootstrap_covariance(m, res.pose, method, 8, workers=0)
+
+
 def test_bootstrap_errors_and_no_pose(pair):
     m = pair.matches
     res = estimate_relative_pose(m, "opencv")

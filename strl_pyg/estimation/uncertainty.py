@@ -16,6 +16,8 @@ with one scale per method (``benchmarks/bench_pose.py --calibrate``).
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
 import numpy as np
@@ -36,8 +38,8 @@ MIN_BOOTSTRAP = 3
 
 
 def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poselib",
-                         n: int = 8, threshold_px: float = 1.0, seed: int = 0
-                         ) -> np.ndarray | None:
+                         n: int = 8, threshold_px: float = 1.0, seed: int = 0,
+                         workers: int | None = None) -> np.ndarray | None:
     """Covariance ``[5, 5]`` (float64) of the robust estimate ``pose`` of ``matches``, from
     ``n`` bootstrap resamples of its point matches, in the tangent parameters of
     :func:`strl_pyg.estimation.fusion.pose_to_tangent` (rotation increment ``w``, rad; translation
@@ -49,6 +51,10 @@ def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poseli
     resampled poses' tangent coordinates about ``pose`` (so a consistent offset counts, not
     only the spread). Returns ``None`` when fewer than
     :data:`MIN_BOOTSTRAP` resamples gave a pose.
+
+    The resamples are solved in ``workers`` threads (default: one per available core, at most
+    ``n``; PoseLib and OpenCV release the GIL): every resample's draw and solver seed are fixed
+    before any is solved, so the covariance is the same for any ``workers`` (tested).
     """
     from strl_pyg.estimation.fusion import pose_to_tangent, tangent_basis
 
@@ -68,22 +74,41 @@ def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poseli
         raise ValueError("Expected a pose with a non-zero translation (got t = 0)")
     t0 = t0 / norm
     basis = tangent_basis(t0)
+    if workers is None:
+        workers = available_cores()
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+        raise ValueError(f"Expected workers as an integer >= 1 or None (got {workers!r})")
     rng = np.random.default_rng(seed)
-    xs = []
-    for b in range(n):
-        idx = rng.integers(0, matches.num_points, matches.num_points)
+    draws = [rng.integers(0, matches.num_points, matches.num_points) for _ in range(n)]
+
+    def solve(b: int):
+        idx = draws[b]
         scores = None if matches.point_scores is None else matches.point_scores[idx]
         # points only: the solver reads neither lines nor images (and re-validating the
         # images on every resample would cost more than the solve on small pairs)
         sample = replace(matches, points0=matches.points0[idx], points1=matches.points1[idx],
                          point_scores=scores, lines0=None, lines1=None, line_scores=None,
                          image0=None, image1=None)
-        res = estimate_relative_pose(sample, method, threshold_px, seed=seed + b + 1)
-        if res.success:
-            xs.append(pose_to_tangent(res.pose, R0, t0, basis).numpy())
+        return estimate_relative_pose(sample, method, threshold_px, seed=seed + b + 1)
+
+    workers = min(int(workers), n)
+    if workers == 1:
+        results = [solve(b) for b in range(n)]
+    else:
+        with ThreadPoolExecutor(workers, thread_name_prefix="strl-bootstrap") as pool:
+            results = list(pool.map(solve, range(n)))
+    xs = [pose_to_tangent(r.pose, R0, t0, basis).numpy() for r in results if r.success]
     if len(xs) < MIN_BOOTSTRAP:
         return None
     X = np.asarray(xs, dtype=np.float64)
     # second moment about the estimate (the chart origin), not about the resamples' mean: when
     # the resamples agree on another solution, that offset is part of the uncertainty
     return X.T @ X / len(X)
+
+
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the OS reports one)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # macOS, Windows
+        return max(1, os.cpu_count() or 1)

@@ -24,6 +24,7 @@ import numpy as np
 
 from strl_pyg.frontend.config import FrontendConfig
 from strl_pyg.frontend.line_descriptors import band_descriptors, line_descriptor_scores
+from strl_pyg.utils.products import matmul
 
 __all__ = ["detect_lines", "candidate_pairs", "match_lines", "match_lines_by_descriptor"]
 
@@ -119,9 +120,11 @@ def candidate_pairs(
     # Epipolar lines in image 1 of both endpoints of every segment 0: [N0, 3].
     ea, eb = _hom(lines0[:, 0]) @ F.T, _hom(lines0[:, 1]) @ F.T
     with np.errstate(divide="ignore", invalid="ignore"):
-        den_a, den_b = ea[:, :2] @ D1.T, eb[:, :2] @ D1.T  # [N0, N1]
-        sa = -(ea @ _hom(P1).T) / den_a  # parameter on segment 1 where epipolar line a cuts it
-        sb = -(eb @ _hom(P1).T) / den_b
+        # [N0, N1] products through PyTorch, not NumPy's BLAS (see strl_pyg.utils.products)
+        den_a, den_b = matmul(ea[:, :2], D1.T), matmul(eb[:, :2], D1.T)
+        h1 = _hom(P1).T
+        sa = -matmul(ea, h1) / den_a  # parameter on segment 1 where epipolar line a cuts it
+        sb = -matmul(eb, h1) / den_b
         sin_a = np.abs(den_a) / (np.linalg.norm(ea[:, :2], axis=1)[:, None] * len1[None])
         sin_b = np.abs(den_b) / (np.linalg.norm(eb[:, :2], axis=1)[:, None] * len1[None])
     min_sin = np.sin(np.deg2rad(cfg.line_min_angle_deg))
@@ -247,7 +250,7 @@ def match_lines_by_descriptor(
         return empty
     lines0 = np.asarray(lines0, dtype=np.float64).reshape(-1, 2, 2)
     lines1 = np.asarray(lines1, dtype=np.float64).reshape(-1, 2, 2)
-    dist = np.sqrt(np.maximum(2.0 - 2.0 * (a @ b.T), 0.0))  # unit descriptors: L2 distance
+    dist = np.sqrt(np.maximum(2.0 - 2.0 * matmul(a, b.T), 0.0))  # unit descriptors: L2
     rows = np.arange(len(a))
     # the ratio's second nearest: over every segment of image 1, guided or not
     two = np.partition(dist, 1, axis=1)

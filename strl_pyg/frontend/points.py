@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from strl_pyg.frontend.config import FrontendConfig
+from strl_pyg.utils.products import matmul
 
 __all__ = ["match_points", "fit_fundamental", "on_both"]
 
@@ -69,7 +70,7 @@ def _top2_l2(d0: np.ndarray, d1: np.ndarray):
     every row's minimum undefined."""
     a = np.ascontiguousarray(d0, dtype=np.float32)
     b = np.ascontiguousarray(d1, dtype=np.float32)
-    prod = a @ b.T  # [N0, N1]
+    prod = matmul(a, b.T)  # [N0, N1]; not NumPy's BLAS (see strl_pyg.utils.products)
     prod *= 2.0  # exact: the same float32 values as (|a|^2 + |b|^2) - 2 a.b computed apart
     sq = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :]
     sq -= prod

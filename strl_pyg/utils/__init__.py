@@ -1,6 +1,7 @@
 """Package-wide helpers that import nothing else of strl_pyg: lazy package faces
 (:mod:`.lazy`), strict dataclass-from-dict (:mod:`.dataclass`), atomic writes and safe
-``torch.load`` (:mod:`.io`), image checks and decoding (:mod:`.images`).
+``torch.load`` (:mod:`.io`), image checks and decoding (:mod:`.images`), large NumPy products
+through PyTorch's BLAS (:mod:`.products`).
 """
 
 from __future__ import annotations
