@@ -387,3 +387,29 @@ def test_readme_snippet_runs_from_another_directory(tmp_path):
     assert res.returncode == 0, res.stderr[-2000:]
     lines = res.stdout.splitlines()
     assert lines[0].startswith("ok ") and lines[-1] == "ok"
+
+
+@pytest.mark.parametrize("row", ["baseline", "LP", "R", "LP+V", "full"])
+def test_forward_pose_of_one_graph_equals_the_batch_of_it(pair, row):
+    from torch_geometric.data import Batch
+
+    from strl_pyg.model import ABLATIONS
+
+    torch.manual_seed(0)
+    m = tiny(**ABLATIONS[row])
+    g = prepare_graph(pair.matches, m, resample=(48, 16))
+    a = forward_pose(m, g)  # one graph straight in (no Batch.from_data_list)
+    b = forward_pose(m, Batch.from_data_list([g]))
+    for x, y in ((a.quaternion, b.quaternion), (a.translation, b.translation),
+                 (a.log_var, b.log_var)):
+        torch.testing.assert_close(x, y, rtol=1e-5, atol=1e-6)
+    # a float64 model casts a copy: the caller's graph (or batch, which was cast in place
+    # before) keeps its float32 tensors
+    bb = Batch.from_data_list([g])
+    before = {k: v.clone() for k, v in g["point"].items() if torch.is_tensor(v)}
+    m.double()
+    assert forward_pose(m, g).quaternion.dtype == torch.float64
+    assert forward_pose(m, bb).quaternion.dtype == torch.float64
+    for graph in (g, bb):
+        for k, v in before.items():
+            assert graph["point"][k].dtype == v.dtype and torch.equal(graph["point"][k], v), k

@@ -94,9 +94,16 @@ def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poseli
     workers = min(int(workers), n)
     if workers == 1:
         results = [solve(b) for b in range(n)]
-    else:
-        with ThreadPoolExecutor(workers, thread_name_prefix="strl-bootstrap") as pool:
-            results = list(pool.map(solve, range(n)))
+    else:  # one task per worker (resamples w, w + workers, ...); the last chunk runs here
+        chunks = [range(w, n, workers) for w in range(workers)]
+        futures = [_pool(workers - 1).submit(lambda c=c: [solve(b) for b in c])
+                   for c in chunks[1:]]
+        done = {0: [solve(b) for b in chunks[0]]}
+        done.update((i + 1, f.result()) for i, f in enumerate(futures))
+        results = [None] * n
+        for w, c in enumerate(chunks):
+            for b, r in zip(c, done[w], strict=True):
+                results[b] = r
     xs = [pose_to_tangent(r.pose, R0, t0, basis).numpy() for r in results if r.success]
     if len(xs) < MIN_BOOTSTRAP:
         return None
@@ -104,6 +111,20 @@ def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poseli
     # second moment about the estimate (the chart origin), not about the resamples' mean: when
     # the resamples agree on another solution, that offset is part of the uncertainty
     return X.T @ X / len(X)
+
+
+_POOL: tuple[int, ThreadPoolExecutor] | None = None  # (threads, pool)
+
+
+def _pool(size: int) -> ThreadPoolExecutor:
+    """A process-wide pool of at least ``size`` threads (starting threads on every call cost
+    ~3 ms each on a busy 2-core machine)."""
+    global _POOL
+    if _POOL is None or _POOL[0] < size:
+        if _POOL is not None:
+            _POOL[1].shutdown(wait=False)
+        _POOL = (size, ThreadPoolExecutor(size, thread_name_prefix="strl-bootstrap"))
+    return _POOL[1]
 
 
 def available_cores() -> int:

@@ -11,6 +11,7 @@ fixed-size resampling (seeded, so a pair always gets the same graph); the forwar
 
 from __future__ import annotations
 
+import copy
 from dataclasses import replace
 from typing import Any
 
@@ -108,13 +109,12 @@ def forward_pose(model: torch.nn.Module, data: Any, device: Any = None):
     ``no_grad``, the graph's floating tensors cast to the model's dtype (float32 outputs for
     half-precision models, float64 for float64 ones) and moved to its device (or
     ``device``)."""
-    from torch_geometric.data import Batch
-
     dtype, dev = _model_dtype(model)
     dev = torch.device(device) if device is not None else dev
-    if not isinstance(data, Batch):
-        data = Batch.from_data_list([data])
-    data = data.to(dev)
+    # one graph goes in as it is (the model reads a graph without batch vectors as one pair;
+    # Batch.from_data_list cost 2.6 ms of a 37 ms forward); a shallow copy, so that the move
+    # and the casts below replace tensors of the copy, never of the caller's graph or batch
+    data = copy.copy(data).to(dev)
     for store in data.stores:
         for key, value in list(store.items()):
             if isinstance(value, torch.Tensor) and value.is_floating_point():
