@@ -198,3 +198,26 @@ def test_graph_and_datasets_refuse_descriptor_lines(tmp_path):
     with pytest.raises(ValueError, match="line_matcher='epipolar' for a dataset"):
         SyntheticPairs(4, matches="frontend", cache_dir=tmp_path,
                              frontend_config=FrontendConfig(line_matcher="descriptor"))
+
+
+def test_endpoint_residuals_are_undefined_for_descriptor_lines():
+    # endpoint k of a descriptor-matched segment is not endpoint k of its match: no epipolar
+    # residual (NaN) and no endpoint-based match quality, instead of numbers that look real
+    from dataclasses import replace
+
+    from strl_pyg.frontend import match_images
+    from strl_pyg.geometry.epipolar import epipolar_residuals
+    from strl_pyg.synthetic.match_quality import evaluate_matches
+
+    pair = generate_pair(6)
+    m = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K,
+                     config=FrontendConfig(line_matcher="descriptor"))
+    pe, le = epipolar_residuals(m, pair.T_0to1)
+    assert len(pe) == m.num_points and np.isfinite(pe).all() and np.median(pe) < 1.0
+    assert le.shape == (m.num_lines,) and np.isnan(le).all()
+    as_corresponding = replace(m, info={**m.info, "line_endpoints": "corresponding"})
+    assert np.isfinite(epipolar_residuals(as_corresponding, pair.T_0to1)[1]).all()
+    with pytest.raises(ValueError, match=r"Expected lines whose endpoint k matches endpoint k "
+                                         r"\(got info\['line_endpoints'\] = 'as detected'"):
+        evaluate_matches(pair, m)
+    assert evaluate_matches(pair, pair.matches)["num_lines"] == pair.matches.num_lines

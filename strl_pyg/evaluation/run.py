@@ -49,6 +49,7 @@ from strl_pyg.evaluation.report import (
 )
 from strl_pyg.geometry import Pose
 from strl_pyg.inference.inputs import network_pose, prepare_matches
+from strl_pyg.inference.recommended import NETWORK_METHODS
 from strl_pyg.metrics.two_view import (  # noqa: F401  (names this module had before the 0.2 split)
     integrate_relative_poses,
     kitti_odometry_errors,
@@ -90,8 +91,8 @@ METHODS = ("regression", "opencv", "poselib", "fused", "geometric", "guided")
 #: first ``"ok"`` classical pose (PoseLib when installed).
 LEGACY_METHOD_NAMES = {"strl": "regression", "fused_poselib": "fused", "fused_opencv": "fused"}
 
-#: Methods that need a network.
-NETWORK_METHODS = ("regression", "fused", "geometric", "guided")
+# NETWORK_METHODS (the methods that need a network) is the estimator's one list, imported above
+# from strl_pyg.inference.recommended and re-exported here.
 
 
 def available_methods() -> tuple[str, ...]:

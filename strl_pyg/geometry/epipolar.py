@@ -239,7 +239,9 @@ def epipolar_residuals(matches: Any, T_0to1: Any) -> tuple[np.ndarray, np.ndarra
 
     Returns:
         ``point_err [Np]`` and ``line_err [Nl]``, the larger of the two endpoints' errors
-        (float64 numpy).
+        (float64 numpy). ``line_err`` is NaN where the lines' endpoints do not correspond
+        (``matches.line_endpoints_correspond`` is ``False``: descriptor-matched segments as
+        detected); an endpoint then has no epipolar residual.
     """
     if getattr(matches, "K0", None) is None or getattr(matches, "K1", None) is None:
         raise ValueError("Expected matches with K0 and K1 (got none)")
@@ -251,5 +253,7 @@ def epipolar_residuals(matches: Any, T_0to1: Any) -> tuple[np.ndarray, np.ndarra
         return sampson_error(F, x0, x1, squared=False).detach().cpu().numpy()
 
     pe = err(matches.points0, matches.points1)
+    if not getattr(matches, "line_endpoints_correspond", True):
+        return pe, np.full(len(np.asarray(matches.lines0).reshape(-1, 2, 2)), np.nan)
     le = err(np.asarray(matches.lines0).reshape(-1, 2), np.asarray(matches.lines1).reshape(-1, 2))
     return pe, le.reshape(-1, 2).max(1)

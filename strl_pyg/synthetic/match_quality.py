@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from strl_pyg.data.matches import PairMatches
+from strl_pyg.data.matches import ENDPOINTS_AS_DETECTED, LINE_ENDPOINTS, PairMatches
 from strl_pyg.geometry.epipolar import epipolar_residuals
 from strl_pyg.synthetic.pair import SyntheticPair
 
@@ -116,6 +116,10 @@ def evaluate_matches(
     ``line_recall`` (fraction of the ground-truth lines of ``pair.lines_clean*`` on which a
     correct match lies, within ``recall_px``, in both images).
     """
+    if not matches.line_endpoints_correspond:
+        raise ValueError("Expected lines whose endpoint k matches endpoint k (got "
+                         f"info['{LINE_ENDPOINTS}'] = '{ENDPOINTS_AS_DETECTED}': the descriptor "
+                         "matcher's segments as detected, which have no endpoint errors)")
     pe, le = epipolar_residuals(matches, pair.T_0to1)
     out = {"num_points": matches.num_points, "num_lines": matches.num_lines}
     if matches.num_points:
