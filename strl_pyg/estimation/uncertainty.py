@@ -16,8 +16,6 @@ with one scale per method (``benchmarks/bench_pose.py --calibrate``).
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
 import numpy as np
@@ -25,6 +23,7 @@ import numpy as np
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.estimation.classical import estimate_relative_pose
 from strl_pyg.geometry import Pose
+from strl_pyg.utils.threads import available_cores, shared_pool
 
 __all__ = ["bootstrap_covariance", "MIN_BOOTSTRAP", "BOOTSTRAPPED"]
 
@@ -96,7 +95,7 @@ def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poseli
         results = [solve(b) for b in range(n)]
     else:  # one task per worker (resamples w, w + workers, ...); the last chunk runs here
         chunks = [range(w, n, workers) for w in range(workers)]
-        futures = [_pool(workers - 1).submit(lambda c=c: [solve(b) for b in c])
+        futures = [shared_pool("bootstrap", workers - 1).submit(lambda c=c: [solve(b) for b in c])
                    for c in chunks[1:]]
         done = {0: [solve(b) for b in chunks[0]]}
         done.update((i + 1, f.result()) for i, f in enumerate(futures))
@@ -111,25 +110,3 @@ def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poseli
     # second moment about the estimate (the chart origin), not about the resamples' mean: when
     # the resamples agree on another solution, that offset is part of the uncertainty
     return X.T @ X / len(X)
-
-
-_POOL: tuple[int, ThreadPoolExecutor] | None = None  # (threads, pool)
-
-
-def _pool(size: int) -> ThreadPoolExecutor:
-    """A process-wide pool of at least ``size`` threads (starting threads on every call cost
-    ~3 ms each on a busy 2-core machine)."""
-    global _POOL
-    if _POOL is None or _POOL[0] < size:
-        if _POOL is not None:
-            _POOL[1].shutdown(wait=False)
-        _POOL = (size, ThreadPoolExecutor(size, thread_name_prefix="strl-bootstrap"))
-    return _POOL[1]
-
-
-def available_cores() -> int:
-    """The cores this process may run on (its CPU affinity where the OS reports one)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # macOS, Windows
-        return max(1, os.cpu_count() or 1)

@@ -1,7 +1,8 @@
 """Package-wide helpers that import nothing else of strl_pyg: lazy package faces
 (:mod:`.lazy`), strict dataclass-from-dict (:mod:`.dataclass`), atomic writes and safe
 ``torch.load`` (:mod:`.io`), image checks and decoding (:mod:`.images`), large NumPy products
-through PyTorch's BLAS (:mod:`.products`).
+through PyTorch's BLAS (:mod:`.products`), fork-safe process-wide thread pools
+(:mod:`.threads`).
 """
 
 from __future__ import annotations
