@@ -5,8 +5,8 @@
 On generated pairs through :func:`~strl_pyg.inference.inputs.prepare_graph` at the shipped
 model's resampled size (768 nodes), one thread each:
 
-- ``PyTorch forward_pose``: the package's batch-1 forward (``Batch`` collation, dtype/device
-  casts, input gathering and validation, then the model) on the graph;
+- ``PyTorch forward_pose``: the package's batch-1 forward (a shallow copy of the graph,
+  dtype/device casts, input gathering and validation, then the model) on the graph;
 - ``PyTorch tensors``: :class:`~strl_pyg.inference.export.DensePoseModule` on the gathered
   tensors (what the export contains: no per-call host work);
 - ``onnxruntime``: the exported graph on the same tensors.

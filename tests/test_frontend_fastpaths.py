@@ -116,8 +116,15 @@ def test_products_through_torch_equal_numpys():
     with pytest.raises(ValueError, match=r"Expected a \[N, K\] and b \[K, M\] \(got \(300, 3\) "
                                          r"and \(2, 250\)\)"):
         matmul(a, b[:2])
-    with pytest.raises(ValueError, match="Expected two float32 or two float64 arrays"):
+    with pytest.raises(ValueError, match=r"Expected a and b of one dtype \(got float32 and "
+                                         r"float64\)"):
         matmul(a.astype(np.float32), b)
+    with pytest.raises(ValueError, match=r"Expected a as a float32 or float64 array \(got int64"):
+        matmul(a.astype(np.int64), b)
+    # views torch.from_numpy refuses (negative strides) and foreign byte order: handled
+    np.testing.assert_allclose(matmul(a[::-1], b[:, ::-1]), (a[::-1] @ b[:, ::-1]), rtol=1e-12,
+                               atol=1e-12)
+    np.testing.assert_allclose(matmul(a.astype(">f8"), b), a @ b, rtol=1e-12, atol=1e-12)
 
 
 def test_line_candidates_through_torch_equal_numpys_products(monkeypatch):
@@ -137,3 +144,9 @@ def test_line_candidates_through_torch_equal_numpys_products(monkeypatch):
     assert len(fast[0]) > 20
     for x, y in zip(fast, ref, strict=True):
         np.testing.assert_allclose(x, y, rtol=0, atol=1e-9)
+    # float32 segments (what cv2's LSD returns) give the same candidates, not a dtype error
+    f32 = candidate_pairs(s0.astype(np.float32), s1.astype(np.float32), F, g1.shape, cfg,
+                          (p0[inl], p1[inl]))
+    np.testing.assert_array_equal(f32[0], fast[0])
+    np.testing.assert_array_equal(f32[1], fast[1])
+    np.testing.assert_allclose(f32[2], fast[2], atol=1e-3)

@@ -406,10 +406,18 @@ def test_forward_pose_of_one_graph_equals_the_batch_of_it(pair, row):
     # a float64 model casts a copy: the caller's graph (or batch, which was cast in place
     # before) keeps its float32 tensors
     bb = Batch.from_data_list([g])
-    before = {k: v.clone() for k, v in g["point"].items() if torch.is_tensor(v)}
+
+    def tensors(graph):
+        return {(i, k): v.clone() for i, store in enumerate(graph.stores)
+                for k, v in store.items() if torch.is_tensor(v)}
+
+    before = {id(g): tensors(g), id(bb): tensors(bb)}
+    assert any(v.dtype == torch.float32 for v in before[id(g)].values())
     m.double()
     assert forward_pose(m, g).quaternion.dtype == torch.float64
     assert forward_pose(m, bb).quaternion.dtype == torch.float64
     for graph in (g, bb):
-        for k, v in before.items():
-            assert graph["point"][k].dtype == v.dtype and torch.equal(graph["point"][k], v), k
+        after = tensors(graph)
+        assert after.keys() == before[id(graph)].keys()
+        for k, v in before[id(graph)].items():
+            assert after[k].dtype == v.dtype and torch.equal(after[k], v), k

@@ -212,6 +212,7 @@ def test_endpoint_residuals_are_undefined_for_descriptor_lines():
     pair = generate_pair(6)
     m = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K,
                      config=FrontendConfig(line_matcher="descriptor"))
+    assert m.num_lines > 0
     pe, le = epipolar_residuals(m, pair.T_0to1)
     assert len(pe) == m.num_points and np.isfinite(pe).all() and np.median(pe) < 1.0
     assert le.shape == (m.num_lines,) and np.isnan(le).all()
@@ -221,3 +222,6 @@ def test_endpoint_residuals_are_undefined_for_descriptor_lines():
                                          r"\(got info\['line_endpoints'\] = 'as detected'"):
         evaluate_matches(pair, m)
     assert evaluate_matches(pair, pair.matches)["num_lines"] == pair.matches.num_lines
+    # no lines at all: nothing to refuse, the points are scored
+    no_lines = replace(m, lines0=None, lines1=None, line_scores=None)
+    assert evaluate_matches(pair, no_lines)["num_points"] == m.num_points

@@ -67,7 +67,7 @@ def test_bootstrap_in_threads_equals_the_serial_loop(pair, method):
                                    [W - 1, H - 1]))  # noisy: the resamples disagree
     res = estimate_relative_pose(m, method, threshold_px=3.0)
     ref = _serial_bootstrap(m, res.pose, method, 8, 3.0, 5)
-    assert np.trace(ref) > 0
+    assert np.trace(ref) > 1e-7  # the resamples disagree (rad^2; identical poses would give 0)
     for workers in (None, 1, 2, 3, 8, 20):
         got = bootstrap_covariance(m, res.pose, method, 8, 3.0, seed=5, workers=workers)
         assert np.array_equal(got, ref), workers

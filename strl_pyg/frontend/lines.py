@@ -114,6 +114,10 @@ def candidate_pairs(
         ``c1 [C, 2, 2]`` (endpoint ``k`` matches endpoint ``k``) and ``flip [C]`` (segment 1
         runs against segment 0's endpoint order), row-major in ``(i0, i1)``.
     """
+    # float64 whatever the caller's (LSD returns float32): the products below take one dtype
+    lines0 = np.asarray(lines0, dtype=np.float64).reshape(-1, 2, 2)
+    lines1 = np.asarray(lines1, dtype=np.float64).reshape(-1, 2, 2)
+    F = np.asarray(F, dtype=np.float64)
     P0, D0 = lines0[:, 0], lines0[:, 1] - lines0[:, 0]
     P1, D1 = lines1[:, 0], lines1[:, 1] - lines1[:, 0]
     len1 = np.linalg.norm(D1, axis=1)

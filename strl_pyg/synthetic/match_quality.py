@@ -116,7 +116,7 @@ def evaluate_matches(
     ``line_recall`` (fraction of the ground-truth lines of ``pair.lines_clean*`` on which a
     correct match lies, within ``recall_px``, in both images).
     """
-    if not matches.line_endpoints_correspond:
+    if matches.num_lines and not matches.line_endpoints_correspond:
         raise ValueError("Expected lines whose endpoint k matches endpoint k (got "
                          f"info['{LINE_ENDPOINTS}'] = '{ENDPOINTS_AS_DETECTED}': the descriptor "
                          "matcher's segments as detected, which have no endpoint errors)")

@@ -39,8 +39,8 @@ def shared_pool(name: str, size: int) -> ThreadPoolExecutor:
     with _LOCK:
         pool = _POOLS.get(name)
         if pool is None or _SIZES[name] < size:
-            if pool is not None:
-                pool.shutdown(wait=False)  # its running tasks finish; new ones go to the new
+            # a smaller pool is dropped, not shut down: a caller that got it a moment ago may
+            # still submit to it; its threads end when it is garbage-collected
             pool = _POOLS[name] = ThreadPoolExecutor(size, thread_name_prefix=f"strl-{name}")
             _SIZES[name] = size
         return pool
