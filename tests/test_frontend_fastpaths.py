@@ -94,6 +94,25 @@ def test_k_nearest_by_partition_equals_the_stable_sort():
         d2 = rng.integers(0, 6, (n, m)).astype(float)
         ref = np.sort(np.argsort(d2, axis=1, kind="stable")[:, :k], axis=1)
         np.testing.assert_array_equal(_k_nearest(d2, k), ref)
+    d2 = rng.normal(size=(50, 80))  # no ties at all
+    ref = np.sort(np.argsort(d2, axis=1, kind="stable")[:, :7], axis=1)
+    np.testing.assert_array_equal(_k_nearest(d2, 7), ref)
+
+
+def test_guided_midpoints_equal_the_straightforward_version():
+    # the distances as two planes: the same float64 values as the [N, M, 2] sum, so the same
+    # nearest points and the same predicted midpoints, bit for bit (half-pixel grids: ties)
+    from strl_pyg.frontend.lines import _guided_midpoints
+
+    rng = np.random.default_rng(1)
+    lines0 = rng.integers(0, 200, (60, 2, 2)) / 2.0
+    p0 = rng.integers(0, 200, (90, 2)) / 2.0
+    p1 = p0 + rng.normal(0, 3, p0.shape)
+    mid = lines0.mean(1)
+    d2 = ((mid[:, None, :] - p0[None, :, :]) ** 2).sum(-1)
+    nearest = np.argsort(d2, axis=1, kind="stable")[:, :8]
+    ref = mid + np.median((p1 - p0)[nearest], axis=1)
+    np.testing.assert_array_equal(_guided_midpoints(lines0, p0, p1, 8), ref)
 
 
 def test_products_through_torch_equal_numpys():
@@ -150,3 +169,21 @@ def test_line_candidates_through_torch_equal_numpys_products(monkeypatch):
     np.testing.assert_array_equal(f32[0], fast[0])
     np.testing.assert_array_equal(f32[1], fast[1])
     np.testing.assert_allclose(f32[2], fast[2], atol=1e-3)
+
+
+def test_near_prediction_equals_the_einsum_version():
+    # the distance to each supporting line as two planes: the same values as the einsum over
+    # [N0, N1, 2] temporaries, so the same mask
+    from strl_pyg.frontend.lines import _near_prediction
+
+    rng = np.random.default_rng(2)
+    cfg = FrontendConfig()
+    pred = rng.uniform(0, 640, (120, 2))
+    lines1 = rng.uniform(0, 640, (150, 2, 2))
+    P1, D1 = lines1[:, 0], lines1[:, 1] - lines1[:, 0]
+    n1 = np.stack([-D1[:, 1], D1[:, 0]], axis=1) / np.linalg.norm(D1, axis=1)[:, None]
+    dist = np.abs(np.einsum("ijk,jk->ij", pred[:, None, :] - P1[None], n1))
+    ref = dist <= cfg.line_guide_tol * float(np.hypot(480, 640))
+    got = _near_prediction(pred, lines1, (480, 640), cfg)
+    assert 0 < got.sum() < got.size
+    np.testing.assert_array_equal(got, ref)
