@@ -122,8 +122,8 @@ def vanishing_directions(matches: PairMatches, line_threshold_px: float = 2.0,
         # refine on the inlier lines: the direction closest to every interpretation plane,
         # its consensus again (twice), and the direction of the last consensus
         for i in range(3):
-            d0b = np.linalg.svd(n0[mask])[2][-1]
-            d1b = np.linalg.svd(n1[mask])[2][-1]
+            d0b = np.linalg.svd(n0[mask], full_matrices=False)[2][-1]
+            d1b = np.linalg.svd(n1[mask], full_matrices=False)[2][-1]
             if i == 2:
                 break
             new = ((_vp_residual_px(d0b[None], K0, e0, m0)[0] < line_threshold_px)
@@ -255,7 +255,7 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
         t = T[k]
         inl = r[k] < thr
         if inl.sum() >= 2:  # least squares on the inliers, then the sign by cheirality
-            t = np.linalg.svd(a[inl])[2][-1]
+            t = np.linalg.svd(a[inl], full_matrices=False)[2][-1]
         front_p, front_m = _in_front(R, t, h0, h1), _in_front(R, -t, h0, h1)
         if (front_m & inl).sum() > (front_p & inl).sum():
             t, front_p = -t, front_m
