@@ -11,14 +11,17 @@ median of ``--repeat`` runs after one warm-up; the ratios compare figures of thi
 * **stages** of ``strl-pose predict`` (the same calls :class:`~strl_pyg.inference.PoseEstimator`
   makes): image check and grey conversion, point detection, point matching, F fit, LSD, line
   candidates (epipolar overlap + guidance) and line descriptors (NCC), graph builds (resampled for
-  the regression, full for the geometric head), network forwards, each pose method.
+  the regression, full for the geometric head), network forwards, each pose method; the
+  forward at batch 1 against the per-pair time at batch 16 (the same resampled graph,
+  ``torch.inference_mode``); LSD at ``lsd_scale=0.5`` beside the default (a lever measured, not
+  taken: it changes the lines the model reads).
 * **end to end** ``PoseEstimator.estimate_images`` as ``strl-pose predict`` calls it: the
   default (``--methods recommended``: the checkpoint's recommended order, stopping at the first
   ``"ok"`` method, lines only when a method that reads them runs) and ``--methods all``
   (every installed method). Model loading (once per process) and reading the files are listed
   apart.
 
-    nice -n 15 .venv/bin/python benchmarks/bench_predict.py --repeat 5
+    nice -n 15 .venv/bin/python benchmarks/bench_predict.py --repeat 9
 """
 
 from __future__ import annotations
