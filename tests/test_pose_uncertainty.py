@@ -68,9 +68,12 @@ def test_bootstrap_in_threads_equals_the_serial_loop(pair, method):
     res = estimate_relative_pose(m, method, threshold_px=3.0)
     ref = _serial_bootstrap(m, res.pose, method, 8, 3.0, 5)
     assert np.trace(ref) > 1e-7  # the resamples disagree (rad^2; identical poses would give 0)
-    for workers in (None, 1, 2, 3, 8, 20):
+    first = bootstrap_covariance(m, res.pose, method, 8, 3.0, seed=5, workers=1)
+    # the serial loop's chart coordinates one by one, ours batched: equal up to rounding
+    np.testing.assert_allclose(first, ref, rtol=1e-10, atol=0)
+    for workers in (None, 2, 3, 8, 20):  # and the same solves whatever the thread count
         got = bootstrap_covariance(m, res.pose, method, 8, 3.0, seed=5, workers=workers)
-        assert np.array_equal(got, ref), workers
+        assert np.array_equal(got, first), workers
     with pytest.raises(ValueError, match=r"Expected workers as an integer >= 1 or None \(got 0\)"):
         bootstrap_covariance(m, res.pose, method, 8, workers=0)
 
@@ -203,3 +206,25 @@ def test_fused_covariance_adds_the_classical_bootstrap(pair):
                                atol=1e-18)
     assert with_boot.info["covariance"] == "information form + opencv bootstrap (8)"
     assert f0.info["covariance"] == "information form"
+
+
+def test_poses_to_tangent_equals_one_by_one():
+    import torch
+
+    from strl_pyg.estimation.fusion import pose_to_tangent, poses_to_tangent, tangent_basis
+    from strl_pyg.geometry import Pose
+    from strl_pyg.geometry.manifold import so3_exp
+
+    g = torch.Generator().manual_seed(0)
+    R0 = so3_exp(torch.randn(3, generator=g, dtype=torch.float64))
+    t0 = torch.tensor([0.3, -0.2, 0.9], dtype=torch.float64)
+    t0 = t0 / t0.norm()
+    basis = tangent_basis(t0)
+    R = so3_exp(0.1 * torch.randn(7, 3, generator=g, dtype=torch.float64)) @ R0
+    t = torch.randn(7, 3, generator=g, dtype=torch.float64)
+    t[5], t[6] = 2.0 * t0, -3.0 * t0  # on the reference direction, and opposite to it
+    got = poses_to_tangent(R, t, R0, t0, basis)
+    ref = torch.stack([pose_to_tangent(Pose(R[i], t[i]), R0, t0, basis) for i in range(7)])
+    assert got.shape == (7, 5)
+    torch.testing.assert_close(got, ref, rtol=1e-12, atol=1e-14)
+    assert float(got[6, 3:].norm()) > 3.0  # -t0: pi along the first basis direction

@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import torch
 
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.estimation.classical import estimate_relative_pose
@@ -55,7 +56,7 @@ def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poseli
     ``n``; PoseLib and OpenCV release the GIL): every resample's draw and solver seed are fixed
     before any is solved, so the covariance is the same for any ``workers`` (tested).
     """
-    from strl_pyg.estimation.fusion import pose_to_tangent, tangent_basis
+    from strl_pyg.estimation.fusion import poses_to_tangent, tangent_basis
 
     if not isinstance(matches, PairMatches):
         raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")
@@ -103,10 +104,11 @@ def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poseli
         for w, c in enumerate(chunks):
             for b, r in zip(c, done[w], strict=True):
                 results[b] = r
-    xs = [pose_to_tangent(r.pose, R0, t0, basis).numpy() for r in results if r.success]
-    if len(xs) < MIN_BOOTSTRAP:
+    ok = [r.pose for r in results if r.success]
+    if len(ok) < MIN_BOOTSTRAP:
         return None
-    X = np.asarray(xs, dtype=np.float64)
+    X = poses_to_tangent(torch.stack([p.R for p in ok]), torch.stack([p.t for p in ok]),
+                         R0, t0, basis).numpy().astype(np.float64)
     # second moment about the estimate (the chart origin), not about the resamples' mean: when
     # the resamples agree on another solution, that offset is part of the uncertainty
     return X.T @ X / len(X)
