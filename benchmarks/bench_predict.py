@@ -21,12 +21,16 @@ median of ``--repeat`` runs after one warm-up; the ratios compare figures of thi
   (every installed method). Model loading (once per process) and reading the files are listed
   apart.
 
-    nice -n 15 .venv/bin/python benchmarks/bench_predict.py --repeat 9
+    MALLOC_MMAP_THRESHOLD_=33554432 MALLOC_TRIM_THRESHOLD_=67108864 \\
+        .venv/bin/python benchmarks/bench_predict.py --repeat 9
+
+See :data:`MALLOC_NOTE` for why the malloc thresholds are pinned.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import time
@@ -43,6 +47,16 @@ from common import banner  # noqa: E402
 
 from strl_pyg import frontend as fe  # noqa: E402
 from strl_pyg.utils.images import read_image_file  # noqa: E402
+
+MALLOC_ENV = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_")
+MALLOC_NOTE = (
+    "glibc's malloc decides whether OpenCV's image buffers are reused or returned to the OS and "
+    "faulted in again on every call; its thresholds move up during a process's life (after a "
+    "large block is freed), and one SIFT detection of a 640x480 image then takes ~25 ms instead "
+    "of ~39 ms: the baseline's time halves on those pairs. Unset, the figures depend on what ran "
+    "before. Run it pinned, e.g. `MALLOC_MMAP_THRESHOLD_=131072 MALLOC_TRIM_THRESHOLD_=131072` "
+    "(a fresh process) or `MALLOC_MMAP_THRESHOLD_=33554432 MALLOC_TRIM_THRESHOLD_=67108864` "
+    "(a long-running one).")
 
 
 def _median_ms(fn, repeat: int) -> tuple[float, object]:
@@ -186,9 +200,12 @@ def main() -> None:
     from strl_pyg.model.strl_pose import StrLPose
 
     lines = ["# Predict-path profile (`benchmarks/bench_predict.py`)", "",
-             "    nice -n 15 .venv/bin/python benchmarks/bench_predict.py "
-             f"--repeat {args.repeat}", "", *banner().splitlines(),
-             f"cv2 threads {cv2.getNumThreads()}, torch threads {torch.get_num_threads()}", "",
+             "    " + " ".join(f"{k}={os.environ[k]}" for k in MALLOC_ENV if k in os.environ)
+             + " .venv/bin/python benchmarks/bench_predict.py "
+             f"--repeat {args.repeat} --out {Path(args.out).name}", "", *banner().splitlines(),
+             f"cv2 threads {cv2.getNumThreads()}, torch threads {torch.get_num_threads()}",
+             "malloc: " + ", ".join(f"{k}={os.environ.get(k, 'unset')}" for k in MALLOC_ENV),
+             "", MALLOC_NOTE, "",
              "Medians of the repeats after one warm-up, ms. Ratios: to the baseline of the same "
              "pair in this run. Targets (issue 'The learned path at CPU speed'): the network "
              "path (front end with lines, graph, forward, PoseLib, fused) <= 1.0x, the default "
