@@ -211,7 +211,8 @@ def test_fused_covariance_adds_the_classical_bootstrap(pair):
 def test_poses_to_tangent_equals_one_by_one():
     import torch
 
-    from strl_pyg.estimation.fusion import pose_to_tangent, poses_to_tangent, tangent_basis
+    from strl_pyg.estimation.fusion import pose_to_tangent, tangent_basis
+    from strl_pyg.estimation.uncertainty import poses_to_tangent
     from strl_pyg.geometry import Pose
     from strl_pyg.geometry.manifold import so3_exp
 
