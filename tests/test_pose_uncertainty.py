@@ -208,11 +208,10 @@ def test_fused_covariance_adds_the_classical_bootstrap(pair):
     assert f0.info["covariance"] == "information form"
 
 
-def test_poses_to_tangent_equals_one_by_one():
+def test_pose_to_tangent_batched_equals_one_by_one():
     import torch
 
-    from strl_pyg.estimation.fusion import pose_to_tangent, tangent_basis
-    from strl_pyg.estimation.uncertainty import poses_to_tangent
+    from strl_pyg.estimation.fusion import pose_to_tangent, sphere_log, tangent_basis
     from strl_pyg.geometry import Pose
     from strl_pyg.geometry.manifold import so3_exp
 
@@ -224,8 +223,12 @@ def test_poses_to_tangent_equals_one_by_one():
     R = so3_exp(0.1 * torch.randn(7, 3, generator=g, dtype=torch.float64)) @ R0
     t = torch.randn(7, 3, generator=g, dtype=torch.float64)
     t[5], t[6] = 2.0 * t0, -3.0 * t0  # on the reference direction, and opposite to it
-    got = poses_to_tangent(R, t, R0, t0, basis)
+    got = pose_to_tangent(Pose(R, t), R0, t0, basis)
     ref = torch.stack([pose_to_tangent(Pose(R[i], t[i]), R0, t0, basis) for i in range(7)])
     assert got.shape == (7, 5)
     torch.testing.assert_close(got, ref, rtol=1e-12, atol=1e-14)
-    assert float(got[6, 3:].norm()) > 3.0  # -t0: pi along the first basis direction
+    assert float(got[5, 3:].norm()) < 1e-12  # on t0: zero translation coordinates
+    # -t0: pi along the first basis direction, batched and one by one
+    torch.testing.assert_close(got[6, 3:], torch.tensor([torch.pi, 0.0], dtype=torch.float64))
+    torch.testing.assert_close(sphere_log(t0, basis, -t0), got[6, 3:])
+    assert sphere_log(t0, basis, t[:3].reshape(3, 1, 3)).shape == (3, 1, 2)

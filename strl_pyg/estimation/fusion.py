@@ -108,11 +108,11 @@ GATE_CHI2 = 15.086
 # ----------------------------------------------------------------------------- charts
 def pose_to_tangent(pose: Pose, R_ref: torch.Tensor, t_ref: torch.Tensor,
                     basis: torch.Tensor) -> torch.Tensor:
-    """Tangent coordinates ``x`` ``(5,)`` of an unbatched ``pose`` in the chart around
-    ``(R_ref, t_ref)`` (unit ``t_ref``); the translation's norm is dropped."""
+    """Tangent coordinates ``x`` ``(*, 5)`` of ``pose`` (batched over leading dimensions) in
+    the chart around ``(R_ref, t_ref)`` (unit ``t_ref``); the translation's norm is dropped."""
     w = so3_log(pose.R.to(R_ref) @ R_ref.T)
     d = sphere_log(t_ref, basis, pose.t.to(t_ref))
-    return torch.cat([w, d])
+    return torch.cat([w, d], dim=-1)
 
 
 def tangent_to_pose(x: torch.Tensor, R_ref: torch.Tensor, t_ref: torch.Tensor,

@@ -88,14 +88,17 @@ def sphere_exp(t: torch.Tensor, basis: torch.Tensor, d: torch.Tensor) -> torch.T
 
 
 def sphere_log(t: torch.Tensor, basis: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
-    """Inverse of :func:`sphere_exp`: the tangent coordinates ``(2,)`` of the unit vector
-    ``u`` ``(3,)`` (undefined only for ``u = -t``, where any direction is returned)."""
-    u = u / u.norm()
-    c = (t * u).sum().clamp(-1.0, 1.0)
-    perp = u - c * t
-    s = perp.norm()
+    """Inverse of :func:`sphere_exp`: the tangent coordinates ``(*, 2)`` of the vectors ``u``
+    ``(*, 3)`` (normalised here; batched over leading dimensions). ``u = t`` gives zero;
+    ``u = -t``, where every direction is a shortest path, gives pi along the first basis
+    direction."""
+    u = u / u.norm(dim=-1, keepdim=True)
+    c = (u * t).sum(-1).clamp(-1.0, 1.0)
+    perp = u - c[..., None] * t
+    s = perp.norm(dim=-1)
     angle = torch.atan2(s, c)
-    if float(s) < 1e-15:
-        direction = basis[:, 0] if float(c) < 0 else torch.zeros_like(t)
-        return (basis.T @ direction) * angle
-    return (basis.T @ perp) * (angle / s)
+    flat = s < 1e-15
+    direction = torch.where(flat[..., None],
+                            torch.where(c[..., None] < 0, basis[:, 0], torch.zeros_like(t)),
+                            perp / torch.where(flat, 1.0, s)[..., None])
+    return (direction @ basis) * angle[..., None]

@@ -15,15 +15,13 @@ from concurrent.futures import ThreadPoolExecutor
 
 __all__ = ["shared_pool", "available_cores"]
 
-_POOLS: dict[str, ThreadPoolExecutor] = {}
-_SIZES: dict[str, int] = {}
+_POOLS: dict[str, tuple[ThreadPoolExecutor, int]] = {}  # name -> (pool, its size)
 _LOCK = threading.Lock()
 
 
 def _forget_after_fork() -> None:
     global _LOCK
     _POOLS.clear()
-    _SIZES.clear()
     _LOCK = threading.Lock()
 
 
@@ -37,12 +35,12 @@ def shared_pool(name: str, size: int) -> ThreadPoolExecutor:
     if isinstance(size, bool) or not isinstance(size, int) or size < 1:
         raise ValueError(f"Expected a pool size as an integer >= 1 (got {size!r})")
     with _LOCK:
-        pool = _POOLS.get(name)
-        if pool is None or _SIZES[name] < size:
+        pool, have = _POOLS.get(name, (None, 0))
+        if pool is None or have < size:
             # a smaller pool is dropped, not shut down: a caller that got it a moment ago may
             # still submit to it; its threads end when it is garbage-collected
-            pool = _POOLS[name] = ThreadPoolExecutor(size, thread_name_prefix=f"strl-{name}")
-            _SIZES[name] = size
+            pool = ThreadPoolExecutor(size, thread_name_prefix=f"strl-{name}")
+            _POOLS[name] = (pool, size)
         return pool
 
 
