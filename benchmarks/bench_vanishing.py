@@ -17,9 +17,10 @@ must not make the answer worse), it scores:
   first)``: the same with ``vp_checked`` in front of the order. A pose that is not ``"ok"``
   counts as no pose.
 
-``--fit N`` first fits ``vp_checked``'s two constants (angle, support slack) on N point-poor
-pairs of other seeds (the calibration split, :data:`CALIBRATION_SEED`) and prints the grid; the
-evaluation sets play no part in it.
+``--fit N`` first fits, on N point-poor pairs of other seeds (the calibration split,
+:data:`CALIBRATION_SEED`), the lines' weight in vp's joint refinement (``VP_LINE_SIGMA_PX``,
+:data:`FIT_SIGMAS`) and then ``vp_checked``'s two constants (angle, support slack), and prints
+both grids; the evaluation sets play no part in it.
 
 AUC@20 of max(rotation, translation) error with no pose = 180 deg, [95 % bootstrap interval
 over pairs]; medians over the pairs with a pose; the paired AUC differences to PoseLib with
@@ -44,6 +45,9 @@ CALIBRATION_SEED = 2_300_000
 #: The grid of ``--fit``: (VP_CHECK_ANGLE_DEG, VP_CHECK_SUPPORT_SLACK).
 FIT_ANGLES = (2.0, 3.0, 5.0, 8.0, 10.0, 15.0)
 FIT_SLACKS = (0, 1, 2, 3, 5, 1000)
+#: The grid of ``--fit`` for the lines' weight in vp's joint refinement
+#: (VP_LINE_SIGMA_PX; ``None``: the points alone).
+FIT_SIGMAS = (None, 1.0, 0.5, 0.25, 0.1, 0.03)
 
 
 def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:
@@ -89,6 +93,34 @@ def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:
     return out
 
 
+def fit_line_sigma(pairs) -> tuple[float | None, str]:
+    """Fits VP_LINE_SIGMA_PX on the calibration split: the grid value with the highest AUC@20
+    of vp's raw pose (no pose = 180 deg); ties go to the larger sigma (the points' weight)."""
+    import bench_pose as bp
+
+    from strl_pyg.estimation.vanishing import (
+        VP_MIN_POINTS,
+        vanishing_directions,
+        vanishing_point_pose,
+    )
+
+    dirs = [vanishing_directions(m) if m.num_lines and m.num_points >= VP_MIN_POINTS else []
+            for _, m, _ in pairs]
+    auc = {}
+    for sigma in tqdm(FIT_SIGMAS, desc="line sigma"):
+        worst = []
+        for (_, m, T), d in zip(pairs, dirs, strict=True):
+            res = vanishing_point_pose(m, directions=d, line_sigma_px=sigma) if d else None
+            worst.append(max(bp.errors(res.T_0to1.matrix().numpy(), T))
+                         if res is not None and res.success else 180.0)
+        auc[sigma] = _auc(np.array(worst))
+    best = max(auc, key=lambda s: (round(auc[s], 6), float("inf") if s is None else s))
+    text = ("VP_LINE_SIGMA_PX (AUC@20 % of vp's raw pose on the same split; none: the points "
+            "alone): " + ", ".join(f"{'none' if s is None else f'{s:g}'}: {a:.1f}"
+                                    for s, a in auc.items()) + f". Fit: {best}.")
+    return best, text
+
+
 def fit(cache: Path, n: int) -> tuple[float, int, str]:
     """Fits (VP_CHECK_ANGLE_DEG, VP_CHECK_SUPPORT_SLACK) on the calibration split: the grid
     point with the highest AUC@20 of ``vp_checked`` (no supported pose = 180 deg); ties go to
@@ -97,11 +129,17 @@ def fit(cache: Path, n: int) -> tuple[float, int, str]:
     import ablation_eval as ae
     import bench_pose as bp
 
+    from strl_pyg.estimation import vanishing as V
     from strl_pyg.inference import PoseEstimator
     from strl_pyg.inference import methods as M
     from strl_pyg.inference.support import check_support
 
     pairs = ae.point_poor_pairs(cache, n, seed0=CALIBRATION_SEED)
+    sigma, sigma_text = fit_line_sigma(pairs)
+    print(sigma_text)
+    if sigma != V.VP_LINE_SIGMA_PX:
+        print(f"note: the fit ({sigma}) differs from the package's VP_LINE_SIGMA_PX "
+              f"({V.VP_LINE_SIGMA_PX}); the constants below are fitted with the package's")
     est = PoseEstimator(methods=("poselib", "vp"))
     base = [(m, T, est.estimate(m).methods) for _, m, T in tqdm(pairs, desc="calibration")]
     saved = (M.VP_CHECK_ANGLE_DEG, M.VP_CHECK_SUPPORT_SLACK)
@@ -131,7 +169,7 @@ def fit(cache: Path, n: int) -> tuple[float, int, str]:
     for ang in FIT_ANGLES:
         lines.append(f"| {ang:g} | " + " | ".join(f"{grid[ang, s]:.1f}" for s in FIT_SLACKS)
                      + " |")
-    return best[0], best[1], "\n".join(lines)
+    return best[0], best[1], sigma_text + "\n\n" + "\n".join(lines)
 
 
 def _worst(rows: list) -> np.ndarray:

@@ -10,7 +10,11 @@ import pytest
 import torch
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.estimation.vanishing import vanishing_directions, vanishing_point_pose
+from strl_pyg.estimation.vanishing import (
+    refine_with_lines,
+    vanishing_directions,
+    vanishing_point_pose,
+)
 from strl_pyg.geometry.pose import rotation_angle_deg
 from strl_pyg.inference import PoseEstimator
 from strl_pyg.inference.estimator import RECOMMENDED_ORDER, recommended_order
@@ -101,6 +105,35 @@ def test_noisy_few_points_stay_close():
                      (manhattan_pair(s, n_points=8, noise=0.3) for s in range(6))])
     # measured: rotation <= 1.9 deg, translation <= 5.7 deg over 20 seeds at 10 points
     assert np.median(errs[:, 0]) < 2.0 and np.median(errs[:, 1]) < 6.0, errs
+
+
+def test_joint_refinement_returns_to_the_true_pose_from_a_perturbed_one():
+    m, R, t = manhattan_pair(2, n_points=6)
+    dirs = vanishing_directions(m)
+    R_start = cv2.Rodrigues(np.array([0.02, -0.015, 0.01]))[0] @ R  # ~1.5 deg off
+    t_start = t + np.array([0.05, -0.04, 0.02])
+    Rr, tr = refine_with_lines(m, R_start, t_start, dirs, np.ones(m.num_points, bool))
+    assert float(rotation_angle_deg(torch.from_numpy(Rr.T @ R))) < 1e-5
+    assert np.degrees(np.arccos(np.clip(tr @ t, -1, 1))) < 1e-4
+    assert abs(np.linalg.norm(tr) - 1) < 1e-12
+    # at the true pose every residual is zero: no step lowers the cost, the pose is returned
+    R0, t0 = refine_with_lines(m, R, t, dirs, np.ones(m.num_points, bool))
+    np.testing.assert_allclose(R0, R, atol=1e-12)
+    np.testing.assert_allclose(t0, t, atol=1e-12)
+
+
+def test_joint_refinement_beats_the_points_alone_on_few_noisy_points():
+    # measured over 20 seeds at 8 points, 0.5 px noise: median rotation 0.22 deg (joint)
+    # against 1.26 (points alone), translation 2.5 against 6.6 deg
+    joint, points = [], []
+    for s in range(8):
+        m, R, t = manhattan_pair(s, n_points=8, noise=0.5)
+        joint.append(_errors(vanishing_point_pose(m), R, t))
+        points.append(_errors(vanishing_point_pose(m, line_sigma_px=None), R, t))
+    joint, points = np.array(joint), np.array(points)
+    assert np.median(joint[:, 0]) < 0.5 * np.median(points[:, 0]), (joint, points)
+    assert np.median(joint[:, 1]) < np.median(points[:, 1]), (joint, points)
+    assert np.median(joint[:, 0]) < 0.5, joint
 
 
 def test_random_lines_give_no_pose():

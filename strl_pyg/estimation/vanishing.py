@@ -17,9 +17,13 @@ point matches to find or support a pose:
    keeps their angle (``R`` preserves ``d0a . d0b``), by orthogonal Procrustes.
 3. **Translation** for each rotation by 2-point RANSAC over the point matches (every pair
    when there are few), scored by MSAC on the Sampson distance, its sign by cheirality.
-4. The best hypothesis is refined on its inlier points (:func:`~strl_pyg.geometry.essential.
-   refine_pose`, 5 degrees of freedom), kept only while the rotation stays within
-   ``max_refine_deg`` of the vanishing-point rotation (the points are few: the lines anchor it).
+4. The best hypothesis is refined jointly on its inlier points and the lines of the
+   vanishing directions (:func:`refine_with_lines`: the rotation, the translation direction
+   and the directions themselves, robust Levenberg-Marquardt), kept only while the rotation
+   stays within ``max_refine_deg`` of the vanishing-point rotation. With few points the
+   translation is only as good as the rotation, and the lines, many and in both images, pin
+   the rotation better than the 2-direction Procrustes of step 2 (``line_sigma_px=None``: the
+   points alone, the solver before this refinement).
 
 The result is a :class:`~strl_pyg.estimation.classical.BaselineResult` (method ``"vp"``), and
 :class:`~strl_pyg.inference.PoseEstimator` checks its support on the point matches like every
@@ -37,12 +41,18 @@ from strl_pyg.data.matches import PairMatches
 from strl_pyg.estimation.classical import BaselineResult, _failed, normalised_matches
 from strl_pyg.geometry import Pose, pose_sampson
 
-__all__ = ["vanishing_directions", "vanishing_point_pose", "VP_MIN_LINES", "VP_MIN_POINTS"]
+__all__ = ["vanishing_directions", "vanishing_point_pose", "refine_with_lines", "VP_MIN_LINES",
+           "VP_MIN_POINTS", "VP_LINE_SIGMA_PX"]
 
 #: Line matches a vanishing direction needs (in both images) to be used.
 VP_MIN_LINES = 4
 #: Point matches the translation needs at the least (two fix it; the rest check it).
 VP_MIN_POINTS = 5
+#: The lines' weight in the joint refinement (:func:`refine_with_lines`): the pixel distance of
+#: a segment's endpoint to its vanishing line counts like a point's Sampson distance times
+#: ``1 / VP_LINE_SIGMA_PX``. Fitted on the calibration split of
+#: ``benchmarks/bench_vanishing.py`` (point-poor pairs of other seeds than ``point_poor``).
+VP_LINE_SIGMA_PX = 0.1
 
 
 def _homogeneous(x: np.ndarray) -> np.ndarray:
@@ -185,10 +195,110 @@ def _in_front(R: np.ndarray, t: np.ndarray, h0: np.ndarray, h1: np.ndarray) -> n
     return ((z0[0] > 0) & (z1[0] > 0)).numpy()
 
 
+def _line_residuals(d: torch.Tensor, K: torch.Tensor, ends: torch.Tensor,
+                    mids: torch.Tensor) -> torch.Tensor:
+    """Signed pixel distance of each segment's first endpoint to the line through its
+    midpoint and the vanishing point ``K d`` (the second endpoint's is its negative)."""
+    v = (K @ d).expand_as(mids)
+    l = torch.cross(mids, v, dim=-1)
+    return (l * ends[:, 0]).sum(-1) / l[:, :2].norm(dim=-1).clamp_min(1e-300)
+
+
+def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, directions: list,
+                      point_mask: np.ndarray, line_sigma_px: float = VP_LINE_SIGMA_PX,
+                      scale_px: float = 1.0, iterations: int = 15) -> tuple[np.ndarray,
+                                                                           np.ndarray]:
+    """Joint Levenberg-Marquardt refinement of ``(R, t)`` and the vanishing directions on the
+    point matches and the lines of those directions.
+
+    Unknowns: ``R <- exp([w]_x) R`` (3), the unit ``t`` (2) and each direction ``d_i`` in camera
+    0 (2 each). Residuals (pixels): the Sampson distance of every point in ``point_mask``; for
+    every line of direction ``i``, the distance of its endpoint to the line through its
+    midpoint and the vanishing point, ``K0 d_i`` in image 0 and ``K1 R d_i`` in image 1
+    (divided by ``line_sigma_px``). A Cauchy loss of scale ``scale_px`` (iteratively reweighted)
+    bounds every residual's pull. With few points and small baselines the translation is only
+    as good as the rotation (a 1 deg rotation error moved the translation by ~9 deg on the
+    point-poor pairs); the lines, many and in both images, pin the rotation, the points fix
+    ``t``.
+
+    Args:
+        matches: the pair (``K0``, ``K1``, points, lines).
+        R, t: the starting pose (``X1 = R X0 + t``).
+        directions: :func:`vanishing_directions` of ``matches`` (``(d0, d1, mask)``).
+        point_mask: boolean ``[N]``, the point matches to use (the hypothesis' inliers).
+        line_sigma_px, scale_px, iterations: the lines' weight, the Cauchy scale (pixels),
+            the most iterations.
+
+    Returns:
+        ``R`` ``(3, 3)`` and unit ``t`` ``(3,)`` (float64 numpy); a step that does not lower the
+        robust cost is rejected, so the result is never worse than the start on that cost.
+    """
+    from strl_pyg.geometry.manifold import so3_exp, sphere_exp, tangent_basis
+
+    dt = torch.float64
+    K0 = torch.as_tensor(np.asarray(matches.K0, float), dtype=dt)
+    K1 = torch.as_tensor(np.asarray(matches.K1, float), dtype=dt)
+    x0, x1, focal = normalised_matches(matches)
+    keep = torch.as_tensor(np.asarray(point_mask, bool))
+    x0, x1 = x0[keep], x1[keep]
+    segs = []
+    for lines, K in ((matches.lines0, K0), (matches.lines1, K1)):
+        e, m, _ = _segments(np.asarray(lines, float), K.numpy())
+        segs.append((torch.from_numpy(e), torch.from_numpy(m)))
+    R0 = torch.as_tensor(R, dtype=dt)
+    t0 = torch.as_tensor(t, dtype=dt)
+    t0 = t0 / t0.norm()
+    Bt = tangent_basis(t0)
+    d0 = [torch.as_tensor(d[0], dtype=dt) for d in directions]
+    Bd = [tangent_basis(d) for d in d0]
+    masks = [torch.as_tensor(np.asarray(d[2], bool)) for d in directions]
+
+    def unpack(p):
+        Rp = so3_exp(p[:3]) @ R0
+        tp = sphere_exp(t0, Bt, p[3:5])
+        ds = [sphere_exp(d, B, p[5 + 2 * i:7 + 2 * i])
+              for i, (d, B) in enumerate(zip(d0, Bd, strict=True))]
+        return Rp, tp, ds
+
+    def residuals(p):
+        Rp, tp, ds = unpack(p)
+        r = [pose_sampson(Rp, tp, x0, x1) * focal]
+        for d, mk in zip(ds, masks, strict=True):
+            r.append(_line_residuals(d, K0, segs[0][0][mk], segs[0][1][mk]) / line_sigma_px)
+            r.append(_line_residuals(Rp @ d, K1, segs[1][0][mk], segs[1][1][mk])
+                     / line_sigma_px)
+        return torch.cat(r)
+
+    def cost(r):
+        return float((scale_px ** 2 * torch.log1p((r / scale_px) ** 2)).sum())
+
+    p = torch.zeros(5 + 2 * len(d0), dtype=dt)
+    r = residuals(p)
+    c, lam = cost(r), 1e-3
+    for _ in range(iterations):
+        J = torch.func.jacfwd(residuals)(p)
+        w = 1.0 / (1.0 + (r / scale_px) ** 2)  # the Cauchy loss's IRLS weights
+        H, g = J.T @ (w[:, None] * J), J.T @ (w * r)
+        improved = False
+        while lam <= 1e6:
+            step = -torch.linalg.solve(H + lam * torch.diag(H.diagonal().clamp_min(1e-12)), g)
+            r_new = residuals(p + step)
+            c_new = cost(r_new)
+            if c_new < c:
+                p, r, c, lam, improved = p + step, r_new, c_new, lam / 3, True
+                break
+            lam *= 5
+        if not improved or float(step.norm()) < 1e-10:
+            break
+    Rp, tp, _ = unpack(p)
+    return Rp.numpy(), tp.numpy()
+
+
 def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
                          line_threshold_px: float = 2.0, max_pairs: int = 500,
                          max_angle_error_deg: float = 3.0, max_refine_deg: float = 5.0,
-                         seed: int = 0, directions: list | None = None) -> BaselineResult:
+                         seed: int = 0, directions: list | None = None,
+                         line_sigma_px: float | None = VP_LINE_SIGMA_PX) -> BaselineResult:
     """``T_0to1`` from the vanishing directions of the matched lines and the point matches
     (module docstring).
 
@@ -201,11 +311,13 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
         max_pairs: point pairs tried per rotation (all pairs when there are fewer).
         max_angle_error_deg: how far the angle between two directions may differ between the
             images for the pair to give a rotation.
-        max_refine_deg: the refinement on the points is kept only within this rotation of the
+        max_refine_deg: the refinement is kept only within this rotation of the
             vanishing-point rotation.
         seed: the RANSAC samples.
         directions: :func:`vanishing_directions` of ``matches`` (with ``line_threshold_px`` and
             ``seed``) when the caller has them already; computed here when ``None``.
+        line_sigma_px: the lines' weight in the final refinement (:func:`refine_with_lines`);
+            ``None`` refines on the inlier points alone (at least 5), as before.
 
     Returns:
         a :class:`BaselineResult` (``success=False`` with ``info["reason"]`` when fewer than two
@@ -268,7 +380,13 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
                               "both cameras")
     _, _, R, t, inl = best
     refined = False
-    if inl.sum() >= 5:
+    if line_sigma_px is not None:  # the points and the lines of the directions together
+        from strl_pyg.geometry.pose import rotation_angle_deg
+
+        Rr, tr = refine_with_lines(matches, R, t, dirs, inl, line_sigma_px)
+        if float(rotation_angle_deg(torch.from_numpy(Rr.T @ R))) <= max_refine_deg:
+            R, t, refined = Rr, tr, True
+    elif inl.sum() >= 5:  # the points alone (the solver before the joint refinement)
         from strl_pyg.geometry.essential import refine_pose
         from strl_pyg.geometry.pose import rotation_angle_deg
 
