@@ -9,13 +9,14 @@ front end limited to 40 keypoints per image) and of the full real sets (where a 
 must not make the answer worse), it scores:
 
 - ``PoseLib``: PoseLib's raw pose (any pose it returns);
-- ``vp``: :func:`~strl_pyg.estimation.vanishing.vanishing_point_pose`'s raw pose;
+- ``vp``: :func:`~strl_pyg.estimation.vanishing.vanishing_point_pose`'s raw pose, with
+  PoseLib's pose as its second start (as the method ``vp`` runs it);
 - ``vp_checked``: the method of that name when ``"ok"`` (PoseLib's pose, or vp's where the
   points are few and the lines' strongest vanishing direction contradicts PoseLib's rotation);
 - ``recommended``: :class:`~strl_pyg.inference.PoseEstimator`'s recommended pose (the shipped
   model and order, every method but the line solvers), and ``recommended (vp_checked
-  first)``: the same with ``vp_checked`` in front of the order. A pose that is not ``"ok"``
-  counts as no pose.
+  first)`` / ``(vp first)``: the same with ``vp_checked`` / ``vp`` in front of the order. A
+  pose that is not ``"ok"`` counts as no pose.
 
 ``--fit N`` first fits, on N point-poor pairs of other seeds (the calibration split,
 :data:`CALIBRATION_SEED`), the lines' weight in vp's joint refinement (``VP_LINE_SIGMA_PX``,
@@ -38,7 +39,8 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-METHODS = ("PoseLib", "vp", "vp_checked", "recommended", "recommended (vp_checked first)")
+METHODS = ("PoseLib", "vp", "vp_checked", "recommended", "recommended (vp_checked first)",
+           "recommended (vp first)")
 #: The calibration split of ``--fit``: point-poor pairs selected like ``point_poor`` from other
 #: seeds (``point_poor`` starts at 2,100,000 and tries at most 1500).
 CALIBRATION_SEED = 2_300_000
@@ -74,7 +76,8 @@ def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:
         err = lambda T_est, T=T: list(bp.errors(np.asarray(T_est), T))  # noqa: E731
         res = estimate_relative_pose(m, "poselib")
         out["PoseLib"].append(err(res.T_0to1.matrix().numpy()) if res.success else None)
-        res = vanishing_point_pose(m) if m.num_lines else None
+        res = (vanishing_point_pose(m, starts=[res.T_0to1] if res.success else None)
+               if m.num_lines else None)
         out["vp"].append(err(res.T_0to1.matrix().numpy())
                          if res is not None and res.success else None)
         # the recommended pose without the line solvers in the run (their refusals would
@@ -90,6 +93,9 @@ def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:
         first = vc if vc.status == "ok" else rec
         out["recommended (vp_checked first)"].append(err(first.T_0to1) if first is not None
                                                     else None)
+        vp = b.methods["vp"]
+        first = vp if vp.status == "ok" else rec
+        out["recommended (vp first)"].append(err(first.T_0to1) if first is not None else None)
     return out
 
 
@@ -245,8 +251,8 @@ def main(argv: list[str] | None = None) -> int:
              "pose) = 180 deg, [95 % bootstrap interval]; median max-error (deg) over the "
              "pairs with a pose, and how many of the pairs have one.", "",
              "| set | pairs | " + " | ".join(METHODS) + " | recommended - PoseLib (AUC) | "
-             "recommended (vp_checked first) - PoseLib |",
-             "|---|---" + "|---" * len(METHODS) + "|---|---|"]
+             "recommended (vp_checked first) - PoseLib | recommended (vp first) - PoseLib |",
+             "|---|---" + "|---" * len(METHODS) + "|---|---|---|"]
     for name, sc in scores.items():
         cells = []
         for k in METHODS:
@@ -256,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
             med = f"{np.median(have):.1f}" if have else "-"
             cells.append(f"{a:.1f} [{lo:.1f}-{hi:.1f}]; med {med} ({len(have)})")
         diffs = []
-        for k in ("recommended", "recommended (vp_checked first)"):
+        for k in ("recommended", "recommended (vp_checked first)", "recommended (vp first)"):
             d, lo, hi = paired_auc_diff(_worst(sc[k]), _worst(sc["PoseLib"]))
             diffs.append(f"{d:+.1f} [{lo:+.1f}-{hi:+.1f}]")
         lines.append(f"| {name} | {len(sc['PoseLib'])} | " + " | ".join(cells)

@@ -319,11 +319,14 @@ def test_vp_checked_is_opt_in():
 
 def test_vp_and_vp_checked_find_the_directions_once_and_vp_is_unchanged(monkeypatch):
     """The directions are shared through the estimate's context (found once per pair); vp's
-    pose equals the solver called on its own (the reference path)."""
+    pose equals the solver called on its own with the classical pose as its second start
+    (the reference path)."""
     from strl_pyg.estimation import vanishing
+    from strl_pyg.estimation.classical import estimate_relative_pose
 
     m, _, _ = manhattan_pair(1, n_points=15, noise=0.3)
-    ref = vanishing_point_pose(m)
+    cls = estimate_relative_pose(m, _base(), 1.0, seed=0)
+    ref = vanishing_point_pose(m, starts=[cls.T_0to1])
     calls = []
     real = vanishing.vanishing_directions
     monkeypatch.setattr(vanishing, "vanishing_directions",

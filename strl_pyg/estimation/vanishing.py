@@ -17,13 +17,16 @@ point matches to find or support a pose:
    keeps their angle (``R`` preserves ``d0a . d0b``), by orthogonal Procrustes.
 3. **Translation** for each rotation by 2-point RANSAC over the point matches (every pair
    when there are few), scored by MSAC on the Sampson distance, its sign by cheirality.
-4. The best hypothesis is refined jointly on its inlier points and the lines of the
-   vanishing directions (:func:`refine_with_lines`: the rotation, the translation direction
-   and the directions themselves, robust Levenberg-Marquardt), kept only while the rotation
-   stays within ``max_refine_deg`` of the vanishing-point rotation. With few points the
-   translation is only as good as the rotation, and the lines, many and in both images, pin
-   the rotation better than the 2-direction Procrustes of step 2 (``line_sigma_px=None``: the
-   points alone, the solver before this refinement).
+4. The best hypothesis, and any other starting pose the caller gives (``starts``: the
+   5-point solver's, from :class:`~strl_pyg.inference.PoseEstimator`), is refined jointly on
+   all the points and the lines of the vanishing directions (:func:`refine_with_lines`: the
+   rotation, the translation direction and the directions themselves, Cauchy-robust
+   Levenberg-Marquardt); the refined pose of lowest cost wins. With few points the
+   translation is only as good as the rotation (1 deg of rotation error moved it by ~9 deg on
+   the point-poor pairs), and the lines, many and in both images, pin the rotation better
+   than the 2-direction Procrustes of step 2 or the 5-point solver. ``line_sigma_px=None``:
+   the solver before this refinement (its inlier points alone, kept within
+   ``max_refine_deg`` of the vanishing-point rotation).
 
 The result is a :class:`~strl_pyg.estimation.classical.BaselineResult` (method ``"vp"``), and
 :class:`~strl_pyg.inference.PoseEstimator` checks its support on the point matches like every
@@ -206,8 +209,8 @@ def _line_residuals(d: torch.Tensor, K: torch.Tensor, ends: torch.Tensor,
 
 def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, directions: list,
                       point_mask: np.ndarray, line_sigma_px: float = VP_LINE_SIGMA_PX,
-                      scale_px: float = 1.0, iterations: int = 15) -> tuple[np.ndarray,
-                                                                           np.ndarray]:
+                      scale_px: float = 1.0, iterations: int = 15,
+                      return_cost: bool = False) -> tuple:
     """Joint Levenberg-Marquardt refinement of ``(R, t)`` and the vanishing directions on the
     point matches and the lines of those directions.
 
@@ -228,10 +231,13 @@ def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, direct
         point_mask: boolean ``[N]``, the point matches to use (the hypothesis' inliers).
         line_sigma_px, scale_px, iterations: the lines' weight, the Cauchy scale (pixels),
             the most iterations.
+        return_cost: also return the final robust cost (comparable between starts on the
+            same ``directions`` and ``point_mask``).
 
     Returns:
-        ``R`` ``(3, 3)`` and unit ``t`` ``(3,)`` (float64 numpy); a step that does not lower the
-        robust cost is rejected, so the result is never worse than the start on that cost.
+        ``R`` ``(3, 3)`` and unit ``t`` ``(3,)`` (float64 numpy), and the cost if asked; a step
+        that does not lower the robust cost is rejected, so the result is never worse than the
+        start on that cost.
     """
     from strl_pyg.geometry.manifold import so3_exp, sphere_exp, tangent_basis
 
@@ -291,14 +297,26 @@ def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, direct
         if not improved or float(step.norm()) < 1e-10:
             break
     Rp, tp, _ = unpack(p)
-    return Rp.numpy(), tp.numpy()
+    return (Rp.numpy(), tp.numpy(), c) if return_cost else (Rp.numpy(), tp.numpy())
+
+
+def _as_Rt(pose) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, t)`` float64 numpy of a ``Pose`` or a ``(4, 4)`` / ``(3, 4)`` ``T_0to1``."""
+    T = pose.matrix().numpy() if isinstance(pose, Pose) else np.asarray(pose, float)
+    if T.shape not in ((4, 4), (3, 4)) or not np.isfinite(T).all():
+        raise ValueError(f"Expected a start as a Pose or a finite (4, 4) / (3, 4) T_0to1 "
+                         f"(got {type(pose).__name__} of shape {getattr(T, 'shape', None)})")
+    if np.linalg.norm(T[:3, 3]) < 1e-12:
+        raise ValueError("Expected a start with a nonzero translation (got t = 0)")
+    return T[:3, :3], T[:3, 3]
 
 
 def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
                          line_threshold_px: float = 2.0, max_pairs: int = 500,
                          max_angle_error_deg: float = 3.0, max_refine_deg: float = 5.0,
                          seed: int = 0, directions: list | None = None,
-                         line_sigma_px: float | None = VP_LINE_SIGMA_PX) -> BaselineResult:
+                         line_sigma_px: float | None = VP_LINE_SIGMA_PX,
+                         starts: list | None = None) -> BaselineResult:
     """``T_0to1`` from the vanishing directions of the matched lines and the point matches
     (module docstring).
 
@@ -311,13 +329,17 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
         max_pairs: point pairs tried per rotation (all pairs when there are fewer).
         max_angle_error_deg: how far the angle between two directions may differ between the
             images for the pair to give a rotation.
-        max_refine_deg: the refinement is kept only within this rotation of the
-            vanishing-point rotation.
+        max_refine_deg: with ``line_sigma_px=None``, the points-only refinement is kept only
+            within this rotation of the vanishing-point rotation.
         seed: the RANSAC samples.
         directions: :func:`vanishing_directions` of ``matches`` (with ``line_threshold_px`` and
             ``seed``) when the caller has them already; computed here when ``None``.
         line_sigma_px: the lines' weight in the final refinement (:func:`refine_with_lines`);
             ``None`` refines on the inlier points alone (at least 5), as before.
+        starts: other poses (``Pose`` or ``(4, 4)`` / ``(3, 4)`` arrays ``T_0to1``, e.g. the
+            5-point solver's) refined like the vanishing-point hypothesis; the refined pose
+            of lowest robust cost on all the points and the directions' lines is returned
+            (``info["start"]``: ``"vp"`` or the index in ``starts``). Needs ``line_sigma_px``.
 
     Returns:
         a :class:`BaselineResult` (``success=False`` with ``info["reason"]`` when fewer than two
@@ -334,6 +356,10 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
     if not (threshold_px > 0 and line_threshold_px > 0):
         raise ValueError(f"Expected threshold_px > 0 and line_threshold_px > 0 "
                          f"(got {threshold_px}, {line_threshold_px})")
+    if starts and line_sigma_px is None:
+        raise ValueError("Expected line_sigma_px with starts (the starts are compared on the "
+                         "joint refinement's cost; got line_sigma_px=None)")
+    given = [_as_Rt(s) for s in (starts or ())]
     start = time.perf_counter()
     n = matches.num_points
     dirs = (vanishing_directions(matches, line_threshold_px, seed=seed) if directions is None
@@ -380,12 +406,19 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
                               "both cameras")
     _, _, R, t, inl = best
     refined = False
-    if line_sigma_px is not None:  # the points and the lines of the directions together
-        from strl_pyg.geometry.pose import rotation_angle_deg
-
-        Rr, tr = refine_with_lines(matches, R, t, dirs, inl, line_sigma_px)
-        if float(rotation_angle_deg(torch.from_numpy(Rr.T @ R))) <= max_refine_deg:
-            R, t, refined = Rr, tr, True
+    if line_sigma_px is not None:
+        # the points and the lines of the directions together, from the vanishing-point
+        # hypothesis and from every given start; all on one cost (every point, Cauchy-robust),
+        # so the lowest one is the pose that explains the points and the lines best
+        every = np.ones(n, dtype=bool)
+        cands = [("vp", R, t)] + [(i, *rt) for i, rt in enumerate(given)]
+        out = []
+        for name, Rs, ts in cands:
+            Rr, tr, c = refine_with_lines(matches, Rs, ts, dirs, every, line_sigma_px,
+                                          return_cost=True)
+            out.append((c, name, Rr, tr))
+        _, info["start"], R, t = min(out, key=lambda o: o[0])
+        refined = True
     elif inl.sum() >= 5:  # the points alone (the solver before the joint refinement)
         from strl_pyg.geometry.essential import refine_pose
         from strl_pyg.geometry.pose import rotation_angle_deg

@@ -127,16 +127,28 @@ def _classical(name: str) -> MethodFn:
 
 def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     """The vanishing-point rotation and 2-point translation
-    (:func:`~strl_pyg.estimation.vanishing.vanishing_point_pose`): needs line matches, and
-    answers where the points are too few for the 5-point solvers; its covariance is the
+    (:func:`~strl_pyg.estimation.vanishing.vanishing_point_pose`), with the classical pose
+    (PoseLib's, else OpenCV's) as a second start of its joint refinement on the points and
+    the lines (``info["start"]``: ``"vp"`` or ``0``, the classical pose): needs line matches,
+    and answers where the points are too few for the 5-point solvers; its covariance is the
     first-order one of its inlier points (no bootstrap, not calibrated)."""
     from strl_pyg.estimation.vanishing import vanishing_point_pose
 
     if matches.num_lines == 0:
         return MethodResult("vp", "failed", warnings=[
             "vp needs line matches (got none: FrontendConfig(lines=True), or lines0/lines1)"])
+    # the 5-point solver's pose is a second start of the joint refinement with the lines
+    base = "poselib" if have_poselib() else "opencv"
+    if base in ctx.results:
+        T = ctx.results[base].T_0to1
+        starts = [] if T is None else [T]
+    else:
+        from strl_pyg.estimation.classical import estimate_relative_pose
+
+        res = estimate_relative_pose(matches, base, ctx.threshold_px, seed=ctx.seed)
+        starts = [res.T_0to1] if res.success else []
     res = vanishing_point_pose(matches, ctx.threshold_px, seed=ctx.seed,
-                               directions=_vanishing_directions(matches, ctx))
+                               directions=_vanishing_directions(matches, ctx), starts=starts)
     if not res.success:
         return MethodResult("vp", "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
                             info=dict(res.info), warnings=[f"vp: {res.info['reason']}"])
