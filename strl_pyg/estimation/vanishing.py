@@ -366,7 +366,7 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
             else directions)
     info = {"directions": len(dirs), "direction_lines": [int(d[2].sum()) for d in dirs]}
     rotations = _rotations(dirs, max_angle_error_deg)
-    if not rotations:
+    if not rotations and not (given and dirs):  # a start needs one direction's lines
         return _failed(n, "vp", (time.perf_counter() - start) * 1e3, **info,
                        reason=f"{len(dirs)} vanishing direction(s) shared by the matched "
                               "lines of both images (needs two at an angle both images agree "
@@ -400,24 +400,30 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
         score = (int((front_p & inl).sum()), -float(cost[k].sum()))
         if best is None or score > best[:2]:
             best = (*score, R, t, inl & front_p)
-    if best is None or best[0] < 2:
+    found = best is not None and best[0] >= 2
+    if not found and not (given and line_sigma_px is not None):
         return _failed(n, "vp", (time.perf_counter() - start) * 1e3, **info,
                        reason="no translation direction has two point matches in front of "
                               "both cameras")
-    _, _, R, t, inl = best
+    R, t, inl = best[2:] if found else (None, None, None)
     refined = False
     if line_sigma_px is not None:
         # the points and the lines of the directions together, from the vanishing-point
-        # hypothesis and from every given start; all on one cost (every point, Cauchy-robust),
-        # so the lowest one is the pose that explains the points and the lines best
+        # hypothesis and from every given start; all on one cost (every point, Cauchy-robust;
+        # the sign of t does not change it), so the lowest one is the pose that explains the
+        # points and the lines best; the sign of t then by cheirality
         every = np.ones(n, dtype=bool)
-        cands = [("vp", R, t)] + [(i, *rt) for i, rt in enumerate(given)]
+        cands = [("vp", R, t)] if found else []
+        cands += [(i, *rt) for i, rt in enumerate(given)]
         out = []
         for name, Rs, ts in cands:
             Rr, tr, c = refine_with_lines(matches, Rs, ts, dirs, every, line_sigma_px,
                                           return_cost=True)
             out.append((c, name, Rr, tr))
         _, info["start"], R, t = min(out, key=lambda o: o[0])
+        close = _sampson(R, t[None], x0, x1)[0] < thr
+        if (_in_front(R, -t, h0, h1) & close).sum() > (_in_front(R, t, h0, h1) & close).sum():
+            t = -t
         refined = True
     elif inl.sum() >= 5:  # the points alone (the solver before the joint refinement)
         from strl_pyg.geometry.essential import refine_pose
@@ -431,5 +437,9 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
     r = _sampson(R, t[None], x0, x1)[0]
     inl = (r < thr) & _in_front(R, t, h0, h1)
     info["refined"] = refined
+    if inl.sum() < 2:
+        return _failed(n, "vp", (time.perf_counter() - start) * 1e3, **info,
+                       reason="the refined pose has fewer than two point matches in front of "
+                              "both cameras")
     return BaselineResult(Pose(R, t / np.linalg.norm(t)), inl,
                           (time.perf_counter() - start) * 1e3, "vp", True, info)
