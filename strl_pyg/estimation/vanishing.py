@@ -55,7 +55,7 @@ VP_MIN_POINTS = 5
 #: a segment's endpoint to its vanishing line counts like a point's Sampson distance times
 #: ``1 / VP_LINE_SIGMA_PX``. Fitted on the calibration split of
 #: ``benchmarks/bench_vanishing.py`` (point-poor pairs of other seeds than ``point_poor``).
-VP_LINE_SIGMA_PX = 0.1
+VP_LINE_SIGMA_PX = 0.03
 
 
 def _homogeneous(x: np.ndarray) -> np.ndarray:

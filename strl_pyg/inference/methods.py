@@ -132,6 +132,7 @@ def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     the lines (``info["start"]``: ``"vp"`` or ``0``, the classical pose): needs line matches,
     and answers where the points are too few for the 5-point solvers; its covariance is the
     first-order one of its inlier points (no bootstrap, not calibrated)."""
+    from strl_pyg.estimation import vanishing
     from strl_pyg.estimation.vanishing import vanishing_point_pose
 
     if matches.num_lines == 0:
@@ -148,7 +149,8 @@ def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
         res = estimate_relative_pose(matches, base, ctx.threshold_px, seed=ctx.seed)
         starts = [res.T_0to1] if res.success else []
     res = vanishing_point_pose(matches, ctx.threshold_px, seed=ctx.seed,
-                               directions=_vanishing_directions(matches, ctx), starts=starts)
+                               directions=_vanishing_directions(matches, ctx), starts=starts,
+                               line_sigma_px=vanishing.VP_LINE_SIGMA_PX)
     if not res.success:
         return MethodResult("vp", "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
                             info=dict(res.info), warnings=[f"vp: {res.info['reason']}"])
