@@ -78,8 +78,9 @@ def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:
         err = lambda T_est, T=T: list(bp.errors(np.asarray(T_est), T))  # noqa: E731
         res = estimate_relative_pose(m, "poselib")
         out["PoseLib"].append(err(res.T_0to1.matrix().numpy()) if res.success else None)
-        res = (vanishing_point_pose(m, starts=[res.T_0to1] if res.success else None,
-                                    line_sigma_px=V.VP_LINE_SIGMA_PX) if m.num_lines else None)
+        sigma = V.VP_LINE_SIGMA_PX
+        res = (vanishing_point_pose(m, starts=[res.T_0to1] if res.success and sigma is not None
+                                    else None, line_sigma_px=sigma) if m.num_lines else None)
         out["vp"].append(err(res.T_0to1.matrix().numpy())
                          if res is not None and res.success else None)
         # the recommended pose without the line solvers in the run (their refusals would

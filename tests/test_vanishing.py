@@ -157,7 +157,7 @@ def test_a_given_start_wins_where_it_explains_points_and_lines_better(monkeypatc
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, t
     res4 = vanishing_point_pose(m, starts=[T[:3]])  # a (3, 4) array is a start too
-    # no hypothesis of its own (RANSAC finds no translation): the start still answers
+    # no hypothesis of its own (no rotation from the lines): the start still answers
     monkeypatch.setattr(vanishing, "_rotations", lambda dirs, tol: [])
     assert not vanishing_point_pose(m).success
     flipped = T[:3].copy()
@@ -167,6 +167,28 @@ def test_a_given_start_wins_where_it_explains_points_and_lines_better(monkeypatc
     assert _errors(only, R, t)[1] < 1e-3
     np.testing.assert_allclose(res4.T_0to1.matrix().numpy(), res.T_0to1.matrix().numpy(),
                                atol=1e-12)
+
+
+def test_vp_method_passes_the_supported_classical_pose_whatever_the_order(monkeypatch):
+    from strl_pyg.estimation import vanishing
+
+    m, _, _ = manhattan_pair(1, n_points=15, noise=0.3)
+    seen = []
+    real = vanishing.vanishing_point_pose
+    monkeypatch.setattr(vanishing, "vanishing_point_pose",
+                        lambda *a, **k: seen.append(k) or real(*a, **k))
+    after = PoseEstimator(methods=(_base(), "vp"), bootstrap=0).estimate(m)
+    alone = PoseEstimator(methods=("vp",), bootstrap=0).estimate(m)
+    assert len(seen) == 2 and all(len(k["starts"]) == 1 for k in seen)
+    np.testing.assert_array_equal(np.asarray(seen[0]["starts"][0]), after.methods[_base()].T_0to1)
+    np.testing.assert_array_equal(np.asarray(seen[1]["starts"][0]),
+                                  np.asarray(seen[0]["starts"][0]))
+    np.testing.assert_array_equal(alone.methods["vp"].T_0to1, after.methods["vp"].T_0to1)
+    # the constant is read at every call; None: the points alone, and no start
+    monkeypatch.setattr(vanishing, "VP_LINE_SIGMA_PX", None)
+    rec = PoseEstimator(methods=("vp",), bootstrap=0).estimate(m).methods["vp"]
+    assert seen[-1]["line_sigma_px"] is None and seen[-1]["starts"] is None
+    assert rec.status == "ok" and rec.info["refined"] is True
 
 
 def test_bad_starts_are_one_line():

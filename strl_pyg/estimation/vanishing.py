@@ -17,16 +17,13 @@ point matches to find or support a pose:
    keeps their angle (``R`` preserves ``d0a . d0b``), by orthogonal Procrustes.
 3. **Translation** for each rotation by 2-point RANSAC over the point matches (every pair
    when there are few), scored by MSAC on the Sampson distance, its sign by cheirality.
-4. The best hypothesis, and any other starting pose the caller gives (``starts``: the
-   5-point solver's, from :class:`~strl_pyg.inference.PoseEstimator`), is refined jointly on
-   all the points and the lines of the vanishing directions (:func:`refine_with_lines`: the
-   rotation, the translation direction and the directions themselves, Cauchy-robust
-   Levenberg-Marquardt); the refined pose of lowest cost wins. With few points the
-   translation is only as good as the rotation (1 deg of rotation error moved it by ~9 deg on
-   the point-poor pairs), and the lines, many and in both images, pin the rotation better
-   than the 2-direction Procrustes of step 2 or the 5-point solver. ``line_sigma_px=None``:
-   the solver before this refinement (its inlier points alone, kept within
-   ``max_refine_deg`` of the vanishing-point rotation).
+4. The best hypothesis and any given start (``starts``: the 5-point solver's, from
+   :class:`~strl_pyg.inference.PoseEstimator`) are refined jointly on all the points and the
+   lines of the vanishing directions (:func:`refine_with_lines`); the lowest cost wins. With
+   few points the translation is only as good as the rotation (1 deg of rotation error moved
+   it by ~9 deg on the point-poor pairs), and the lines, many and in both images, pin the
+   rotation. ``line_sigma_px=None``: the solver before this refinement (its inlier points
+   alone, kept within ``max_refine_deg`` of the vanishing-point rotation).
 
 The result is a :class:`~strl_pyg.estimation.classical.BaselineResult` (method ``"vp"``), and
 :class:`~strl_pyg.inference.PoseEstimator` checks its support on the point matches like every
@@ -228,7 +225,8 @@ def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, direct
         matches: the pair (``K0``, ``K1``, points, lines).
         R, t: the starting pose (``X1 = R X0 + t``).
         directions: :func:`vanishing_directions` of ``matches`` (``(d0, d1, mask)``).
-        point_mask: boolean ``[N]``, the point matches to use (the hypothesis' inliers).
+        point_mask: boolean ``[N]``, the point matches to use (:func:`vanishing_point_pose`
+            passes every point: the Cauchy loss bounds the outliers' pull).
         line_sigma_px, scale_px, iterations: the lines' weight, the Cauchy scale (pixels),
             the most iterations.
         return_cost: also return the final robust cost (comparable between starts on the
@@ -343,8 +341,11 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
 
     Returns:
         a :class:`BaselineResult` (``success=False`` with ``info["reason"]`` when fewer than two
-        vanishing directions are shared or no translation has inliers); ``info`` holds
-        ``directions`` (how many), ``direction_lines`` (their line counts) and ``refined``.
+        vanishing directions are shared (one suffices with ``starts``), when no translation has
+        two point matches in front of both cameras and no start is given, or when the refined
+        pose keeps fewer than two); ``info`` holds ``directions`` (how many),
+        ``direction_lines`` (their line counts), ``refined`` and, with ``line_sigma_px``,
+        ``start``.
     """
     if not isinstance(matches, PairMatches):
         raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")
@@ -419,7 +420,11 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
         for name, Rs, ts in cands:
             Rr, tr, c = refine_with_lines(matches, Rs, ts, dirs, every, line_sigma_px,
                                           return_cost=True)
-            out.append((c, name, Rr, tr))
+            if np.isfinite(c) and np.isfinite(Rr).all() and np.isfinite(tr).all():
+                out.append((c, name, Rr, tr))
+        if not out:
+            return _failed(n, "vp", (time.perf_counter() - start) * 1e3, **info,
+                           reason="the joint refinement gave no finite pose")
         _, info["start"], R, t = min(out, key=lambda o: o[0])
         close = _sampson(R, t[None], x0, x1)[0] < thr
         if (_in_front(R, -t, h0, h1) & close).sum() > (_in_front(R, t, h0, h1) & close).sum():

@@ -138,19 +138,23 @@ def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     if matches.num_lines == 0:
         return MethodResult("vp", "failed", warnings=[
             "vp needs line matches (got none: FrontendConfig(lines=True), or lines0/lines1)"])
-    # the 5-point solver's pose is a second start of the joint refinement with the lines
-    base = "poselib" if have_poselib() else "opencv"
-    if base in ctx.results:
-        T = ctx.results[base].T_0to1
-        starts = [] if T is None else [T]
-    else:
-        from strl_pyg.estimation.classical import estimate_relative_pose
+    # the 5-point solver's supported pose is a second start of the joint refinement with the
+    # lines: its record of this run when it ran before, else solved and support-checked here
+    # (once per pair), so that vp's answer does not depend on the order of the methods
+    sigma = vanishing.VP_LINE_SIGMA_PX
+    starts = None
+    if sigma is not None:
+        from strl_pyg.inference.support import check_support
 
-        res = estimate_relative_pose(matches, base, ctx.threshold_px, seed=ctx.seed)
-        starts = [res.T_0to1] if res.success else []
+        base = "poselib" if have_poselib() else "opencv"
+        cls = ctx.results.get(base) or ctx.cache.get("vp_start")
+        if cls is None:
+            cls = ctx.cache["vp_start"] = check_support(_classical(base)(matches, ctx), matches,
+                                                        ctx.threshold_px)
+        starts = [cls.T_0to1] if cls.status == "ok" else []
     res = vanishing_point_pose(matches, ctx.threshold_px, seed=ctx.seed,
                                directions=_vanishing_directions(matches, ctx), starts=starts,
-                               line_sigma_px=vanishing.VP_LINE_SIGMA_PX)
+                               line_sigma_px=sigma)
     if not res.success:
         return MethodResult("vp", "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
                             info=dict(res.info), warnings=[f"vp: {res.info['reason']}"])
