@@ -203,6 +203,9 @@ def test_bad_starts_are_one_line():
     T[:3, 3] = t
     with pytest.raises(ValueError, match="line_sigma_px"):
         vanishing_point_pose(m, starts=[T], line_sigma_px=None)
+    for bad in (0.0, -1.0):  # a zero or negative line weight: one line, not NaN costs
+        with pytest.raises(ValueError, match=r"line_sigma_px > 0 .*got 1.0, 2.0, "):
+            vanishing_point_pose(m, line_sigma_px=bad)
 
 
 def test_random_lines_give_no_pose():
@@ -267,7 +270,7 @@ def test_bad_input_is_one_line():
                       image_size1=SIZE, K0=K, K1=K)
     with pytest.raises(ValueError, match=r"Expected at least 5 point matches \(got 4\)"):
         vanishing_point_pose(few)
-    with pytest.raises(ValueError, match=r"threshold_px > 0"):
+    with pytest.raises(ValueError, match=r"Expected threshold_px, .* > 0 .*\(got 0, "):
         vanishing_point_pose(m, threshold_px=0)
     with pytest.raises(TypeError, match=r"Expected a PairMatches"):
         vanishing_point_pose("matches")

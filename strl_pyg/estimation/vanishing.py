@@ -354,9 +354,9 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
     if matches.num_points < VP_MIN_POINTS:
         raise ValueError(f"Expected at least {VP_MIN_POINTS} point matches "
                          f"(got {matches.num_points})")
-    if not (threshold_px > 0 and line_threshold_px > 0):
-        raise ValueError(f"Expected threshold_px > 0 and line_threshold_px > 0 "
-                         f"(got {threshold_px}, {line_threshold_px})")
+    if not (threshold_px > 0 < line_threshold_px and (line_sigma_px is None or line_sigma_px > 0)):
+        raise ValueError(f"Expected threshold_px, line_threshold_px, line_sigma_px > 0 (or None)"
+                         f" (got {threshold_px}, {line_threshold_px}, {line_sigma_px})")
     if starts and line_sigma_px is None:
         raise ValueError("Expected line_sigma_px with starts (the starts are compared on the "
                          "joint refinement's cost; got line_sigma_px=None)")
