@@ -104,29 +104,35 @@ def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:
 
 def fit_line_sigma(pairs) -> tuple[float | None, str]:
     """Fits VP_LINE_SIGMA_PX on the calibration split: the grid value with the highest AUC@20
-    of vp's raw pose (no pose = 180 deg); ties go to the larger sigma (the points' weight)."""
+    of vp's raw pose (no pose = 180 deg) as the method ``vp`` runs it (the supported classical
+    pose as its second start, none with ``None``); ties go to the larger sigma (the points'
+    weight)."""
     import bench_pose as bp
 
-    from strl_pyg.estimation.vanishing import (
-        VP_MIN_POINTS,
-        vanishing_directions,
-        vanishing_point_pose,
-    )
+    from strl_pyg.estimation import vanishing as V
+    from strl_pyg.inference import PoseEstimator
 
-    dirs = [vanishing_directions(m) if m.num_lines and m.num_points >= VP_MIN_POINTS else []
-            for _, m, _ in pairs]
-    auc = {}
-    for sigma in tqdm(FIT_SIGMAS, desc="line sigma"):
-        worst = []
-        for (_, m, T), d in zip(pairs, dirs, strict=True):
-            res = vanishing_point_pose(m, directions=d, line_sigma_px=sigma) if d else None
-            worst.append(max(bp.errors(res.T_0to1.matrix().numpy(), T))
-                         if res is not None and res.success else 180.0)
-        auc[sigma] = _auc(np.array(worst))
+    base = PoseEstimator(methods=("poselib",))
+    est = PoseEstimator(methods=("poselib", "vp"))
+    known = [base.estimate(m).methods if m is not None and m.num_lines
+             and m.num_points >= V.VP_MIN_POINTS else None for _, m, _ in pairs]
+    auc, saved = {}, V.VP_LINE_SIGMA_PX
+    try:
+        for sigma in tqdm(FIT_SIGMAS, desc="line sigma"):
+            V.VP_LINE_SIGMA_PX = sigma  # read by the method vp at every call
+            worst = []
+            for (_, m, T), k in zip(pairs, known, strict=True):
+                raw = est.estimate(m, known=k).methods["vp"].raw if k is not None else None
+                worst.append(max(bp.errors(raw.T_0to1.matrix().numpy(), T))
+                             if raw is not None and raw.success else 180.0)
+            auc[sigma] = _auc(np.array(worst))
+    finally:
+        V.VP_LINE_SIGMA_PX = saved
     best = max(auc, key=lambda s: (round(auc[s], 6), float("inf") if s is None else s))
-    text = ("VP_LINE_SIGMA_PX (AUC@20 % of vp's raw pose on the same split; none: the points "
-            "alone): " + ", ".join(f"{'none' if s is None else f'{s:g}'}: {a:.1f}"
-                                    for s, a in auc.items()) + f". Fit: {best}.")
+    text = ("VP_LINE_SIGMA_PX (AUC@20 % of vp's raw pose as the method runs it, on the same "
+            "split; none: the points alone): " + ", ".join(
+                f"{'none' if s is None else f'{s:g}'}: {a:.1f}" for s, a in auc.items())
+            + f". Fit: {best}.")
     return best, text
 
 

@@ -11,6 +11,8 @@ import torch
 
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.estimation.vanishing import (
+    _segments,
+    _vp_residual_px,
     refine_with_lines,
     vanishing_directions,
     vanishing_point_pose,
@@ -120,6 +122,38 @@ def test_joint_refinement_returns_to_the_true_pose_from_a_perturbed_one():
     R0, t0 = refine_with_lines(m, R, t, dirs, np.ones(m.num_points, bool))
     np.testing.assert_allclose(R0, R, atol=1e-12)
     np.testing.assert_allclose(t0, t, atol=1e-12)
+
+
+def test_joint_refinement_refuses_bad_starts_and_masks_with_one_line():
+    m, R, t = manhattan_pair(2, n_points=6)
+    dirs, every = vanishing_directions(m), np.ones(m.num_points, bool)
+    for bad_R, bad_t in ((R[:2], t), (R, t[:2]), (R, np.zeros(3)), (R, np.full(3, np.nan)),
+                         (np.full((3, 3), np.inf), t)):
+        with pytest.raises(ValueError, match="Expected a finite R") as e:
+            refine_with_lines(m, bad_R, bad_t, dirs, every)
+        assert "\n" not in str(e.value)
+    with pytest.raises(ValueError, match=f"point_mask of length {m.num_points} \\(got 3"):
+        refine_with_lines(m, R, t, dirs, every[:3])
+
+
+def test_line_residual_is_the_larger_endpoint_distance_to_the_vanishing_line():
+    # the distance of each endpoint to the line through the midpoint and K d, computed here
+    # independently (projection onto the line's normal in pixels)
+    rng = np.random.default_rng(0)
+    K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+    lines = rng.uniform(0, 640, (20, 2, 2))
+    d = rng.normal(size=(4, 3))
+    ends, mids, _ = _segments(lines, K)
+    got = _vp_residual_px(d, K, ends, mids)
+    vp = d @ K.T
+    for h in range(4):
+        for i in range(20):
+            a = mids[i, :2]
+            # direction from the midpoint towards the vanishing point (finite or at infinity)
+            u = vp[h, :2] - a * vp[h, 2]
+            nrm = np.array([-u[1], u[0]]) / np.linalg.norm(u)
+            want = max(abs((lines[i, k] - a) @ nrm) for k in range(2))
+            assert abs(got[h, i] - want) < 1e-9 * max(1.0, want)
 
 
 def test_joint_refinement_beats_the_points_alone_on_few_noisy_points():

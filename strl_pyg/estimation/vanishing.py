@@ -19,11 +19,8 @@ point matches to find or support a pose:
    when there are few), scored by MSAC on the Sampson distance, its sign by cheirality.
 4. The best hypothesis and any given start (``starts``: the 5-point solver's, from
    :class:`~strl_pyg.inference.PoseEstimator`) are refined jointly on all the points and the
-   lines of the vanishing directions (:func:`refine_with_lines`); the lowest cost wins. With
-   few points the translation is only as good as the rotation (1 deg of rotation error moved
-   it by ~9 deg on the point-poor pairs), and the lines, many and in both images, pin the
-   rotation. ``line_sigma_px=None``: the solver before this refinement (its inlier points
-   alone, kept within ``max_refine_deg`` of the vanishing-point rotation).
+   lines of the vanishing directions (:func:`refine_with_lines`); the lowest cost wins (the
+   lines pin the rotation the translation needs). ``line_sigma_px=None``: the inlier points.
 
 The result is a :class:`~strl_pyg.estimation.classical.BaselineResult` (method ``"vp"``), and
 :class:`~strl_pyg.inference.PoseEstimator` checks its support on the point matches like every
@@ -70,14 +67,21 @@ def _segments(lines: np.ndarray, K: np.ndarray):
     return ph, ph.mean(axis=1), n
 
 
+def _vp_residuals(d: torch.Tensor, K: torch.Tensor, ends: torch.Tensor,
+                  mids: torch.Tensor) -> torch.Tensor:
+    """Signed pixel distance ``[H, M]`` of each segment's first endpoint to the line through
+    its midpoint and the vanishing point ``K d`` (``d`` ``[H, 3]``); the second endpoint's is
+    its negative (the line passes through the midpoint). The one line residual of the module:
+    the consensus of :func:`vanishing_directions` and the refinement's residual."""
+    v = (d @ K.T)[:, None].expand(-1, len(mids), -1)  # [H, M, 3], third coordinate 0 at inf.
+    l = torch.cross(mids[None].expand_as(v), v, dim=-1)
+    return (l * ends[None, :, 0]).sum(-1) / l[..., :2].norm(dim=-1).clamp_min(1e-300)
+
+
 def _vp_residual_px(d: np.ndarray, K: np.ndarray, ends: np.ndarray, mids: np.ndarray):
-    """Pixel distance of each segment's endpoints to the line through its midpoint and the
-    vanishing point ``K d`` (``d`` ``[H, 3]``): ``[H, M]`` (the larger of the two ends)."""
-    v = d @ K.T  # [H, 3] homogeneous vanishing points (third coordinate 0 at infinity)
-    l = np.cross(mids[None], v[:, None])  # [H, M, 3]
-    norm = np.linalg.norm(l[..., :2], axis=-1).clip(1e-300)
-    dist = np.abs(np.einsum("hmk,mek->hme", l, ends)) / norm[..., None]
-    return dist.max(axis=-1)
+    """:func:`_vp_residuals`' distance ``[H, M]`` (unsigned) of numpy arrays."""
+    return _vp_residuals(*(torch.from_numpy(np.asarray(a, float)) for a in (d, K, ends, mids))
+                         ).abs().numpy()
 
 
 def vanishing_directions(matches: PairMatches, line_threshold_px: float = 2.0,
@@ -195,15 +199,6 @@ def _in_front(R: np.ndarray, t: np.ndarray, h0: np.ndarray, h1: np.ndarray) -> n
     return ((z0[0] > 0) & (z1[0] > 0)).numpy()
 
 
-def _line_residuals(d: torch.Tensor, K: torch.Tensor, ends: torch.Tensor,
-                    mids: torch.Tensor) -> torch.Tensor:
-    """Signed pixel distance of each segment's first endpoint to the line through its
-    midpoint and the vanishing point ``K d`` (the second endpoint's is its negative)."""
-    v = (K @ d).expand_as(mids)
-    l = torch.cross(mids, v, dim=-1)
-    return (l * ends[:, 0]).sum(-1) / l[:, :2].norm(dim=-1).clamp_min(1e-300)
-
-
 def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, directions: list,
                       point_mask: np.ndarray, line_sigma_px: float = VP_LINE_SIGMA_PX,
                       scale_px: float = 1.0, iterations: int = 15,
@@ -239,6 +234,12 @@ def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, direct
     """
     from strl_pyg.geometry.manifold import so3_exp, sphere_exp, tangent_basis
 
+    n, R, t = matches.num_points, np.asarray(R, float), np.asarray(t, float)
+    if R.shape != (3, 3) or t.shape != (3,) or not (np.isfinite(R).all() and 0 < t @ t < np.inf):
+        raise ValueError(f"Expected a finite R (3, 3) and a finite nonzero t (3,) (got shapes "
+                         f"{R.shape}, {t.shape})")
+    if len(point_mask) != n:
+        raise ValueError(f"Expected point_mask of length {n} (got {len(point_mask)})")
     dt = torch.float64
     K0 = torch.as_tensor(np.asarray(matches.K0, float), dtype=dt)
     K1 = torch.as_tensor(np.asarray(matches.K1, float), dtype=dt)
@@ -268,9 +269,8 @@ def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, direct
         Rp, tp, ds = unpack(p)
         r = [pose_sampson(Rp, tp, x0, x1) * focal]
         for d, mk in zip(ds, masks, strict=True):
-            r.append(_line_residuals(d, K0, segs[0][0][mk], segs[0][1][mk]) / line_sigma_px)
-            r.append(_line_residuals(Rp @ d, K1, segs[1][0][mk], segs[1][1][mk])
-                     / line_sigma_px)
+            for Kc, dc, (e, mid) in ((K0, d, segs[0]), (K1, Rp @ d, segs[1])):
+                r.append(_vp_residuals(dc[None], Kc, e[mk], mid[mk])[0] / line_sigma_px)
         return torch.cat(r)
 
     def cost(r):
