@@ -59,7 +59,7 @@ def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:
     recommended pose, and the recommended pose with ``vp_checked`` in front of the order."""
     import bench_pose as bp
 
-    from strl_pyg.estimation import vanishing as V
+    from strl_pyg.estimation import line_refine as L
     from strl_pyg.estimation.classical import estimate_relative_pose
     from strl_pyg.estimation.vanishing import vanishing_point_pose
     from strl_pyg.inference import PoseEstimator
@@ -78,7 +78,7 @@ def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:
         err = lambda T_est, T=T: list(bp.errors(np.asarray(T_est), T))  # noqa: E731
         res = estimate_relative_pose(m, "poselib")
         out["PoseLib"].append(err(res.T_0to1.matrix().numpy()) if res.success else None)
-        sigma = V.VP_LINE_SIGMA_PX
+        sigma = L.VP_LINE_SIGMA_PX
         res = (vanishing_point_pose(m, starts=[res.T_0to1] if res.success and sigma is not None
                                     else None, line_sigma_px=sigma) if m.num_lines else None)
         out["vp"].append(err(res.T_0to1.matrix().numpy())
@@ -109,6 +109,7 @@ def fit_line_sigma(pairs) -> tuple[float | None, str]:
     weight)."""
     import bench_pose as bp
 
+    from strl_pyg.estimation import line_refine as L
     from strl_pyg.estimation import vanishing as V
     from strl_pyg.inference import PoseEstimator
 
@@ -116,10 +117,10 @@ def fit_line_sigma(pairs) -> tuple[float | None, str]:
     est = PoseEstimator(methods=("poselib", "vp"))
     known = [base.estimate(m).methods if m is not None and m.num_lines
              and m.num_points >= V.VP_MIN_POINTS else None for _, m, _ in pairs]
-    auc, saved = {}, V.VP_LINE_SIGMA_PX
+    auc, saved = {}, L.VP_LINE_SIGMA_PX
     try:
         for sigma in tqdm(FIT_SIGMAS, desc="line sigma"):
-            V.VP_LINE_SIGMA_PX = sigma  # read by the method vp at every call
+            L.VP_LINE_SIGMA_PX = sigma  # read by the method vp at every call
             worst = []
             for (_, m, T), k in zip(pairs, known, strict=True):
                 raw = est.estimate(m, known=k).methods["vp"].raw if k is not None else None
@@ -127,7 +128,7 @@ def fit_line_sigma(pairs) -> tuple[float | None, str]:
                              if raw is not None and raw.success else 180.0)
             auc[sigma] = _auc(np.array(worst))
     finally:
-        V.VP_LINE_SIGMA_PX = saved
+        L.VP_LINE_SIGMA_PX = saved
     best = max(auc, key=lambda s: (round(auc[s], 6), float("inf") if s is None else s))
     text = ("VP_LINE_SIGMA_PX (AUC@20 % of vp's raw pose as the method runs it, on the same "
             "split; none: the points alone): " + ", ".join(
@@ -144,7 +145,7 @@ def fit(cache: Path, n: int) -> tuple[float, int, str]:
     import ablation_eval as ae
     import bench_pose as bp
 
-    from strl_pyg.estimation import vanishing as V
+    from strl_pyg.estimation import line_refine as L
     from strl_pyg.inference import PoseEstimator
     from strl_pyg.inference import methods as M
     from strl_pyg.inference.support import check_support
@@ -152,10 +153,10 @@ def fit(cache: Path, n: int) -> tuple[float, int, str]:
     pairs = ae.point_poor_pairs(cache, n, seed0=CALIBRATION_SEED)
     sigma, sigma_text = fit_line_sigma(pairs)
     print(sigma_text)
-    if sigma != V.VP_LINE_SIGMA_PX:
+    if sigma != L.VP_LINE_SIGMA_PX:
         print(f"note: the fit ({sigma}) differs from the package's VP_LINE_SIGMA_PX "
-              f"({V.VP_LINE_SIGMA_PX}); vp_checked's constants and the evaluation use the fit")
-    V.VP_LINE_SIGMA_PX = sigma  # read by the method vp at every call
+              f"({L.VP_LINE_SIGMA_PX}); vp_checked's constants and the evaluation use the fit")
+    L.VP_LINE_SIGMA_PX = sigma  # read by the method vp at every call
     est = PoseEstimator(methods=("poselib", "vp"))
     base = [(m, T, est.estimate(m).methods) for _, m, T in tqdm(pairs, desc="calibration")]
     saved = (M.VP_CHECK_ANGLE_DEG, M.VP_CHECK_SUPPORT_SLACK)
@@ -217,7 +218,7 @@ def main(argv: list[str] | None = None) -> int:
     import bench_pose as bp
     from common import banner
 
-    from strl_pyg.estimation import vanishing as V
+    from strl_pyg.estimation import line_refine as L
     from strl_pyg.frontend import FrontendConfig
     from strl_pyg.inference import methods as M
     from strl_pyg.model.strl_pose import StrLPose
@@ -262,7 +263,7 @@ def main(argv: list[str] | None = None) -> int:
              "(%) of max(rotation, translation) error, no pose (or a non-ok recommended "
              "pose) = 180 deg, [95 % bootstrap interval]; median max-error (deg) over the "
              "pairs with a pose, and how many of the pairs have one. Constants: "
-             f"VP_LINE_SIGMA_PX {V.VP_LINE_SIGMA_PX}, VP_CHECK_ANGLE_DEG "
+             f"VP_LINE_SIGMA_PX {L.VP_LINE_SIGMA_PX}, VP_CHECK_ANGLE_DEG "
              f"{M.VP_CHECK_ANGLE_DEG}, VP_CHECK_SUPPORT_SLACK {M.VP_CHECK_SUPPORT_SLACK}.", "",
              "| set | pairs | " + " | ".join(METHODS) + " | recommended - PoseLib (AUC) | "
              "recommended (vp_checked first) - PoseLib | recommended (vp first) - PoseLib |",

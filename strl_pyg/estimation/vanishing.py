@@ -13,7 +13,8 @@ point matches to find or support a pose:
    consensus being the line matches whose segments point at the vanishing point within
    ``line_threshold_px`` in *both* images; up to three directions, greedily, each refined on
    its lines (the null vector of their interpretation-plane normals).
-2. **Rotation hypotheses** from every pair of directions and every sign assignment that
+2. **Rotation hypotheses** from every pair of directions at least
+   :data:`VP_MIN_SEPARATION_DEG` apart (no such pair: no answer) and every sign assignment that
    keeps their angle (``R`` preserves ``d0a . d0b``), by orthogonal Procrustes.
 3. **Translation** for each rotation by 2-point RANSAC over the point matches (every pair
    when there are few), scored by MSAC on the Sampson distance, its sign by cheirality.
@@ -35,53 +36,29 @@ import numpy as np
 import torch
 
 from strl_pyg.data.matches import PairMatches
+from strl_pyg.estimation import line_refine
 from strl_pyg.estimation.classical import BaselineResult, _failed, normalised_matches
+from strl_pyg.estimation.line_refine import (
+    _homogeneous,
+    _segments,
+    _vp_residual_px,
+    refine_with_lines,
+)
 from strl_pyg.geometry import Pose, pose_sampson
 
 __all__ = ["vanishing_directions", "vanishing_point_pose", "refine_with_lines", "VP_MIN_LINES",
-           "VP_MIN_POINTS", "VP_LINE_SIGMA_PX"]
+           "VP_MIN_POINTS", "VP_MIN_SEPARATION_DEG"]
 
 #: Line matches a vanishing direction needs (in both images) to be used.
 VP_MIN_LINES = 4
 #: Point matches the translation needs at the least (two fix it; the rest check it).
 VP_MIN_POINTS = 5
-#: The lines' weight in the joint refinement (:func:`refine_with_lines`): the pixel distance of
-#: a segment's endpoint to its vanishing line counts like a point's Sampson distance times
-#: ``1 / VP_LINE_SIGMA_PX``. Fitted on the calibration split of
-#: ``benchmarks/bench_vanishing.py`` (point-poor pairs of other seeds than ``point_poor``).
-VP_LINE_SIGMA_PX = 0.03
-
-
-def _homogeneous(x: np.ndarray) -> np.ndarray:
-    return np.concatenate([x, np.ones(x.shape[:-1] + (1,))], axis=-1)
-
-
-def _segments(lines: np.ndarray, K: np.ndarray):
-    """Pixel endpoints ``[M, 2, 3]``, midpoints ``[M, 3]`` and unit interpretation-plane
-    normals (normalised camera coordinates) ``[M, 3]`` of ``[M, 2, 2]`` pixel segments."""
-    ph = _homogeneous(lines)
-    Kinv = np.linalg.inv(K)
-    rays = ph @ Kinv.T
-    n = np.cross(rays[:, 0], rays[:, 1])
-    n /= np.linalg.norm(n, axis=1, keepdims=True).clip(1e-300)
-    return ph, ph.mean(axis=1), n
-
-
-def _vp_residuals(d: torch.Tensor, K: torch.Tensor, ends: torch.Tensor,
-                  mids: torch.Tensor) -> torch.Tensor:
-    """Signed pixel distance ``[H, M]`` of each segment's first endpoint to the line through
-    its midpoint and the vanishing point ``K d`` (``d`` ``[H, 3]``); the second endpoint's is
-    its negative (the line passes through the midpoint). The one line residual of the module:
-    the consensus of :func:`vanishing_directions` and the refinement's residual."""
-    v = (d @ K.T)[:, None].expand(-1, len(mids), -1)  # [H, M, 3], third coordinate 0 at inf.
-    l = torch.cross(mids[None].expand_as(v), v, dim=-1)
-    return (l * ends[None, :, 0]).sum(-1) / l[..., :2].norm(dim=-1).clamp_min(1e-300)
-
-
-def _vp_residual_px(d: np.ndarray, K: np.ndarray, ends: np.ndarray, mids: np.ndarray):
-    """:func:`_vp_residuals`' distance ``[H, M]`` (unsigned) of numpy arrays."""
-    return _vp_residuals(*(torch.from_numpy(np.asarray(a, float)) for a in (d, K, ends, mids))
-                         ).abs().numpy()
+#: The lines inform the pose only when two of their shared vanishing directions are at least
+#: this far apart (deg): the rotation of two nearly parallel directions is ill-conditioned about
+#: the axis between them, and one direction leaves a rotation free. A conditioning bound, not a
+#: fit: on the calibration split 30, 45 and 60 deg score alike; on the dino's curved outlines the
+#: directions found lay 10-13 deg apart (``benchmarks/results_vanishing.md``).
+VP_MIN_SEPARATION_DEG = 30.0
 
 
 def vanishing_directions(matches: PairMatches, line_threshold_px: float = 2.0,
@@ -159,14 +136,25 @@ def _procrustes(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return U @ D @ Vt
 
 
+def _separation_deg(dirs) -> float:
+    """The widest angle (deg, at most 90) between two of the directions in camera 0; 0 for
+    fewer than two."""
+    D = np.array([d[0] for d in dirs]).reshape(-1, 3)
+    c = np.abs(D @ D.T)[np.triu_indices(len(D), 1)]
+    return float(np.degrees(np.arccos(np.clip(c.min(), 0.0, 1.0)))) if len(c) else 0.0
+
+
 def _rotations(dirs, max_angle_error_deg: float) -> list[np.ndarray]:
-    """Rotation hypotheses of every pair of directions and sign assignment (module step 2)."""
+    """Rotation hypotheses of every pair of directions at least :data:`VP_MIN_SEPARATION_DEG`
+    apart and every sign assignment (module step 2)."""
     out = []
     tol = np.sin(np.radians(max_angle_error_deg))
     for i in range(len(dirs)):
         for j in range(i + 1, len(dirs)):
             a0, a1 = dirs[i][0], dirs[i][1]
             b0, b1 = dirs[j][0], dirs[j][1]
+            if _separation_deg([dirs[i], dirs[j]]) < VP_MIN_SEPARATION_DEG:
+                continue
             for sa in (1.0, -1.0):
                 for sb in (1.0, -1.0):
                     u1, v1 = sa * a1, sb * b1
@@ -199,105 +187,6 @@ def _in_front(R: np.ndarray, t: np.ndarray, h0: np.ndarray, h1: np.ndarray) -> n
     return ((z0[0] > 0) & (z1[0] > 0)).numpy()
 
 
-def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, directions: list,
-                      point_mask: np.ndarray, line_sigma_px: float = VP_LINE_SIGMA_PX,
-                      scale_px: float = 1.0, iterations: int = 15,
-                      return_cost: bool = False) -> tuple:
-    """Joint Levenberg-Marquardt refinement of ``(R, t)`` and the vanishing directions on the
-    point matches and the lines of those directions.
-
-    Unknowns: ``R <- exp([w]_x) R`` (3), the unit ``t`` (2) and each direction ``d_i`` in camera
-    0 (2 each). Residuals (pixels): the Sampson distance of every point in ``point_mask``; for
-    every line of direction ``i``, the distance of its endpoint to the line through its
-    midpoint and the vanishing point, ``K0 d_i`` in image 0 and ``K1 R d_i`` in image 1
-    (divided by ``line_sigma_px``). A Cauchy loss of scale ``scale_px`` (iteratively reweighted)
-    bounds every residual's pull. With few points and small baselines the translation is only
-    as good as the rotation (a 1 deg rotation error moved the translation by ~9 deg on the
-    point-poor pairs); the lines, many and in both images, pin the rotation, the points fix
-    ``t``.
-
-    Args:
-        matches: the pair (``K0``, ``K1``, points, lines).
-        R, t: the starting pose (``X1 = R X0 + t``).
-        directions: :func:`vanishing_directions` of ``matches`` (``(d0, d1, mask)``).
-        point_mask: boolean ``[N]``, the point matches to use (:func:`vanishing_point_pose`
-            passes every point: the Cauchy loss bounds the outliers' pull).
-        line_sigma_px, scale_px, iterations: the lines' weight, the Cauchy scale (pixels),
-            the most iterations.
-        return_cost: also return the final robust cost (comparable between starts on the
-            same ``directions`` and ``point_mask``).
-
-    Returns:
-        ``R`` ``(3, 3)`` and unit ``t`` ``(3,)`` (float64 numpy), and the cost if asked; a step
-        that does not lower the robust cost is rejected, so the result is never worse than the
-        start on that cost.
-    """
-    from strl_pyg.geometry.manifold import so3_exp, sphere_exp, tangent_basis
-
-    n, R, t = matches.num_points, np.asarray(R, float), np.asarray(t, float)
-    if R.shape != (3, 3) or t.shape != (3,) or not (np.isfinite(R).all() and 0 < t @ t < np.inf):
-        raise ValueError(f"Expected a finite R (3, 3) and a finite nonzero t (3,) (got shapes "
-                         f"{R.shape}, {t.shape})")
-    if len(point_mask) != n:
-        raise ValueError(f"Expected point_mask of length {n} (got {len(point_mask)})")
-    dt = torch.float64
-    K0 = torch.as_tensor(np.asarray(matches.K0, float), dtype=dt)
-    K1 = torch.as_tensor(np.asarray(matches.K1, float), dtype=dt)
-    x0, x1, focal = normalised_matches(matches)
-    keep = torch.as_tensor(np.asarray(point_mask, bool))
-    x0, x1 = x0[keep], x1[keep]
-    segs = []
-    for lines, K in ((matches.lines0, K0), (matches.lines1, K1)):
-        e, m, _ = _segments(np.asarray(lines, float), K.numpy())
-        segs.append((torch.from_numpy(e), torch.from_numpy(m)))
-    R0 = torch.as_tensor(R, dtype=dt)
-    t0 = torch.as_tensor(t, dtype=dt)
-    t0 = t0 / t0.norm()
-    Bt = tangent_basis(t0)
-    d0 = [torch.as_tensor(d[0], dtype=dt) for d in directions]
-    Bd = [tangent_basis(d) for d in d0]
-    masks = [torch.as_tensor(np.asarray(d[2], bool)) for d in directions]
-
-    def unpack(p):
-        Rp = so3_exp(p[:3]) @ R0
-        tp = sphere_exp(t0, Bt, p[3:5])
-        ds = [sphere_exp(d, B, p[5 + 2 * i:7 + 2 * i])
-              for i, (d, B) in enumerate(zip(d0, Bd, strict=True))]
-        return Rp, tp, ds
-
-    def residuals(p):
-        Rp, tp, ds = unpack(p)
-        r = [pose_sampson(Rp, tp, x0, x1) * focal]
-        for d, mk in zip(ds, masks, strict=True):
-            for Kc, dc, (e, mid) in ((K0, d, segs[0]), (K1, Rp @ d, segs[1])):
-                r.append(_vp_residuals(dc[None], Kc, e[mk], mid[mk])[0] / line_sigma_px)
-        return torch.cat(r)
-
-    def cost(r):
-        return float((scale_px ** 2 * torch.log1p((r / scale_px) ** 2)).sum())
-
-    p = torch.zeros(5 + 2 * len(d0), dtype=dt)
-    r = residuals(p)
-    c, lam = cost(r), 1e-3
-    for _ in range(iterations):
-        J = torch.func.jacfwd(residuals)(p)
-        w = 1.0 / (1.0 + (r / scale_px) ** 2)  # the Cauchy loss's IRLS weights
-        H, g = J.T @ (w[:, None] * J), J.T @ (w * r)
-        improved = False
-        while lam <= 1e6:
-            step = -torch.linalg.solve(H + lam * torch.diag(H.diagonal().clamp_min(1e-12)), g)
-            r_new = residuals(p + step)
-            c_new = cost(r_new)
-            if c_new < c:
-                p, r, c, lam, improved = p + step, r_new, c_new, lam / 3, True
-                break
-            lam *= 5
-        if not improved or float(step.norm()) < 1e-10:
-            break
-    Rp, tp, _ = unpack(p)
-    return (Rp.numpy(), tp.numpy(), c) if return_cost else (Rp.numpy(), tp.numpy())
-
-
 def _as_Rt(pose) -> tuple[np.ndarray, np.ndarray]:
     """``(R, t)`` float64 numpy of a ``Pose`` or a ``(4, 4)`` / ``(3, 4)`` ``T_0to1``."""
     T = pose.matrix().numpy() if isinstance(pose, Pose) else np.asarray(pose, float)
@@ -313,7 +202,7 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
                          line_threshold_px: float = 2.0, max_pairs: int = 500,
                          max_angle_error_deg: float = 3.0, max_refine_deg: float = 5.0,
                          seed: int = 0, directions: list | None = None,
-                         line_sigma_px: float | None = VP_LINE_SIGMA_PX,
+                         line_sigma_px: float | None = line_refine.VP_LINE_SIGMA_PX,
                          starts: list | None = None) -> BaselineResult:
     """``T_0to1`` from the vanishing directions of the matched lines and the point matches
     (module docstring).
@@ -340,12 +229,12 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
             (``info["start"]``: ``"vp"`` or the index in ``starts``). Needs ``line_sigma_px``.
 
     Returns:
-        a :class:`BaselineResult` (``success=False`` with ``info["reason"]`` when fewer than two
-        vanishing directions are shared (one suffices with ``starts``), when no translation has
+        a :class:`BaselineResult` (``success=False`` with ``info["reason"]`` when no two shared
+        vanishing directions are :data:`VP_MIN_SEPARATION_DEG` apart, when no translation has
         two point matches in front of both cameras and no start is given, or when the refined
         pose keeps fewer than two); ``info`` holds ``directions`` (how many),
-        ``direction_lines`` (their line counts), ``refined`` and, with ``line_sigma_px``,
-        ``start``.
+        ``direction_lines`` (their line counts), ``separation_deg`` (the widest two's angle),
+        ``refined`` and, with ``line_sigma_px``, ``start``.
     """
     if not isinstance(matches, PairMatches):
         raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")
@@ -365,9 +254,16 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
     n = matches.num_points
     dirs = (vanishing_directions(matches, line_threshold_px, seed=seed) if directions is None
             else directions)
-    info = {"directions": len(dirs), "direction_lines": [int(d[2].sum()) for d in dirs]}
+    info = {"directions": len(dirs), "direction_lines": [int(d[2].sum()) for d in dirs],
+            "separation_deg": _separation_deg(dirs)}
+    if info["separation_deg"] < VP_MIN_SEPARATION_DEG:
+        return _failed(n, "vp", (time.perf_counter() - start) * 1e3, **info,
+                       reason=f"{len(dirs)} vanishing direction(s) shared by the matched lines "
+                              "of both images" + (f", the widest two {info['separation_deg']:.0f}"
+                                                  " deg apart" if len(dirs) > 1 else "")
+                              + f" (needs two at least {VP_MIN_SEPARATION_DEG:g} deg apart)")
     rotations = _rotations(dirs, max_angle_error_deg)
-    if not rotations and not (given and dirs):  # a start needs one direction's lines
+    if not rotations and not given:
         return _failed(n, "vp", (time.perf_counter() - start) * 1e3, **info,
                        reason=f"{len(dirs)} vanishing direction(s) shared by the matched "
                               "lines of both images (needs two at an angle both images agree "

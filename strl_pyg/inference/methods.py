@@ -132,7 +132,7 @@ def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     the lines (``info["start"]``: ``"vp"`` or ``0``, the classical pose): needs line matches,
     and answers where the points are too few for the 5-point solvers; its covariance is the
     first-order one of its inlier points (no bootstrap, not calibrated)."""
-    from strl_pyg.estimation import vanishing
+    from strl_pyg.estimation import line_refine
     from strl_pyg.estimation.vanishing import vanishing_point_pose
 
     if matches.num_lines == 0:
@@ -141,7 +141,7 @@ def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     # the 5-point solver's supported pose is a second start of the joint refinement with the
     # lines: its record of this run when it ran before, else solved and support-checked here
     # (once per pair), so that vp's answer does not depend on the order of the methods
-    sigma = vanishing.VP_LINE_SIGMA_PX
+    sigma = line_refine.VP_LINE_SIGMA_PX
     starts = None
     if sigma is not None:
         from strl_pyg.inference.support import check_support

@@ -1,0 +1,153 @@
+"""The joint refinement of a relative pose on few point matches and the lines of vanishing
+directions (:func:`refine_with_lines`), and the one line residual of the vanishing-point solver
+(:mod:`strl_pyg.estimation.vanishing`): a segment's distance to the line through its midpoint
+and a vanishing point."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from strl_pyg.data.matches import PairMatches
+from strl_pyg.estimation.classical import normalised_matches
+from strl_pyg.geometry import pose_sampson
+from strl_pyg.geometry.manifold import so3_exp, sphere_exp, tangent_basis
+
+__all__ = ["refine_with_lines", "VP_LINE_SIGMA_PX"]
+
+#: The lines' weight in the joint refinement (:func:`refine_with_lines`): the pixel distance of
+#: a segment's endpoint to its vanishing line counts like a point's Sampson distance times
+#: ``1 / VP_LINE_SIGMA_PX``; read at every call by the method ``vp``
+#: (:class:`~strl_pyg.inference.PoseEstimator`). Fitted on the calibration split of
+#: ``benchmarks/bench_vanishing.py`` (point-poor pairs of other seeds than ``point_poor``).
+VP_LINE_SIGMA_PX = 0.03
+
+
+def _homogeneous(x: np.ndarray) -> np.ndarray:
+    return np.concatenate([x, np.ones(x.shape[:-1] + (1,))], axis=-1)
+
+
+def _segments(lines: np.ndarray, K: np.ndarray):
+    """Pixel endpoints ``[M, 2, 3]``, midpoints ``[M, 3]`` and unit interpretation-plane
+    normals (normalised camera coordinates) ``[M, 3]`` of ``[M, 2, 2]`` pixel segments."""
+    ph = _homogeneous(lines)
+    Kinv = np.linalg.inv(K)
+    rays = ph @ Kinv.T
+    n = np.cross(rays[:, 0], rays[:, 1])
+    n /= np.linalg.norm(n, axis=1, keepdims=True).clip(1e-300)
+    return ph, ph.mean(axis=1), n
+
+
+def _vp_residuals(d: torch.Tensor, K: torch.Tensor, ends: torch.Tensor,
+                  mids: torch.Tensor) -> torch.Tensor:
+    """Signed pixel distance ``[H, M]`` of each segment's first endpoint to the line through
+    its midpoint and the vanishing point ``K d`` (``d`` ``[H, 3]``); the second endpoint's is
+    its negative (the line passes through the midpoint): the consensus of
+    :func:`~strl_pyg.estimation.vanishing.vanishing_directions` and the refinement's residual."""
+    v = (d @ K.T)[:, None].expand(-1, len(mids), -1)  # [H, M, 3], third coordinate 0 at inf.
+    l = torch.cross(mids[None].expand_as(v), v, dim=-1)
+    return (l * ends[None, :, 0]).sum(-1) / l[..., :2].norm(dim=-1).clamp_min(1e-300)
+
+
+def _vp_residual_px(d: np.ndarray, K: np.ndarray, ends: np.ndarray, mids: np.ndarray):
+    """:func:`_vp_residuals`' distance ``[H, M]`` (unsigned) of numpy arrays."""
+    return _vp_residuals(*(torch.from_numpy(np.asarray(a, float)) for a in (d, K, ends, mids))
+                         ).abs().numpy()
+
+
+def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, directions: list,
+                      point_mask: np.ndarray, line_sigma_px: float = VP_LINE_SIGMA_PX,
+                      scale_px: float = 1.0, iterations: int = 15,
+                      return_cost: bool = False) -> tuple:
+    """Joint Levenberg-Marquardt refinement of ``(R, t)`` and the vanishing directions on the
+    point matches and the lines of those directions.
+
+    Unknowns: ``R <- exp([w]_x) R`` (3), the unit ``t`` (2) and each direction ``d_i`` in camera
+    0 (2 each). Residuals (pixels): the Sampson distance of every point in ``point_mask``; for
+    every line of direction ``i``, the distance of its endpoint to the line through its
+    midpoint and the vanishing point, ``K0 d_i`` in image 0 and ``K1 R d_i`` in image 1
+    (divided by ``line_sigma_px``). A Cauchy loss of scale ``scale_px`` (iteratively reweighted)
+    bounds every residual's pull. With few points and small baselines the translation is only
+    as good as the rotation (a 1 deg rotation error moved the translation by ~9 deg on the
+    point-poor pairs); the lines, many and in both images, pin the rotation, the points fix
+    ``t``.
+
+    Args:
+        matches: the pair (``K0``, ``K1``, points, lines).
+        R, t: the starting pose (``X1 = R X0 + t``).
+        directions: :func:`~strl_pyg.estimation.vanishing.vanishing_directions` of
+            ``matches`` (``(d0, d1, mask)``).
+        point_mask: boolean ``[N]``, the point matches to use (``vanishing_point_pose``
+            passes every point: the Cauchy loss bounds the outliers' pull).
+        line_sigma_px, scale_px, iterations: the lines' weight, the Cauchy scale (pixels),
+            the most iterations.
+        return_cost: also return the final robust cost (comparable between starts on the
+            same ``directions`` and ``point_mask``).
+
+    Returns:
+        ``R`` ``(3, 3)`` and unit ``t`` ``(3,)`` (float64 numpy), and the cost if asked; a step
+        that does not lower the robust cost is rejected, so the result is never worse than the
+        start on that cost.
+    """
+    n, R, t = matches.num_points, np.asarray(R, float), np.asarray(t, float)
+    if R.shape != (3, 3) or t.shape != (3,) or not (np.isfinite(R).all() and 0 < t @ t < np.inf):
+        raise ValueError(f"Expected a finite R (3, 3) and a finite nonzero t (3,) (got shapes "
+                         f"{R.shape}, {t.shape})")
+    if len(point_mask) != n:
+        raise ValueError(f"Expected point_mask of length {n} (got {len(point_mask)})")
+    dt = torch.float64
+    K0 = torch.as_tensor(np.asarray(matches.K0, float), dtype=dt)
+    K1 = torch.as_tensor(np.asarray(matches.K1, float), dtype=dt)
+    x0, x1, focal = normalised_matches(matches)
+    keep = torch.as_tensor(np.asarray(point_mask, bool))
+    x0, x1 = x0[keep], x1[keep]
+    segs = []
+    for lines, K in ((matches.lines0, K0), (matches.lines1, K1)):
+        e, m, _ = _segments(np.asarray(lines, float), K.numpy())
+        segs.append((torch.from_numpy(e), torch.from_numpy(m)))
+    R0 = torch.as_tensor(R, dtype=dt)
+    t0 = torch.as_tensor(t, dtype=dt)
+    t0 = t0 / t0.norm()
+    Bt = tangent_basis(t0)
+    d0 = [torch.as_tensor(d[0], dtype=dt) for d in directions]
+    Bd = [tangent_basis(d) for d in d0]
+    masks = [torch.as_tensor(np.asarray(d[2], bool)) for d in directions]
+
+    def unpack(p):
+        Rp = so3_exp(p[:3]) @ R0
+        tp = sphere_exp(t0, Bt, p[3:5])
+        ds = [sphere_exp(d, B, p[5 + 2 * i:7 + 2 * i])
+              for i, (d, B) in enumerate(zip(d0, Bd, strict=True))]
+        return Rp, tp, ds
+
+    def residuals(p):
+        Rp, tp, ds = unpack(p)
+        r = [pose_sampson(Rp, tp, x0, x1) * focal]
+        for d, mk in zip(ds, masks, strict=True):
+            for Kc, dc, (e, mid) in ((K0, d, segs[0]), (K1, Rp @ d, segs[1])):
+                r.append(_vp_residuals(dc[None], Kc, e[mk], mid[mk])[0] / line_sigma_px)
+        return torch.cat(r)
+
+    def cost(r):
+        return float((scale_px ** 2 * torch.log1p((r / scale_px) ** 2)).sum())
+
+    p = torch.zeros(5 + 2 * len(d0), dtype=dt)
+    r = residuals(p)
+    c, lam = cost(r), 1e-3
+    for _ in range(iterations):
+        J = torch.func.jacfwd(residuals)(p)
+        w = 1.0 / (1.0 + (r / scale_px) ** 2)  # the Cauchy loss's IRLS weights
+        H, g = J.T @ (w[:, None] * J), J.T @ (w * r)
+        improved = False
+        while lam <= 1e6:
+            step = -torch.linalg.solve(H + lam * torch.diag(H.diagonal().clamp_min(1e-12)), g)
+            r_new = residuals(p + step)
+            c_new = cost(r_new)
+            if c_new < c:
+                p, r, c, lam, improved = p + step, r_new, c_new, lam / 3, True
+                break
+            lam *= 5
+        if not improved or float(step.norm()) < 1e-10:
+            break
+    Rp, tp, _ = unpack(p)
+    return (Rp.numpy(), tp.numpy(), c) if return_cost else (Rp.numpy(), tp.numpy())
