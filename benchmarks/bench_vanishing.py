@@ -50,7 +50,7 @@ FIT_ANGLES = (2.0, 3.0, 5.0, 8.0, 10.0, 15.0)
 FIT_SLACKS = (0, 1, 2, 3, 5, 1000)
 #: The grid of ``--fit`` for the lines' weight in vp's joint refinement
 #: (VP_LINE_SIGMA_PX; ``None``: the points alone).
-FIT_SIGMAS = (None, 1.0, 0.5, 0.25, 0.1, 0.03)
+FIT_SIGMAS = (None, 1.0, 0.5, 0.25, 0.1, 0.03, 0.01)
 
 
 def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:

@@ -181,6 +181,34 @@ def test_line_residual_is_the_larger_endpoint_distance_to_the_vanishing_line():
             assert abs(got[h, i] - want) < 1e-9 * max(1.0, want)
 
 
+def test_line_sigmas_grow_with_the_lines_noise_and_count():
+    from strl_pyg.estimation.line_refine import line_sigmas
+
+    def reference(m, dirs, sigma):  # the docstring's formula, with the tested residual
+        ends, mids, _ = _segments(np.asarray(m.lines0, float), K)
+        return np.array([sigma * max(1.0, np.median(_vp_residual_px(d0[None], K, ends[mk],
+                                                                    mids[mk])[0]) / 0.1)
+                         * np.sqrt(max(1.0, mk.sum() / 10)) for d0, _, mk in dirs])
+
+    for noise in (0.0, 0.5):
+        m, _, _ = manhattan_pair(3, n_lines=60, noise=noise)
+        dirs = vanishing_directions(m)
+        got = line_sigmas(m, dirs, 0.03)
+        np.testing.assert_allclose(got, reference(m, dirs, 0.03), rtol=1e-9)
+        counts = np.array([d[2].sum() for d in dirs])
+        count_term = 0.03 * np.sqrt(np.maximum(1, counts / 10))
+        # exact segments: the count term (a stray line or two in a consensus aside);
+        # 0.5 px of noise: the noise term too
+        if noise == 0:
+            assert (counts > 10).all() and (got < 1.2 * count_term).all()
+        else:
+            assert (got > 1.5 * count_term).all(), got / count_term
+    few = [(d0, d1, mk & (np.cumsum(mk) <= 5)) for d0, d1, mk in dirs]  # 5 lines: no count term
+    np.testing.assert_allclose(line_sigmas(m, few, 0.5), reference(m, few, 0.5), rtol=1e-9)
+    with pytest.raises(ValueError, match="line_sigma_px > 0"):
+        line_sigmas(m, dirs, 0.0)
+
+
 def test_joint_refinement_beats_the_points_alone_on_few_noisy_points():
     # measured over 20 seeds at 8 points, 0.5 px noise, VP_LINE_SIGMA_PX 0.03: median rotation
     # 0.58 deg (joint) against 1.26 (points alone), translation 2.5 against 6.6 deg (at 0.1:

@@ -13,7 +13,8 @@ from strl_pyg.estimation.classical import normalised_matches
 from strl_pyg.geometry import pose_sampson
 from strl_pyg.geometry.manifold import so3_exp, sphere_exp, tangent_basis
 
-__all__ = ["refine_with_lines", "VP_LINE_SIGMA_PX"]
+__all__ = ["refine_with_lines", "line_sigmas", "VP_LINE_SIGMA_PX", "LINE_NOISE_REF_PX",
+           "LINE_COUNT_REF"]
 
 #: The lines' weight in the joint refinement (:func:`refine_with_lines`): the pixel distance of
 #: a segment's endpoint to its vanishing line counts like a point's Sampson distance times
@@ -21,6 +22,12 @@ __all__ = ["refine_with_lines", "VP_LINE_SIGMA_PX"]
 #: (:class:`~strl_pyg.inference.PoseEstimator`). Fitted on the calibration split of
 #: ``benchmarks/bench_vanishing.py`` (point-poor pairs of other seeds than ``point_poor``).
 VP_LINE_SIGMA_PX = 0.03
+#: The line noise and the lines per direction of the calibration split (medians over its
+#: directions: the median endpoint distance of a direction's lines to its vanishing line, in
+#: image 0; the lines it holds). A direction whose lines are noisier, or more, than these gets
+#: a larger sigma (:func:`line_sigmas`).
+LINE_NOISE_REF_PX = 0.1
+LINE_COUNT_REF = 10
 
 
 def _homogeneous(x: np.ndarray) -> np.ndarray:
@@ -55,6 +62,33 @@ def _vp_residual_px(d: np.ndarray, K: np.ndarray, ends: np.ndarray, mids: np.nda
                          ).abs().numpy()
 
 
+def line_sigmas(matches: PairMatches, directions: list, line_sigma_px: float) -> np.ndarray:
+    """Each direction's sigma in :func:`refine_with_lines`: ``line_sigma_px`` times
+    ``max(1, s / LINE_NOISE_REF_PX)`` times ``sqrt(max(1, n / LINE_COUNT_REF))``, ``s`` the
+    median distance (px) of the direction's ``n`` lines to its vanishing line in image 0.
+
+    Why: the constant was fitted on generated pairs, whose segments are near-exact projections
+    of parallel edges (``s`` ~0.1 px, ~10 lines per direction). Real segments are noisier
+    (KITTI 06: ~0.27 px) and many more (~70 per direction), and the lines of one direction
+    share its errors (edges not quite parallel, lens residuals), so they are not independent
+    evidence: with the sigma scaled so, a direction's lines weigh on the rotation like ten
+    lines of the calibration split's precision, however many and however noisy
+    (``benchmarks/results_vanishing.md``).
+    """
+    if not line_sigma_px > 0:
+        raise ValueError(f"Expected line_sigma_px > 0 (got {line_sigma_px})")
+    K0 = np.asarray(matches.K0, float)
+    ends, mids, _ = _segments(np.asarray(matches.lines0, float), K0)
+    out = []
+    for d0, _, mk in directions:
+        mk = np.asarray(mk, bool)
+        s = float(np.median(_vp_residual_px(np.asarray(d0, float)[None], K0, ends[mk],
+                                            mids[mk])[0])) if mk.any() else 0.0
+        out.append(line_sigma_px * max(1.0, s / LINE_NOISE_REF_PX)
+                   * max(1.0, mk.sum() / LINE_COUNT_REF) ** 0.5)
+    return np.array(out)
+
+
 def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, directions: list,
                       point_mask: np.ndarray, line_sigma_px: float = VP_LINE_SIGMA_PX,
                       scale_px: float = 1.0, iterations: int = 15,
@@ -66,11 +100,11 @@ def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, direct
     0 (2 each). Residuals (pixels): the Sampson distance of every point in ``point_mask``; for
     every line of direction ``i``, the distance of its endpoint to the line through its
     midpoint and the vanishing point, ``K0 d_i`` in image 0 and ``K1 R d_i`` in image 1
-    (divided by ``line_sigma_px``). A Cauchy loss of scale ``scale_px`` (iteratively reweighted)
-    bounds every residual's pull. With few points and small baselines the translation is only
-    as good as the rotation (a 1 deg rotation error moved the translation by ~9 deg on the
-    point-poor pairs); the lines, many and in both images, pin the rotation, the points fix
-    ``t``.
+    (divided by direction ``i``'s sigma, :func:`line_sigmas` of ``line_sigma_px``). A Cauchy
+    loss of scale ``scale_px`` (iteratively reweighted) bounds every residual's pull. With few
+    points and small baselines the translation is only as good as the rotation (a 1 deg
+    rotation error moved the translation by ~9 deg on the point-poor pairs); the lines, many
+    and in both images, pin the rotation, the points fix ``t``.
 
     Args:
         matches: the pair (``K0``, ``K1``, points, lines).
@@ -112,6 +146,7 @@ def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, direct
     d0 = [torch.as_tensor(d[0], dtype=dt) for d in directions]
     Bd = [tangent_basis(d) for d in d0]
     masks = [torch.as_tensor(np.asarray(d[2], bool)) for d in directions]
+    sigmas = line_sigmas(matches, directions, line_sigma_px)
 
     def unpack(p):
         Rp = so3_exp(p[:3]) @ R0
@@ -123,9 +158,9 @@ def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, direct
     def residuals(p):
         Rp, tp, ds = unpack(p)
         r = [pose_sampson(Rp, tp, x0, x1) * focal]
-        for d, mk in zip(ds, masks, strict=True):
+        for d, mk, sig in zip(ds, masks, sigmas, strict=True):
             for Kc, dc, (e, mid) in ((K0, d, segs[0]), (K1, Rp @ d, segs[1])):
-                r.append(_vp_residuals(dc[None], Kc, e[mk], mid[mk])[0] / line_sigma_px)
+                r.append(_vp_residuals(dc[None], Kc, e[mk], mid[mk])[0] / float(sig))
         return torch.cat(r)
 
     def cost(r):
