@@ -21,8 +21,10 @@ must not make the answer worse), it scores:
 ``--fit N`` first fits, on N point-poor pairs of other seeds (the calibration split,
 :data:`CALIBRATION_SEED`), the lines' weight in vp's joint refinement (``VP_LINE_SIGMA_PX``,
 :data:`FIT_SIGMAS`) and then ``vp_checked``'s two constants (angle, support slack), and prints
-both grids; the evaluation sets play no part in it, and the evaluation then uses the fitted
-constants (the run says where they differ from the package's: set them there).
+both grids and the split's line statistics (the references of
+:func:`~strl_pyg.estimation.line_refine.line_sigmas`); the evaluation sets play no part in
+it, and the evaluation then uses the fitted constants (the run says where they differ from the
+package's: set them there).
 
 AUC@20 of max(rotation, translation) error with no pose = 180 deg, [95 % bootstrap interval
 over pairs]; medians over the pairs with a pose; the paired AUC differences to PoseLib with
@@ -137,6 +139,27 @@ def fit_line_sigma(pairs) -> tuple[float | None, str]:
     return best, text
 
 
+def line_statistics(pairs) -> str:
+    """The calibration split's line noise and lines per direction (medians over the vanishing
+    directions of its pairs), beside the package's ``LINE_NOISE_REF_PX`` and
+    ``LINE_COUNT_REF`` (:func:`~strl_pyg.estimation.line_refine.line_sigmas`)."""
+    from strl_pyg.estimation import line_refine as L
+    from strl_pyg.estimation.vanishing import VP_MIN_POINTS, vanishing_directions
+
+    noise, count = [], []
+    for _, m, _ in pairs:
+        if m is None or not m.num_lines or m.num_points < VP_MIN_POINTS:
+            continue
+        K0 = np.asarray(m.K0, float)
+        ends, mids, _ = L._segments(np.asarray(m.lines0, float), K0)
+        for d0, _, mk in vanishing_directions(m):
+            noise.append(np.median(L._vp_residual_px(d0[None], K0, ends[mk], mids[mk])[0]))
+            count.append(int(mk.sum()))
+    return (f"Line statistics of the split ({len(noise)} vanishing directions): median line "
+            f"noise {np.median(noise):.3f} px (LINE_NOISE_REF_PX {L.LINE_NOISE_REF_PX}), median "
+            f"lines per direction {np.median(count):.0f} (LINE_COUNT_REF {L.LINE_COUNT_REF}).")
+
+
 def fit(cache: Path, n: int) -> tuple[float, int, str]:
     """Fits (VP_CHECK_ANGLE_DEG, VP_CHECK_SUPPORT_SLACK) on the calibration split: the grid
     point with the highest AUC@20 of ``vp_checked`` (no supported pose = 180 deg); ties go to
@@ -151,7 +174,9 @@ def fit(cache: Path, n: int) -> tuple[float, int, str]:
     from strl_pyg.inference.support import check_support
 
     pairs = ae.point_poor_pairs(cache, n, seed0=CALIBRATION_SEED)
+    stats = line_statistics(pairs)
     sigma, sigma_text = fit_line_sigma(pairs)
+    sigma_text = stats + "\n\n" + sigma_text
     print(sigma_text)
     if sigma != L.VP_LINE_SIGMA_PX:
         print(f"note: the fit ({sigma}) differs from the package's VP_LINE_SIGMA_PX "

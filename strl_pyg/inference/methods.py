@@ -184,7 +184,7 @@ VP_CHECK_MAX_POINTS = 30
 VP_CHECK_ANGLE_DEG = 2.0
 #: ``vp``'s pose replaces the classical one only while it is supported by at least this many
 #: fewer point matches than the classical pose (fitted with :data:`VP_CHECK_ANGLE_DEG`).
-VP_CHECK_SUPPORT_SLACK = 5
+VP_CHECK_SUPPORT_SLACK = 3
 
 
 def _result_of(name: str, matches: PairMatches, ctx: MethodContext) -> MethodResult:
