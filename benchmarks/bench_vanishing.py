@@ -9,14 +9,17 @@ front end limited to 40 keypoints per image) and of the full real sets (where a 
 must not make the answer worse), it scores:
 
 - ``PoseLib``: PoseLib's raw pose (any pose it returns);
-- ``vp``: :func:`~strl_pyg.estimation.vanishing.vanishing_point_pose`'s raw pose, with
-  PoseLib's pose as its second start (as the method ``vp`` runs it);
+- ``vp``: the method ``vp``'s raw pose (:func:`~strl_pyg.estimation.vanishing.vanishing_point_pose`
+  with the supported classical pose as its second start), before its support check;
 - ``vp_checked``: the method of that name when ``"ok"`` (PoseLib's pose, or vp's where the
   points are few and the lines' strongest vanishing direction contradicts PoseLib's rotation);
-- ``recommended``: :class:`~strl_pyg.inference.PoseEstimator`'s recommended pose (the shipped
-  model and order, every method but the line solvers), and ``recommended (vp_checked
-  first)`` / ``(vp first)``: the same with ``vp_checked`` / ``vp`` in front of the order. A
-  pose that is not ``"ok"`` counts as no pose.
+- ``recommended (points' order)``: :class:`~strl_pyg.inference.PoseEstimator`'s recommended
+  pose with every method but the line solvers (the shipped model and its calibrated order:
+  the recommended pose before the point-poor order), and ``(vp_checked first)`` / ``(vp
+  first)``: the same with ``vp_checked`` / ``vp`` in front of the order on every pair;
+- ``recommended``: the shipped recommended pose (every method; ``POINT_POOR_ORDER`` first with
+  at most ``POINT_POOR_MAX_POINTS`` point matches). A pose that is not ``"ok"`` counts as no
+  pose.
 
 ``--fit N`` first fits, on N point-poor pairs of other seeds (the calibration split,
 :data:`CALIBRATION_SEED`), the lines' weight in vp's joint refinement (``VP_LINE_SIGMA_PX``,
@@ -42,11 +45,15 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-METHODS = ("PoseLib", "vp", "vp_checked", "recommended", "recommended (vp_checked first)",
-           "recommended (vp first)")
+METHODS = ("PoseLib", "vp", "vp_checked", "recommended (points' order)",
+           "recommended (vp_checked first)", "recommended (vp first)", "recommended")
+#: The recommended poses compared with PoseLib's (paired differences).
+RECOMMENDED = METHODS[3:]
 #: The calibration split of ``--fit``: point-poor pairs selected like ``point_poor`` from other
 #: seeds (``point_poor`` starts at 2,100,000 and tries at most 1500).
 CALIBRATION_SEED = 2_300_000
+#: The sets scored by default (``--sets``).
+SETS = ("point_poor", "kitti06_kp40", "demon_kp40", "dino_kp40", "kitti06", "demon", "dino")
 #: The grid of ``--fit``: (VP_CHECK_ANGLE_DEG, VP_CHECK_SUPPORT_SLACK).
 FIT_ANGLES = (2.0, 3.0, 5.0, 8.0, 10.0, 15.0)
 FIT_SLACKS = (0, 1, 2, 3, 5, 1000)
@@ -57,13 +64,13 @@ FIT_SIGMAS = (None, 1.0, 0.5, 0.25, 0.1, 0.03, 0.01)
 
 def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:
     """``method -> [(rot, trans) or None]`` over ``pairs``: PoseLib's and vp's raw poses
-    (any pose they return), ``vp_checked`` when ``"ok"`` (support-checked), the shipped
-    recommended pose, and the recommended pose with ``vp_checked`` in front of the order."""
+    (any pose they return), ``vp_checked`` when ``"ok"`` (support-checked), the recommended
+    pose of the points' order (the run without the line solvers, the order before the
+    point-poor order), the same with ``vp_checked`` or ``vp`` in front (on every pair), and
+    the shipped recommended pose (every method; ``vp`` first with at most 30 point matches)."""
     import bench_pose as bp
 
-    from strl_pyg.estimation import line_refine as L
     from strl_pyg.estimation.classical import estimate_relative_pose
-    from strl_pyg.estimation.vanishing import vanishing_point_pose
     from strl_pyg.inference import PoseEstimator
     from strl_pyg.inference.estimator import METHODS as REGISTRY
 
@@ -80,21 +87,21 @@ def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:
         err = lambda T_est, T=T: list(bp.errors(np.asarray(T_est), T))  # noqa: E731
         res = estimate_relative_pose(m, "poselib")
         out["PoseLib"].append(err(res.T_0to1.matrix().numpy()) if res.success else None)
-        sigma = L.VP_LINE_SIGMA_PX
-        res = (vanishing_point_pose(m, starts=[res.T_0to1] if res.success and sigma is not None
-                                    else None, line_sigma_px=sigma) if m.num_lines else None)
-        out["vp"].append(err(res.T_0to1.matrix().numpy())
-                         if res is not None and res.success else None)
         # the recommended pose without the line solvers in the run (their refusals would
         # keep the regression out of it), then the line solvers on the same results
         a = est_without.estimate(m)
         b = est_with.estimate(m, known=a.methods)
+        raw = b.methods["vp"].raw  # the solver's pose before the support check
+        out["vp"].append(err(raw.T_0to1.matrix().numpy())
+                         if raw is not None and raw.success else None)
         vc = b.methods["vp_checked"]
         out["vp_checked"].append(err(vc.T_0to1) if vc.status == "ok" else None)
         out["vp_checked_source"].append(vc.info.get("source") if vc.status == "ok" else None)
         rec = a.pose if a.pose.status == "ok" else None
-        out["recommended"].append(err(rec.T_0to1) if rec is not None else None)
-        out["recommended_method"].append(rec.method if rec is not None else None)
+        out["recommended (points' order)"].append(err(rec.T_0to1) if rec is not None else None)
+        shipped = b.pose if b.pose.status == "ok" else None
+        out["recommended"].append(err(shipped.T_0to1) if shipped is not None else None)
+        out["recommended_method"].append(shipped.method if shipped is not None else None)
         first = vc if vc.status == "ok" else rec
         out["recommended (vp_checked first)"].append(err(first.T_0to1) if first is not None
                                                     else None)
@@ -259,7 +266,15 @@ def main(argv: list[str] | None = None) -> int:
                     help="first fit vp_checked's angle and slack on N calibration pairs and "
                          "print the grid (the package's constants are not changed: set them "
                          "in strl_pyg/inference/methods.py)")
+    ap.add_argument("--sets", default=",".join(SETS),
+                    help=f"comma-separated sets to score, of {', '.join(SETS)} and "
+                         "'calibration' (the --fit split: the evidence for an order)")
     args = ap.parse_args(argv)
+    wanted = [x.strip() for x in args.sets.split(",") if x.strip()]
+    unknown = [x for x in wanted if x not in (*SETS, "calibration")]
+    if unknown:
+        ap.error(f"unknown set(s) {', '.join(unknown)} (expected some of "
+                 f"{', '.join(SETS)}, calibration)")
     cache = Path(args.cache)
     fit_text = ""
     if args.fit:
@@ -271,13 +286,16 @@ def main(argv: list[str] | None = None) -> int:
                   "the fit: set the fitted constants in the package")
         M.VP_CHECK_ANGLE_DEG, M.VP_CHECK_SUPPORT_SLACK = ang, slack
     few = FrontendConfig(max_keypoints=ae.FEW_KEYPOINTS)
-    sets = {"point_poor": ae.point_poor_pairs(cache, args.point_poor),
-            "kitti06_kp40": bp.kitti_pairs(1, cache, config=few),
-            "demon_kp40": bp.demon_pairs(cache, config=few),
-            "dino_kp40": bp.dino_pairs(cache, config=few),
-            "kitti06": bp.kitti_pairs(1, cache),
-            "demon": bp.demon_pairs(cache),
-            "dino": bp.dino_pairs(cache)}
+    load = {"point_poor": lambda: ae.point_poor_pairs(cache, args.point_poor),
+            "kitti06_kp40": lambda: bp.kitti_pairs(1, cache, config=few),
+            "demon_kp40": lambda: bp.demon_pairs(cache, config=few),
+            "dino_kp40": lambda: bp.dino_pairs(cache, config=few),
+            "kitti06": lambda: bp.kitti_pairs(1, cache),
+            "demon": lambda: bp.demon_pairs(cache),
+            "dino": lambda: bp.dino_pairs(cache),
+            "calibration": lambda: ae.point_poor_pairs(cache, args.fit or 100,
+                                                       seed0=CALIBRATION_SEED)}
+    sets = {k: load[k]() for k in wanted}
     sets = {k: v for k, v in sets.items() if v}
     model = StrLPose.from_pretrained()
     scores = {}
@@ -290,9 +308,9 @@ def main(argv: list[str] | None = None) -> int:
              "pairs with a pose, and how many of the pairs have one. Constants: "
              f"VP_LINE_SIGMA_PX {L.VP_LINE_SIGMA_PX}, VP_CHECK_ANGLE_DEG "
              f"{M.VP_CHECK_ANGLE_DEG}, VP_CHECK_SUPPORT_SLACK {M.VP_CHECK_SUPPORT_SLACK}.", "",
-             "| set | pairs | " + " | ".join(METHODS) + " | recommended - PoseLib (AUC) | "
-             "recommended (vp_checked first) - PoseLib | recommended (vp first) - PoseLib |",
-             "|---|---" + "|---" * len(METHODS) + "|---|---|---|"]
+             "| set | pairs | " + " | ".join(METHODS) + " | "
+             + " | ".join(f"{k} - PoseLib (AUC)" for k in RECOMMENDED) + " |",
+             "|---|---" + "|---" * (len(METHODS) + len(RECOMMENDED)) + "|"]
     for name, sc in scores.items():
         cells = []
         for k in METHODS:
@@ -302,7 +320,7 @@ def main(argv: list[str] | None = None) -> int:
             med = f"{np.median(have):.1f}" if have else "-"
             cells.append(f"{a:.1f} [{lo:.1f}-{hi:.1f}]; med {med} ({len(have)})")
         diffs = []
-        for k in ("recommended", "recommended (vp_checked first)", "recommended (vp first)"):
+        for k in RECOMMENDED:
             d, lo, hi = paired_auc_diff(_worst(sc[k]), _worst(sc["PoseLib"]))
             diffs.append(f"{d:+.1f} [{lo:+.1f}-{hi:+.1f}]")
         lines.append(f"| {name} | {len(sc['PoseLib'])} | " + " | ".join(cells)

@@ -55,6 +55,27 @@ def test_same_pose_as_every_method(model, pair, order):
     assert (lazy.num_lines > 0) == reads_lines and full.num_lines > 0
 
 
+def test_few_points_put_the_line_solver_first_with_the_same_pose(model):
+    """At most 30 point matches (the front end limited to 40 keypoints): the lazy path matches
+    the points first, then the lines for vp, and gives the pose of the run of every method."""
+    import torch
+
+    from strl_pyg.geometry.pose import rotation_angle_deg
+    from strl_pyg.inference.estimator import POINT_POOR_MAX_POINTS
+
+    p = generate_pair(0, SceneConfig(kind="street", image_size=(240, 320)))
+    cfg = FrontendConfig(max_keypoints=40)
+    lazy = estimate_recommended(model, p.image0, p.image1, p.K, p.K, cfg)
+    full = PoseEstimator(model).estimate_images(p.image0, p.image1, p.K, p.K, cfg)
+    assert lazy.num_points <= POINT_POOR_MAX_POINTS and lazy.num_lines > 0
+    assert lazy.pose.method == full.pose.method == "vp" and lazy.status == "ok"
+    np.testing.assert_allclose(lazy.T_0to1, full.T_0to1, atol=1e-9)
+    assert set(lazy.methods) < set(full.methods)
+    R = np.asarray(p.T_0to1, float)[:3, :3]
+    err = float(rotation_angle_deg(torch.from_numpy(np.asarray(lazy.T_0to1)[:3, :3].T @ R)))
+    assert err < 2.0, err
+
+
 def test_default_order_runs_the_classical_solver_only(model, pair):
     est = estimate_recommended(model, pair.image0, pair.image1, pair.K, pair.K)
     assert list(est.methods) == [model.metadata["recommended_order"][0]]

@@ -24,7 +24,7 @@ from strl_pyg.data.matches import PairMatches
 __all__ = [
     "ZERO_PARALLAX_PX", "ZERO_PARALLAX_FRACTION", "FOCAL_RANGE", "NORMALISED_K_MAX",
     "prepare_matches", "prepare_graph", "forward_pose", "input_warnings",
-    "intrinsics_problems", "zero_parallax", "network_pose"]
+    "intrinsics_problems", "zero_parallax", "network_pose", "check_device"]
 
 #: Zero parallax: at least this fraction of the point matches moved less than this many
 #: pixels (image 1 re-expressed in image 0's camera when both K are known).
@@ -214,3 +214,28 @@ def zero_parallax(matches: PairMatches) -> bool:
         p1 = (x1 @ K0.T)[:, :2] / (x1 @ K0.T)[:, 2:]
     moved = np.linalg.norm(p1 - p0, axis=1)
     return float(np.mean(moved < ZERO_PARALLAX_PX)) >= ZERO_PARALLAX_FRACTION
+
+
+def check_device(device: Any) -> torch.device | None:
+    """``device`` as a ``torch.device`` (``None`` stays ``None``); ``ValueError`` for a name
+    torch does not know or a device this machine does not have."""
+    if device is None:
+        return None
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError):
+        raise ValueError(f"Expected a torch device such as 'cpu' or 'cuda' (got {device!r})"
+                         ) from None
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            raise ValueError(f"Expected a device this machine has (got {device!r}: CUDA is not "
+                             "available here); use device='cpu', or None for the model's own")
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise ValueError(f"Expected a CUDA device index below {torch.cuda.device_count()} "
+                             f"(got {device!r})")
+    elif dev.type == "mps" and not torch.backends.mps.is_available():
+        raise ValueError(f"Expected a device this machine has (got {device!r}: MPS is not "
+                         "available here); use device='cpu', or None for the model's own")
+    elif dev.type == "meta":
+        raise ValueError(f"Expected a device that holds data (got {device!r})")
+    return dev

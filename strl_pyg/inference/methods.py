@@ -161,6 +161,7 @@ def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     rec = _with_covariance("vp", res.pose.matrix().numpy(), matches, ctx.threshold_px,
                            time_ms=res.time_ms, info=dict(res.info), raw=res)
     rec.info["covariance_kind"] = "first-order"
+    rec.warnings.append("vp: covariance not calibrated (first-order, of its inlier points)")
     return rec
 
 

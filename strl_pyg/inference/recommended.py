@@ -8,7 +8,8 @@ same recommended pose but runs the methods of that order one at a time, stopping
 estimate, ``guided`` reuses the classical one; or at the first ``"unreliable"`` one when the
 intrinsics fail the input checks: every later pose would be too), and matches line segments
 only once a method that reads them (the network's, ``vp``) is about to run: the classical
-solvers use points only.
+solvers use points only. The point matches come first: with few of them the order starts with
+:data:`~strl_pyg.inference.estimator.POINT_POOR_ORDER`.
 
 Same pose: every method is deterministic in the matches and the seed, the point matches do not
 depend on whether lines are matched (``filter_points`` off), and a method's result depends only
@@ -67,7 +68,12 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
             ``threshold_px``, ``device``).
     """
     from strl_pyg.frontend import FrontendConfig, NoMatchesError, match_images
-    from strl_pyg.inference.estimator import METHODS, PoseEstimator, recommended_order
+    from strl_pyg.inference.estimator import (
+        METHODS,
+        POINT_POOR_ORDER,
+        PoseEstimator,
+        recommended_order,
+    )
     from strl_pyg.inference.inputs import intrinsics_problems
 
     cfg = frontend_config if frontend_config is not None else FrontendConfig()
@@ -76,11 +82,24 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
     if K0 is None and K1 is not None:
         raise ValueError("Expected K0 with K1 (got K1 only)")
     K1 = K0 if K1 is None else K1
-    order = [m for m in recommended_order(model) if m in METHODS and METHODS[m].available()]
+    def installed(names):
+        return [m for m in names if m in METHODS and METHODS[m].available()]
+
+    order = installed(recommended_order(model))
     if not order:  # nothing recommended is installed: the estimator reports it
         return PoseEstimator(model, **estimator_kw).estimate_images(image0, image1, K0, K1, cfg)
     matches, est, run = {}, None, ()
     done: dict[bool, dict] = {}  # results per match set: each method runs at most once
+    if installed(POINT_POOR_ORDER):  # the order depends on the number of point matches
+        try:
+            matches[False] = match_images(image0, image1, K0, K1,
+                                          dataclasses.replace(cfg, lines=False))
+        except NoMatchesError:  # the estimator's own "degenerate" record
+            run = methods_needed(order[:1])
+            lines = cfg.lines and any(m in LINE_METHODS for m in run)
+            return PoseEstimator(model, methods=run, **estimator_kw).estimate_images(
+                image0, image1, K0, K1, dataclasses.replace(cfg, lines=lines))
+        order = installed(recommended_order(model, matches[False].num_points))
     for name in order:
         run = methods_needed((*run, name))
         lines = cfg.lines and any(m in LINE_METHODS for m in run)
