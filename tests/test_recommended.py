@@ -63,7 +63,7 @@ def test_few_points_put_the_line_solver_first_with_the_same_pose(model):
     from strl_pyg.geometry.pose import rotation_angle_deg
     from strl_pyg.inference.estimator import POINT_POOR_MAX_POINTS
 
-    p = generate_pair(0, SceneConfig(kind="street", image_size=(240, 320)))
+    p = generate_pair(2, SceneConfig(kind="street", image_size=(240, 320)))
     cfg = FrontendConfig(max_keypoints=40)
     lazy = estimate_recommended(model, p.image0, p.image1, p.K, p.K, cfg)
     full = PoseEstimator(model).estimate_images(p.image0, p.image1, p.K, p.K, cfg)

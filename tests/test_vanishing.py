@@ -244,16 +244,21 @@ def test_a_given_start_wins_where_it_explains_points_and_lines_better(monkeypatc
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, t
     res4 = vanishing_point_pose(m, starts=[T[:3]])  # a (3, 4) array is a start too
-    # no hypothesis of its own (no rotation from the lines): the start still answers
-    monkeypatch.setattr(vanishing, "_rotations", lambda dirs, tol: [])
-    assert not vanishing_point_pose(m).success
-    flipped = T[:3].copy()
-    flipped[:, 3] *= -1
-    only = vanishing_point_pose(m, starts=[flipped])  # the sign of t is set by cheirality
-    assert only.success and only.info["start"] == 0
-    assert _errors(only, R, t)[1] < 1e-3
     np.testing.assert_allclose(res4.T_0to1.matrix().numpy(), res.T_0to1.matrix().numpy(),
                                atol=1e-12)
+    # a start whose t is reversed: the sign is set by cheirality after the refinement
+    flipped = T[:3].copy()
+    flipped[:, 3] *= -1
+    monkeypatch.setattr(vanishing, "_rotations", lambda dirs, tol: [R @ cv2.Rodrigues(
+        axis * np.radians(3))[0]])  # a hypothesis 3 deg off: the start wins
+    only = vanishing_point_pose(m, starts=[flipped])
+    assert only.success and only.info["start"] == 0 and _errors(only, R, t)[1] < 1e-3
+    # no rotation from the lines (the directions' angles disagree between the images): no
+    # answer, with a start neither (it used to be refined on lines that fix no rotation)
+    monkeypatch.setattr(vanishing, "_rotations", lambda dirs, tol: [])
+    for starts in (None, [flipped]):
+        res = vanishing_point_pose(m, starts=starts)
+        assert not res.success and "an angle both images agree on" in res.info["reason"]
 
 
 def test_vp_method_passes_the_supported_classical_pose_whatever_the_order(monkeypatch):
@@ -380,7 +385,9 @@ def test_vp_comes_first_where_points_are_few_and_only_there():
     est = PoseEstimator(methods=("opencv", "vp"), bootstrap=0).estimate(few)
     assert est.methods["vp"].status == "ok" and est.pose.method == "vp"
     np.testing.assert_array_equal(est.T_0to1, est.methods["vp"].T_0to1)
-    assert "vp: covariance not calibrated (first-order, of its inlier points)" in est.pose.warnings
+    # its covariance: first-order, not calibrated (no scale in the record)
+    assert est.pose.info["covariance"] == "first-order"
+    assert "calibration_scale" not in est.pose.info
     assert _errors_T(est.T_0to1, R, t)[0] < 1.0
     many, _, _ = manhattan_pair(0, n_points=POINT_POOR_MAX_POINTS + 1, noise=0.2)
     est = PoseEstimator(methods=("opencv", "vp"), bootstrap=0).estimate(many)

@@ -140,7 +140,8 @@ def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
 METHOD_LABELS = {"regression": "the network's pose head", "opencv": "OpenCV MAGSAC",
                  "poselib": "PoseLib", "fused": "network + classical, information form",
                  "geometric": "the network's weighted eight-point", "guided": "network-guided "
-                 "classical solve"}
+                 "classical solve", "vp": "vanishing-point rotation + 2-point translation",
+                 "vp_checked": "PoseLib checked by the lines' vanishing direction"}
 
 #: ``strl-pose predict``'s exit codes (also in its ``--help``).
 EXIT_CODES = {0: "a pose: status 'ok'",

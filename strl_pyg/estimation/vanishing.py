@@ -256,14 +256,14 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
             else directions)
     info = {"directions": len(dirs), "direction_lines": [int(d[2].sum()) for d in dirs],
             "separation_deg": _separation_deg(dirs)}
-    if info["separation_deg"] < VP_MIN_SEPARATION_DEG:
+    if not info["separation_deg"] >= VP_MIN_SEPARATION_DEG:  # NaN directions too
         return _failed(n, "vp", (time.perf_counter() - start) * 1e3, **info,
                        reason=f"{len(dirs)} vanishing direction(s) shared by the matched lines "
                               "of both images" + (f", the widest two {info['separation_deg']:.0f}"
                                                   " deg apart" if len(dirs) > 1 else "")
                               + f" (needs two at least {VP_MIN_SEPARATION_DEG:g} deg apart)")
     rotations = _rotations(dirs, max_angle_error_deg)
-    if not rotations and not given:
+    if not rotations:  # the lines fix no rotation: a start is not refined on them either
         return _failed(n, "vp", (time.perf_counter() - start) * 1e3, **info,
                        reason=f"{len(dirs)} vanishing direction(s) shared by the matched "
                               "lines of both images (needs two at an angle both images agree "

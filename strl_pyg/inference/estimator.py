@@ -101,8 +101,9 @@ RECOMMENDED_ORDER: tuple[str, ...] = ("poselib", "opencv", "regression")
 #: Where a pair has at most :data:`POINT_POOR_MAX_POINTS` point matches, these methods come
 #: before the recommended order. Fitted on the point-poor calibration split of
 #: ``benchmarks/bench_vanishing.py --sets calibration`` (100 generated pairs of other seeds than
-#: the evaluation's): the recommended pose with ``vp`` first +11.4 AUC@20 points over PoseLib
-#: [+3.7, +18.9], without it -3.6 [-6.7, -0.9]; ``vp_checked`` first +8.5.
+#: the evaluation's, <= 30 point and >= 20 line matches; the bound 30 is that split's
+#: definition, not a fit): the recommended pose with ``vp`` first beats PoseLib beyond the
+#: paired-bootstrap noise, without it it does not (``benchmarks/results_vanishing.md``).
 POINT_POOR_ORDER: tuple[str, ...] = ("vp",)
 POINT_POOR_MAX_POINTS = 30
 

@@ -11,9 +11,9 @@ the context they share; :mod:`strl_pyg.inference.estimator` registers them in :d
 * ``guided``: the classical solver guided by the geometric head's inlier weights
   (:func:`~strl_pyg.estimation.guided.guided_estimate`).
 * ``vp``: the vanishing-point rotation of the matched lines and a 2-point translation
-  (:func:`~strl_pyg.estimation.vanishing.vanishing_point_pose`); opt-in: not in the recommended
-  order, which it made no better on the real point-poor sets
-  (``benchmarks/results_vanishing.md``).
+  (:func:`~strl_pyg.estimation.vanishing.vanishing_point_pose`); first in the recommended order
+  where a pair has at most 30 point matches
+  (:data:`~strl_pyg.inference.estimator.POINT_POOR_ORDER`, ``benchmarks/results_vanishing.md``).
 * ``vp_checked`` (:func:`_vp_checked`): the classical pose, replaced by ``vp``'s where the
   points are few and the lines' strongest vanishing direction contradicts its rotation; opt-in.
 
@@ -160,8 +160,8 @@ def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
                             info=dict(res.info), warnings=[f"vp: {res.info['reason']}"])
     rec = _with_covariance("vp", res.pose.matrix().numpy(), matches, ctx.threshold_px,
                            time_ms=res.time_ms, info=dict(res.info), raw=res)
-    rec.info["covariance_kind"] = "first-order"
-    rec.warnings.append("vp: covariance not calibrated (first-order, of its inlier points)")
+    if rec.covariance is not None:  # the documented key (the CLI prints it)
+        rec.info["covariance"] = "first-order"
     return rec
 
 

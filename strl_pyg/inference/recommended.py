@@ -63,7 +63,8 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
         image0, image1, K0, K1: as :meth:`PoseEstimator.estimate_images
             <strl_pyg.inference.PoseEstimator.estimate_images>` (``K1`` defaults to ``K0``).
         frontend_config: :class:`~strl_pyg.frontend.FrontendConfig` (default: its defaults);
-            its ``lines`` is switched on only when a network method runs.
+            its ``lines`` is switched on only when a method that reads lines runs (the
+            network's, ``vp``).
         estimator_kw: passed to :class:`~strl_pyg.inference.estimator.PoseEstimator` (``seed``,
             ``threshold_px``, ``device``).
     """
@@ -90,16 +91,18 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
         return PoseEstimator(model, **estimator_kw).estimate_images(image0, image1, K0, K1, cfg)
     matches, est, run = {}, None, ()
     done: dict[bool, dict] = {}  # results per match set: each method runs at most once
-    if installed(POINT_POOR_ORDER):  # the order depends on the number of point matches
+    if installed(POINT_POOR_ORDER):  # the order depends on the number of point matches:
+        # the first method's matches first (points only unless it reads lines)
+        run = methods_needed(order[:1])
+        lines = cfg.lines and any(m in LINE_METHODS for m in run)
         try:
-            matches[False] = match_images(image0, image1, K0, K1,
-                                          dataclasses.replace(cfg, lines=False))
+            matches[lines] = match_images(image0, image1, K0, K1,
+                                          dataclasses.replace(cfg, lines=lines))
         except NoMatchesError:  # the estimator's own "degenerate" record
-            run = methods_needed(order[:1])
-            lines = cfg.lines and any(m in LINE_METHODS for m in run)
             return PoseEstimator(model, methods=run, **estimator_kw).estimate_images(
                 image0, image1, K0, K1, dataclasses.replace(cfg, lines=lines))
-        order = installed(recommended_order(model, matches[False].num_points))
+        order = installed(recommended_order(model, matches[lines].num_points))
+        run = ()
     for name in order:
         run = methods_needed((*run, name))
         lines = cfg.lines and any(m in LINE_METHODS for m in run)
