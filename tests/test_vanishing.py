@@ -369,7 +369,7 @@ def test_bad_input_is_one_line():
 
 
 def test_vp_comes_first_where_points_are_few_and_only_there():
-    """The point-poor order (fitted on the point-poor calibration split, +11.4 AUC@20 points
+    """The point-poor order (fitted on the point-poor calibration split, +10.6 AUC@20 points
     over PoseLib): with at most 30 point matches the recommended pose is vp's where it is
     supported, else the calibrated order's; with more, the calibrated order alone."""
     from strl_pyg.inference.estimator import POINT_POOR_MAX_POINTS, POINT_POOR_ORDER

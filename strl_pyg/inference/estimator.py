@@ -88,8 +88,7 @@ from strl_pyg.inference.support import (
 )
 
 __all__ = [
-    "STATUSES", "RECOMMENDED_ORDER", "POINT_POOR_ORDER", "POINT_POOR_MAX_POINTS",
-    "recommended_order", "MIN_POINTS", "ZERO_PARALLAX_PX",
+    "STATUSES", "RECOMMENDED_ORDER", "recommended_order", "MIN_POINTS", "ZERO_PARALLAX_PX",
     "ZERO_PARALLAX_FRACTION",
     "FOCAL_RANGE", "METHODS", "MethodSpec", "MethodResult", "MethodContext", "PoseEstimate",
     "PoseEstimator", "register_method", "prepare_matches", "prepare_graph", "forward_pose",
