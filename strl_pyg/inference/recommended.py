@@ -83,8 +83,22 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
     if K0 is None and K1 is not None:
         raise ValueError("Expected K0 with K1 (got K1 only)")
     K1 = K0 if K1 is None else K1
+
     def installed(names):
         return [m for m in names if m in METHODS and METHODS[m].available()]
+
+    def match(run):
+        """Matches for the methods ``run`` (lines only if one reads them), once per kind;
+        ``(lines, None)``, or the estimator's own "degenerate" estimate when nothing matches."""
+        lines = cfg.lines and any(m in LINE_METHODS for m in run)
+        if lines not in matches:
+            try:
+                matches[lines] = match_images(image0, image1, K0, K1,
+                                              dataclasses.replace(cfg, lines=lines))
+            except NoMatchesError:
+                return lines, PoseEstimator(model, methods=run, **estimator_kw).estimate_images(
+                    image0, image1, K0, K1, dataclasses.replace(cfg, lines=lines))
+        return lines, None
 
     order = installed(recommended_order(model))
     if not order:  # nothing recommended is installed: the estimator reports it
@@ -93,26 +107,15 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
     done: dict[bool, dict] = {}  # results per match set: each method runs at most once
     if installed(POINT_POOR_ORDER):  # the order depends on the number of point matches:
         # the first method's matches first (points only unless it reads lines)
-        run = methods_needed(order[:1])
-        lines = cfg.lines and any(m in LINE_METHODS for m in run)
-        try:
-            matches[lines] = match_images(image0, image1, K0, K1,
-                                          dataclasses.replace(cfg, lines=lines))
-        except NoMatchesError:  # the estimator's own "degenerate" record
-            return PoseEstimator(model, methods=run, **estimator_kw).estimate_images(
-                image0, image1, K0, K1, dataclasses.replace(cfg, lines=lines))
+        lines, degenerate = match(methods_needed(order[:1]))
+        if degenerate is not None:
+            return degenerate
         order = installed(recommended_order(model, matches[lines].num_points))
-        run = ()
     for name in order:
         run = methods_needed((*run, name))
-        lines = cfg.lines and any(m in LINE_METHODS for m in run)
-        if lines not in matches:
-            try:
-                matches[lines] = match_images(image0, image1, K0, K1,
-                                              dataclasses.replace(cfg, lines=lines))
-            except NoMatchesError:  # the estimator's own "degenerate" record
-                return PoseEstimator(model, methods=run, **estimator_kw).estimate_images(
-                    image0, image1, K0, K1, dataclasses.replace(cfg, lines=lines))
+        lines, degenerate = match(run)
+        if degenerate is not None:
+            return degenerate
         m = matches[lines]
         est = PoseEstimator(model, methods=run, **estimator_kw).estimate(
             m, known=done.setdefault(lines, {}))
