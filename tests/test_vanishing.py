@@ -157,8 +157,50 @@ def test_joint_refinement_refuses_bad_starts_and_masks_with_one_line():
         with pytest.raises(ValueError, match="Expected a finite R") as e:
             refine_with_lines(m, bad_R, bad_t, dirs, every)
         assert "\n" not in str(e.value)
-    with pytest.raises(ValueError, match=f"point_mask of length {m.num_points} \\(got 3"):
+    with pytest.raises(ValueError, match=f"boolean array of length {m.num_points} \\(got bool "
+                                         r"of shape \(3,\)"):
         refine_with_lines(m, R, t, dirs, every[:3])
+
+
+def test_joint_refinement_refuses_what_it_used_to_take_silently():
+    # before: a scaled or reflected R was refined as if it were a rotation, an index array of
+    # the right length was read as a mask (index 0 -> False), line_sigma_px=inf dropped the
+    # lines without a word and scale_px=0 made every cost NaN, so the start came back unchanged
+    m, R, t = manhattan_pair(2, n_points=6)
+    dirs, every = vanishing_directions(m), np.ones(m.num_points, bool)
+    for bad_R in (2 * R, R @ np.diag([1.0, 1.0, -1.0])):
+        with pytest.raises(ValueError, match=r"Expected R to be a rotation .*got max") as e:
+            refine_with_lines(m, bad_R, t, dirs, every)
+        assert "\n" not in str(e.value)
+    with pytest.raises(ValueError, match="boolean array .*got int64"):
+        refine_with_lines(m, R, t, dirs, np.arange(m.num_points))
+    with pytest.raises(ValueError, match="finite line_sigma_px > 0 \\(got inf"):
+        refine_with_lines(m, R, t, dirs, every, line_sigma_px=np.inf)
+    for scale in (0.0, np.nan, np.inf):
+        with pytest.raises(ValueError, match="finite scale_px > 0"):
+            refine_with_lines(m, R, t, dirs, every, scale_px=scale)
+    with pytest.raises(ValueError, match="integer iterations"):
+        refine_with_lines(m, R, t, dirs, every, iterations=2.5)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = 1.5 * R, t
+    with pytest.raises(ValueError, match="Expected a start's rotation to be a rotation"):
+        vanishing_point_pose(m, starts=[T])
+    with pytest.raises(ValueError, match="line_sigma_px > 0 \\(the last finite"):
+        vanishing_point_pose(m, line_sigma_px=np.inf)
+
+
+def test_joint_refinement_reads_the_line_weight_at_the_call(monkeypatch):
+    from strl_pyg.estimation import line_refine
+
+    m, R, t = manhattan_pair(2, n_points=6)
+    dirs, every = vanishing_directions(m), np.ones(m.num_points, bool)
+    R_start = cv2.Rodrigues(np.array([0.02, -0.015, 0.01]))[0] @ R
+    want = refine_with_lines(m, R_start, t, dirs, every, line_sigma_px=0.5, iterations=2)
+    monkeypatch.setattr(line_refine, "VP_LINE_SIGMA_PX", 0.5)
+    got = refine_with_lines(m, R_start, t, dirs, every, iterations=2)
+    np.testing.assert_allclose(got[0], want[0], atol=1e-12)
+    other = refine_with_lines(m, R_start, t, dirs, every, line_sigma_px=0.01, iterations=2)
+    assert np.abs(other[0] - want[0]).max() > 1e-9  # the weight matters on this start
 
 
 def test_line_residual_is_the_larger_endpoint_distance_to_the_vanishing_line():

@@ -13,8 +13,8 @@ from strl_pyg.estimation.classical import normalised_matches
 from strl_pyg.geometry import pose_sampson
 from strl_pyg.geometry.manifold import so3_exp, sphere_exp, tangent_basis
 
-__all__ = ["refine_with_lines", "line_sigmas", "VP_LINE_SIGMA_PX", "LINE_NOISE_REF_PX",
-           "LINE_COUNT_REF"]
+__all__ = ["refine_with_lines", "line_sigmas", "check_rotation", "VP_LINE_SIGMA_PX",
+           "LINE_NOISE_REF_PX", "LINE_COUNT_REF", "ROTATION_TOLERANCE"]
 
 #: The lines' weight in the joint refinement (:func:`refine_with_lines`): the pixel distance of
 #: a segment's endpoint to its vanishing line counts like a point's Sampson distance times
@@ -28,6 +28,26 @@ VP_LINE_SIGMA_PX = 0.03
 #: a larger sigma (:func:`line_sigmas`).
 LINE_NOISE_REF_PX = 0.1
 LINE_COUNT_REF = 10
+
+
+#: How far ``R^T R`` may be from the identity (max abs entry) for ``R`` to count as a rotation
+#: (float32 poses converted to float64 reach ~1e-7).
+ROTATION_TOLERANCE = 1e-5
+
+
+def check_rotation(R: np.ndarray, what: str = "R") -> None:
+    """Raises a one-line ``ValueError`` unless ``R`` is a finite ``(3, 3)`` rotation
+    (orthonormal within :data:`ROTATION_TOLERANCE`, determinant +1)."""
+    R = np.asarray(R, float)
+    if R.shape != (3, 3) or not np.isfinite(R).all():
+        raise ValueError(f"Expected {what} as a finite (3, 3) rotation (got shape {R.shape}"
+                         + ("" if R.shape != (3, 3) else ", non-finite entries") + ")")
+    off = float(np.abs(R.T @ R - np.eye(3)).max())
+    det = float(np.linalg.det(R))
+    if off > ROTATION_TOLERANCE or det <= 0:
+        raise ValueError(f"Expected {what} to be a rotation (R^T R = I within "
+                         f"{ROTATION_TOLERANCE:g}, det +1; got max |R^T R - I| {off:.2g}, "
+                         f"det {det:.3g})")
 
 
 def _homogeneous(x: np.ndarray) -> np.ndarray:
@@ -75,8 +95,8 @@ def line_sigmas(matches: PairMatches, directions: list, line_sigma_px: float) ->
     lines of the calibration split's precision, however many and however noisy
     (``benchmarks/results_vanishing.md``).
     """
-    if not line_sigma_px > 0:
-        raise ValueError(f"Expected line_sigma_px > 0 (got {line_sigma_px})")
+    if not 0 < line_sigma_px < np.inf:  # NaN too; inf would silently drop the lines
+        raise ValueError(f"Expected a finite line_sigma_px > 0 (got {line_sigma_px})")
     K0 = np.asarray(matches.K0, float)
     ends, mids, _ = _segments(np.asarray(matches.lines0, float), K0)
     out = []
@@ -90,7 +110,7 @@ def line_sigmas(matches: PairMatches, directions: list, line_sigma_px: float) ->
 
 
 def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, directions: list,
-                      point_mask: np.ndarray, line_sigma_px: float = VP_LINE_SIGMA_PX,
+                      point_mask: np.ndarray, line_sigma_px: float | None = None,
                       scale_px: float = 1.0, iterations: int = 15,
                       return_cost: bool = False) -> tuple:
     """Joint Levenberg-Marquardt refinement of ``(R, t)`` and the vanishing directions on the
@@ -113,8 +133,9 @@ def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, direct
             ``matches`` (``(d0, d1, mask)``).
         point_mask: boolean ``[N]``, the point matches to use (``vanishing_point_pose``
             passes every point: the Cauchy loss bounds the outliers' pull).
-        line_sigma_px, scale_px, iterations: the lines' weight, the Cauchy scale (pixels),
-            the most iterations.
+        line_sigma_px: the lines' weight (finite, > 0); ``None``: :data:`VP_LINE_SIGMA_PX`
+            as it is at the call.
+        scale_px, iterations: the Cauchy scale (pixels, finite, > 0), the most iterations.
         return_cost: also return the final robust cost (comparable between starts on the
             same ``directions`` and ``point_mask``).
 
@@ -127,8 +148,16 @@ def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, direct
     if R.shape != (3, 3) or t.shape != (3,) or not (np.isfinite(R).all() and 0 < t @ t < np.inf):
         raise ValueError(f"Expected a finite R (3, 3) and a finite nonzero t (3,) (got shapes "
                          f"{R.shape}, {t.shape})")
-    if len(point_mask) != n:
-        raise ValueError(f"Expected point_mask of length {n} (got {len(point_mask)})")
+    check_rotation(R)
+    point_mask = np.asarray(point_mask)
+    if point_mask.dtype != bool or point_mask.shape != (n,):
+        raise ValueError(f"Expected point_mask as a boolean array of length {n} (got "
+                         f"{point_mask.dtype} of shape {point_mask.shape})")
+    if line_sigma_px is None:
+        line_sigma_px = VP_LINE_SIGMA_PX
+    if not (0 < scale_px < np.inf) or int(iterations) != iterations or iterations < 0:
+        raise ValueError(f"Expected a finite scale_px > 0 and an integer iterations >= 0 (got "
+                         f"{scale_px}, {iterations})")
     dt = torch.float64
     K0 = torch.as_tensor(np.asarray(matches.K0, float), dtype=dt)
     K1 = torch.as_tensor(np.asarray(matches.K1, float), dtype=dt)

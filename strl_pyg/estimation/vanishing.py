@@ -195,6 +195,7 @@ def _as_Rt(pose) -> tuple[np.ndarray, np.ndarray]:
                          f"(got {type(pose).__name__} of shape {getattr(T, 'shape', None)})")
     if np.linalg.norm(T[:3, 3]) < 1e-12:
         raise ValueError("Expected a start with a nonzero translation (got t = 0)")
+    line_refine.check_rotation(T[:3, :3], "a start's rotation")
     return T[:3, :3], T[:3, 3]
 
 
@@ -222,7 +223,9 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
         directions: :func:`vanishing_directions` of ``matches`` (with ``line_threshold_px`` and
             ``seed``) when the caller has them already; computed here when ``None``.
         line_sigma_px: the lines' weight in the final refinement (:func:`refine_with_lines`);
-            ``None`` refines on the inlier points alone (at least 5), as before.
+            ``None`` refines on the inlier points alone (at least 5), as before. The default
+            is :data:`~strl_pyg.estimation.line_refine.VP_LINE_SIGMA_PX` as it was when this
+            module was imported; the method ``vp`` passes the constant's value at each call.
         starts: other poses (``Pose`` or ``(4, 4)`` / ``(3, 4)`` arrays ``T_0to1``, e.g. the
             5-point solver's) refined like the vanishing-point hypothesis; the refined pose
             of lowest robust cost on all the points and the directions' lines is returned
@@ -243,8 +246,10 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
     if matches.num_points < VP_MIN_POINTS:
         raise ValueError(f"Expected at least {VP_MIN_POINTS} point matches "
                          f"(got {matches.num_points})")
-    if not (threshold_px > 0 < line_threshold_px and (line_sigma_px is None or line_sigma_px > 0)):
-        raise ValueError(f"Expected threshold_px, line_threshold_px, line_sigma_px > 0 (or None)"
+    if not (threshold_px > 0 < line_threshold_px
+            and (line_sigma_px is None or 0 < line_sigma_px < np.inf)):
+        raise ValueError(f"Expected threshold_px, line_threshold_px, line_sigma_px > 0 (the "
+                         f"last finite, or None)"
                          f" (got {threshold_px}, {line_threshold_px}, {line_sigma_px})")
     if starts and line_sigma_px is None:
         raise ValueError("Expected line_sigma_px with starts (the starts are compared on the "
