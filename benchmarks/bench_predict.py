@@ -1,9 +1,12 @@
 """Profile of the predict path against a plain SIFT + MAGSAC pipeline on the same images.
 
 One run, the same decoded images for both sides (real pairs: KITTI 06 frames 0-1, 370x1226;
-DeMoN mvs_test_00000 0-1, 480x640; Middlebury dino 1-2 where present). Every figure is the
-median of ``--repeat`` runs after one warm-up; the ratios compare figures of this run only
-(the machine is shared and noisy).
+DeMoN mvs_test_00000 0-1, 480x640; Middlebury dino 1-2 where present; and a generated
+point-poor pair, :data:`POINT_POOR_SEED` of the ``point_poor`` set, 640x480, written to PNG files
+first: at most 30 point matches, so ``--methods recommended`` puts the line solver ``vp`` first
+and matches the points twice, once without lines to count them and once with lines). Every
+figure is the median of ``--repeat`` runs after one warm-up; the ratios compare figures of this
+run only (the machine is shared and noisy).
 
 * **baseline**: ``cv2.SIFT_create()`` (OpenCV defaults) on both grey images, ``BFMatcher``
   kNN with Lowe's ratio test (0.8), ``cv2.findEssentialMat(USAC_MAGSAC, 0.999, 1 px)`` and
@@ -33,6 +36,7 @@ import argparse
 import os
 import statistics
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -59,6 +63,11 @@ MALLOC_NOTE = (
     "(a long-running one).")
 
 
+#: The generated point-poor pair (the first pair of the ``point_poor`` set of
+#: ``benchmarks/ablation_eval.py``: 23 point and 34 line matches from our front end).
+POINT_POOR_SEED = 2_100_000
+
+
 def _median_ms(fn, repeat: int) -> tuple[float, object]:
     out = fn()  # warm-up
     times = []
@@ -81,9 +90,28 @@ def baseline(img0: np.ndarray, img1: np.ndarray, K: np.ndarray):
     good = [m[0] for m in knn if len(m) == 2 and m[0].distance < 0.8 * m[1].distance]
     p0 = np.float64([k0[m.queryIdx].pt for m in good])
     p1 = np.float64([k1[m.trainIdx].pt for m in good])
+    if len(good) < 5:
+        return None, None, 0
     E, mask = cv2.findEssentialMat(p0, p1, K, method=cv2.USAC_MAGSAC, prob=0.999, threshold=1.0)
+    if E is None:  # no model found (few or degenerate matches): the baseline's time still counts
+        return None, None, 0
     _, R, t, mask = cv2.recoverPose(E[:3], p0, p1, K, mask=mask)
     return R, t, int(mask.sum())
+
+
+def _point_poor_pair(folder: Path):
+    """The generated point-poor pair written to two PNG files in ``folder``."""
+    from strl_pyg.synthetic import generate_pair
+    from strl_pyg.synthetic.distributions import eval_distribution
+
+    dist = eval_distribution("low_texture", kinds=("street", "indoor", "boxes"))
+    p = generate_pair(POINT_POOR_SEED, dist.config(POINT_POOR_SEED))
+    paths = [folder / f"point_poor_{POINT_POOR_SEED}_{i}.png" for i in (0, 1)]
+    for path, img in zip(paths, (p.image0, p.image1), strict=True):
+        if not cv2.imwrite(str(path), img):
+            raise OSError(f"Expected to write '{path}' (cv2.imwrite failed)")
+    return (f"generated point-poor {POINT_POOR_SEED}", paths,
+            np.ascontiguousarray(np.asarray(p.K, dtype=np.float64)))
 
 
 def _pairs(data: Path):
@@ -217,6 +245,8 @@ def main() -> None:
     pairs = _pairs(Path(args.data))
     if not pairs:
         raise SystemExit(f"Expected the real data slices under {args.data} (got none)")
+    tmp = tempfile.TemporaryDirectory()
+    pairs.append(_point_poor_pair(Path(tmp.name)))
     for name, paths, K in pairs:
         t_read, (img0, img1) = _median_ms(lambda p=paths: [read_image_file(x) for x in p],
                                           args.repeat)
