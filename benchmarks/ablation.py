@@ -65,9 +65,12 @@ MULTI_SEED_ROWS = ("baseline", "LP", "V", "full")
 PLAN = ([(r, 0) for r in ("full", "baseline", "LP", "L", "V", "V+W", "LP+V", "R", "LP+R")]
         + [(r, s) for s in (1, 2) for r in MULTI_SEED_ROWS])
 #: The paired comparisons of the report: the issue's two (full vs baseline, LP vs L), then one
-#: per finding of the paper (L alone slightly worse than baseline, LP and V better, W on V).
+#: per finding of the paper (L alone slightly worse than baseline, LP and V better, W on V),
+#: and the visual branch's two forms (R: CNN features of the points' neighbourhoods; V: the
+#: pixel visual graph), alone and with the lines.
 COMPARISONS = (("full", "baseline"), ("LP", "L"), ("L", "baseline"), ("LP", "baseline"),
-               ("V", "baseline"), ("V+W", "V"), ("full", "LP"))
+               ("V", "baseline"), ("V+W", "V"), ("full", "LP"), ("R", "baseline"),
+               ("V", "R"), ("LP+R", "LP"), ("LP+V", "LP+R"))
 STEPS = 2000
 TRAIN_ARGS = [
     "--scene-mix", "lines_small", "--matches", "frontend",
