@@ -38,6 +38,14 @@ REAL_SETS = ("kitti06", "demon", "dino")
 FEW_KEYPOINTS = 40
 
 
+def point_poor_distribution():
+    """The distribution the ``point_poor`` candidates are drawn from (low texture; street,
+    indoor and boxes scenes)."""
+    from strl_pyg.synthetic.distributions import eval_distribution
+
+    return eval_distribution("low_texture", kinds=("street", "indoor", "boxes"))
+
+
 def point_poor_pairs(cache: Path, n: int = POINT_POOR_PAIRS, seed0: int = POINT_POOR_SEED
                      ) -> list[tuple[str, Any, np.ndarray]]:
     """The ``point_poor`` set (see the module docstring); another ``seed0`` gives another
@@ -47,13 +55,12 @@ def point_poor_pairs(cache: Path, n: int = POINT_POOR_PAIRS, seed0: int = POINT_
     from strl_pyg.data.matches import PairMatches
     from strl_pyg.frontend import NoMatchesError, match_images
     from strl_pyg.synthetic import generate_pair
-    from strl_pyg.synthetic.distributions import eval_distribution
 
     def wanted(m) -> bool:
         lines = 0 if m.lines0 is None else len(m.lines0)
         return m.num_points <= 30 and lines >= 20
 
-    dist = eval_distribution("low_texture", kinds=("street", "indoor", "boxes"))
+    dist = point_poor_distribution()
     out = []
     for seed in range(seed0, seed0 + POINT_POOR_MAX_CANDIDATES):
         if len(out) == n:

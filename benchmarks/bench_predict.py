@@ -101,11 +101,11 @@ def baseline(img0: np.ndarray, img1: np.ndarray, K: np.ndarray):
 
 def _point_poor_pair(folder: Path):
     """The generated point-poor pair written to two PNG files in ``folder``."""
-    from strl_pyg.synthetic import generate_pair
-    from strl_pyg.synthetic.distributions import eval_distribution
+    from ablation_eval import point_poor_distribution
 
-    dist = eval_distribution("low_texture", kinds=("street", "indoor", "boxes"))
-    p = generate_pair(POINT_POOR_SEED, dist.config(POINT_POOR_SEED))
+    from strl_pyg.synthetic import generate_pair
+
+    p = generate_pair(POINT_POOR_SEED, point_poor_distribution().config(POINT_POOR_SEED))
     paths = [folder / f"point_poor_{POINT_POOR_SEED}_{i}.png" for i in (0, 1)]
     for path, img in zip(paths, (p.image0, p.image1), strict=True):
         if not cv2.imwrite(str(path), img):

@@ -80,13 +80,12 @@ def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:
     from strl_pyg.estimation.classical import estimate_relative_pose
     from strl_pyg.inference import PoseEstimator
     from strl_pyg.inference.estimator import METHODS as REGISTRY
+    from strl_pyg.inference.estimator import POINT_POOR_MAX_POINTS
 
     lines_only = ("vp", "vp_checked")
     without = tuple(m for m in REGISTRY if m not in lines_only and REGISTRY[m].available())
     est_without = PoseEstimator(model, methods=without)
     est_with = PoseEstimator(model, methods=(*without, *lines_only))
-    from strl_pyg.inference.estimator import POINT_POOR_MAX_POINTS
-
     out = {k: [] for k in (*METHODS, "recommended_method", "vp_checked_source", "point_poor")}
     for _, m, T in tqdm(pairs, desc="pairs", disable=not progress, leave=False):
         if m is None or m.num_points < 5:

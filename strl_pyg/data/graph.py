@@ -35,7 +35,7 @@ from strl_pyg.data.pair_graph import (
     implicit_edge_types,
     materialize_complete_edges,
 )
-from strl_pyg.geometry import normalize_points
+from strl_pyg.geometry import check_rotation, normalize_points
 from strl_pyg.utils.io import atomic_open
 
 __all__ = [
@@ -144,13 +144,7 @@ def _checked_pose_matrix(T_0to1: Any) -> Tensor:
         raise ValueError(f"Expected T_0to1 of shape (4, 4) or (3, 4) (got {T.shape})")
     if not np.isfinite(T).all():
         raise ValueError("Expected a finite T_0to1 (got NaN or inf)")
-    R = T[:3, :3]
-    err = np.abs(R @ R.T - np.eye(3)).max()
-    if err > 1e-4 or np.linalg.det(R) < 0:
-        raise ValueError(
-            f"Expected a rotation (orthonormal, det +1) in T_0to1 (got |RR^T - I| = {err:.2e}, "
-            f"det = {np.linalg.det(R):.3f})"
-        )
+    check_rotation(T[:3, :3], "the rotation of T_0to1", tol=1e-4)
     return torch.from_numpy(T).float()
 
 

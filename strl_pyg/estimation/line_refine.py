@@ -10,11 +10,11 @@ import torch
 
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.estimation.classical import normalised_matches
-from strl_pyg.geometry import pose_sampson
+from strl_pyg.geometry import check_rotation, pose_sampson
 from strl_pyg.geometry.manifold import so3_exp, sphere_exp, tangent_basis
 
-__all__ = ["refine_with_lines", "line_sigmas", "check_rotation", "VP_LINE_SIGMA_PX",
-           "LINE_NOISE_REF_PX", "LINE_COUNT_REF", "ROTATION_TOLERANCE"]
+__all__ = ["refine_with_lines", "line_sigmas", "VP_LINE_SIGMA_PX", "LINE_NOISE_REF_PX",
+           "LINE_COUNT_REF"]
 
 #: The lines' weight in the joint refinement (:func:`refine_with_lines`): the pixel distance of
 #: a segment's endpoint to its vanishing line counts like a point's Sampson distance times
@@ -28,26 +28,6 @@ VP_LINE_SIGMA_PX = 0.03
 #: a larger sigma (:func:`line_sigmas`).
 LINE_NOISE_REF_PX = 0.1
 LINE_COUNT_REF = 10
-
-
-#: How far ``R^T R`` may be from the identity (max abs entry) for ``R`` to count as a rotation
-#: (float32 poses converted to float64 reach ~1e-7).
-ROTATION_TOLERANCE = 1e-5
-
-
-def check_rotation(R: np.ndarray, what: str = "R") -> None:
-    """Raises a one-line ``ValueError`` unless ``R`` is a finite ``(3, 3)`` rotation
-    (orthonormal within :data:`ROTATION_TOLERANCE`, determinant +1)."""
-    R = np.asarray(R, float)
-    if R.shape != (3, 3) or not np.isfinite(R).all():
-        raise ValueError(f"Expected {what} as a finite (3, 3) rotation (got shape {R.shape}"
-                         + ("" if R.shape != (3, 3) else ", non-finite entries") + ")")
-    off = float(np.abs(R.T @ R - np.eye(3)).max())
-    det = float(np.linalg.det(R))
-    if off > ROTATION_TOLERANCE or det <= 0:
-        raise ValueError(f"Expected {what} to be a rotation (R^T R = I within "
-                         f"{ROTATION_TOLERANCE:g}, det +1; got max |R^T R - I| {off:.2g}, "
-                         f"det {det:.3g})")
 
 
 def _homogeneous(x: np.ndarray) -> np.ndarray:

@@ -44,7 +44,7 @@ from strl_pyg.estimation.line_refine import (
     _vp_residual_px,
     refine_with_lines,
 )
-from strl_pyg.geometry import Pose, pose_sampson
+from strl_pyg.geometry import Pose, check_rotation, pose_sampson
 
 __all__ = ["vanishing_directions", "vanishing_point_pose", "refine_with_lines", "VP_MIN_LINES",
            "VP_MIN_POINTS", "VP_MIN_SEPARATION_DEG"]
@@ -195,7 +195,7 @@ def _as_Rt(pose) -> tuple[np.ndarray, np.ndarray]:
                          f"(got {type(pose).__name__} of shape {getattr(T, 'shape', None)})")
     if np.linalg.norm(T[:3, 3]) < 1e-12:
         raise ValueError("Expected a start with a nonzero translation (got t = 0)")
-    line_refine.check_rotation(T[:3, :3], "a start's rotation")
+    check_rotation(T[:3, :3], "a start's rotation")
     return T[:3, :3], T[:3, 3]
 
 

@@ -14,6 +14,8 @@ import torch
 
 __all__ = [
     "as_tensor",
+    "check_rotation",
+    "ROTATION_TOLERANCE",
     "rotation_to_quaternion",
     "quaternion_to_rotation",
     "rotation_angle_deg",
@@ -23,6 +25,26 @@ __all__ = [
     "relative_pose_from_c2w",
     "relative_pose_from_w2c",
 ]
+
+
+#: How far ``R R^T`` may be from the identity (max abs entry) for :func:`check_rotation` by
+#: default (float32 rotations converted to float64 reach ~1e-7).
+ROTATION_TOLERANCE = 1e-5
+
+
+def check_rotation(R: Any, what: str = "R", tol: float = ROTATION_TOLERANCE) -> None:
+    """Raises a one-line ``ValueError`` unless ``R`` is a finite ``(3, 3)`` rotation:
+    ``max |R R^T - I| <= tol`` and ``det R > 0`` (a scaled matrix or a reflection is an error,
+    never a rotation). ``what`` names ``R`` in the message."""
+    R = np.asarray(R.detach().cpu() if isinstance(R, torch.Tensor) else R, dtype=np.float64)
+    if R.shape != (3, 3) or not np.isfinite(R).all():
+        raise ValueError(f"Expected {what} as a finite (3, 3) rotation (got shape {R.shape}"
+                         + ("" if R.shape != (3, 3) else ", non-finite entries") + ")")
+    err = float(np.abs(R @ R.T - np.eye(3)).max())
+    det = float(np.linalg.det(R))
+    if err > tol or det <= 0:
+        raise ValueError(f"Expected {what} to be a rotation (orthonormal within {tol:g}, det +1) "
+                         f"(got |RR^T - I| = {err:.2e}, det = {det:.3f})")
 
 
 def _kornia_conversions():
