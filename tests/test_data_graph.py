@@ -125,7 +125,7 @@ def test_batching_offsets_every_edge_type():
     implicit = [build_pair_graph(make(n, m, seed=n)) for n, m in [(3, 2), (5, 0), (1, 3)]]
     b2 = next(iter(DataLoader(implicit, batch_size=3)))
     assert has_implicit_complete_edges(b2) and b2[K.SELF_EDGE_TYPES[0]][K.DENSE].shape == (3,)
-    materialize_complete_edges(b2)
+    b2 = materialize_complete_edges(b2)
     for et in K.COMPLETE_EDGE_TYPES:
         a = batch[et].edge_index
         b = b2[et].edge_index

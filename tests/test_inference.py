@@ -235,12 +235,25 @@ def test_an_implausible_K_warns(pair, change, message):
     assert any(message in w for w in est.warnings), est.warnings
 
 
-def test_no_intrinsics_runs_the_network_only_and_says_so(model, pair):
+def test_no_intrinsics_gives_no_plain_ok_and_a_fundamental_matrix(model, pair):
+    # was: "ok" from the regression, with a sigma calibrated on K-normalised pairs (a
+    # Strecha pair without --K: 10.6 deg off, sigma 2.3 deg)
     m = replace(pair.matches, K0=None, K1=None)
     est = PoseEstimator(model).estimate(m)
     assert est.methods["opencv"].status == "failed"
-    assert est.status == "ok" and est.pose.method == "regression"
-    assert any("no intrinsics" in w for w in est.warnings)
+    assert est.status == "unreliable" and est.T_0to1 is None and est.pose.sigma is None
+    assert est.methods["regression"].status == "unreliable"
+    assert any("no metric pose without intrinsics" in w for w in est.warnings)
+    # the route without intrinsics: the fundamental matrix of the pixels, x1^T F x0 = 0
+    F = est.pose.info["fundamental_matrix"]
+    K, T = pair.K, pair.T_0to1
+    t = T[:3, 3]
+    E_gt = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]]) @ T[:3, :3]
+    E = K.T @ F @ K
+    E, E_gt = E / np.linalg.norm(E), E_gt / np.linalg.norm(E_gt)
+    assert min(np.abs(E - E_gt).max(), np.abs(E + E_gt).max()) < 1e-2
+    assert est.pose.info["fundamental_inliers"] > 0.8 * m.num_points
+    assert est.to_dict()["pose"]["info"]["fundamental_matrix"] is not None
 
 
 @pytest.mark.parametrize("dtype, tol", [(torch.bfloat16, 2.0), (torch.float64, 1e-3)])

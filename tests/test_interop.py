@@ -170,7 +170,7 @@ def test_batch_roundtrip_subgraph_and_device():
     # subgraph of a complete graph is complete on the kept nodes
     keep = {K.POINT: torch.tensor([0, 2, 4, 6, 9]), K.ENDPOINT: torch.tensor([1, 2, 3, 7])}
     s, se = implicit.subgraph(keep), explicit.subgraph(keep)
-    materialize_complete_edges(s)
+    s = materialize_complete_edges(s)
     for et in K.EDGE_TYPES:
         assert edge_set(s[et].edge_index) == edge_set(se[et].edge_index), et
     moved = implicit.to("meta")

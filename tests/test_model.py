@@ -132,7 +132,10 @@ def test_explicit_edges_match_dense_path(name, geometric):
         grads.append([p.grad.clone() for p in model.parameters()])
     torch.testing.assert_close(outs[0], outs[1], atol=1e-5, rtol=1e-5)
     for a, b in zip(*grads, strict=True):
-        torch.testing.assert_close(a, b, atol=1e-5, rtol=1e-4)
+        # float32 sums in another order: the error scales with the tensor's largest entry
+        # (the standardised flow inputs make the first layer's gradients ~50x larger)
+        scale = float(b.abs().max().clamp_min(1.0))
+        torch.testing.assert_close(a, b, atol=1e-5 * scale, rtol=1e-4)
 
 
 def test_batch_equals_single_pairs():

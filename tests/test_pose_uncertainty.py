@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from strl_pyg.estimation.classical import estimate_relative_pose
-from strl_pyg.estimation.uncertainty import bootstrap_covariance
+from strl_pyg.estimation.uncertainty import bootstrap_covariance, cap_covariance
 from strl_pyg.inference.estimator import PoseEstimator
 from strl_pyg.synthetic import SceneConfig, generate_pair
 
@@ -180,8 +180,12 @@ def test_guided_covariance_is_first_order_plus_the_bootstrap_of_its_solve(kind, 
     sub = pair.matches if subset is None else pair.matches.select(point_index=subset)
     boot = bootstrap_covariance(sub, raw.pose, base, 8, 1.0, 0)
     scale = g.info.get("calibration_scale", 1.0)
-    np.testing.assert_allclose(g.covariance, scale * (g0.covariance / g0.info.get(
-        "calibration_scale", 1.0) + boot), rtol=1e-9)
+    # the estimator's record is the sum, calibrated, then capped at 180 deg RMS per block
+    uncapped = g0.info.get("calibration_scale", 1.0)
+    expected = scale * (g0.covariance / uncapped + boot)
+    assert not g0.info.get("sigma_capped")
+    np.testing.assert_allclose(g.covariance, cap_covariance(expected)[0], rtol=1e-9)
+    assert g.info.get("sigma_capped", False) == cap_covariance(expected)[1]
 
 
 def test_fused_covariance_adds_the_classical_bootstrap(pair):

@@ -174,6 +174,14 @@ def _print_estimate(est, indent: str = "") -> None:
                   f"translation direction {pose.sigma['translation_deg']:.3f} deg")
     else:
         print(f"{indent}pose: {pose.status}, no pose given")
+    if "fundamental_matrix" in pose.info:  # the route without intrinsics
+        F = pose.info["fundamental_matrix"]
+        if F is None:
+            print(f"{indent}fundamental matrix (no intrinsics): none found")
+        else:
+            rows = "; ".join(" ".join(f"{v:+.4e}" for v in row) for row in np.asarray(F))
+            print(f"{indent}fundamental matrix (no intrinsics; x1^T F x0 = 0, pixels, "
+                  f"{pose.info['fundamental_inliers']} inliers): [{rows}]")
     for w in pose.warnings:
         print(f"{indent}warning: {w}")
     print(f"{indent}methods:")

@@ -254,7 +254,7 @@ def build_pair_graph(
     for et in keys_.COMPLETE_EDGE_TYPES:
         data[et][keys_.DENSE] = torch.ones(1, dtype=torch.bool)
     if complete_edges == "explicit":
-        materialize_complete_edges(data)
+        data = materialize_complete_edges(data)
 
     data[keys_.IMAGE_SIZE0] = torch.tensor([sizes[0]], dtype=torch.long)
     data[keys_.IMAGE_SIZE1] = torch.tensor([sizes[1]], dtype=torch.long)

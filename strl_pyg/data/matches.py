@@ -25,7 +25,13 @@ __all__ = [
     "LINE_ENDPOINTS",
     "ENDPOINTS_CORRESPONDING",
     "ENDPOINTS_AS_DETECTED",
+    "DUPLICATE_TOLERANCE_PX",
+    "first_unique_rows",
 ]
+
+#: Two matches closer than this (pixels, in every coordinate of both images) are one
+#: correspondence: :meth:`PairMatches.deduplicated`.
+DUPLICATE_TOLERANCE_PX = 1e-3
 
 #: ``PairMatches.info`` key saying whether the lines' endpoints correspond, and its values:
 #: ``"corresponding"`` (endpoint ``k`` matches endpoint ``k``: the front end's epipolar
@@ -305,6 +311,44 @@ class PairMatches:
         )
         return PairMatches(**kwargs)
 
+    def deduplicated(self, tol_px: float = DUPLICATE_TOLERANCE_PX) -> tuple[PairMatches,
+                                                                           list[str]]:
+        """The matches with each correspondence once, and one-line notes of what was found.
+
+        Repeated rows (both images' coordinates within ``tol_px``) are kept once, the first
+        occurrence with its score: a match listed ``k`` times is one observation, so it must
+        not count ``k`` times towards a minimum count, the support of a pose or the spread of
+        a bootstrap. Rows that share one side with another match but not the other
+        (one-to-many, many-to-one) are kept and counted in a note: only
+        :attr:`num_distinct_points` of them can constrain a pose. Returns ``self`` when
+        nothing was repeated."""
+        notes = []
+        pi = first_unique_rows(np.concatenate([self.points0, self.points1], axis=1), tol_px)
+        li = first_unique_rows(np.concatenate([self.lines0, self.lines1], axis=1), tol_px)
+        dp, dl = self.num_points - len(pi), self.num_lines - len(li)
+        if dp or dl:
+            what = [f"{d} repeated {kind} matches" for d, kind in ((dp, "point"), (dl, "line"))
+                    if d]
+            notes.append(f"{' and '.join(what)} removed (a repeated match is one "
+                         f"correspondence): {len(pi)} point and {len(li)} line matches remain")
+        out = self if not (dp or dl) else self.select(pi, li)
+        shared = [(int(len(out.points0) - _distinct(out.points0, tol_px)), 0),
+                  (int(len(out.points1) - _distinct(out.points1, tol_px)), 1)]
+        for extra, side in shared:
+            # a few reused keypoints are usual (SIFT keeps one keypoint per orientation at a
+            # location); a note when they change what the pair can determine
+            if extra and (extra > 0.1 * out.num_points or out.num_distinct_points < 8):
+                notes.append(f"{extra} point matches reuse a point of image {side} that another "
+                             f"match already uses (one-to-many): {out.num_distinct_points} "
+                             "distinct correspondences")
+        return out, notes
+
+    @property
+    def num_distinct_points(self) -> int:
+        """Point matches that can constrain a pose: the smaller of the numbers of distinct
+        points in image 0 and in image 1 (equal to :attr:`num_points` without repeats)."""
+        return min(_distinct(self.points0), _distinct(self.points1))
+
     # ------------------------------------------------------------------ I/O
     def save(self, path: str | os.PathLike) -> Path:
         """Saves to ``.npz`` atomically (temporary file, then rename).
@@ -332,6 +376,22 @@ class PairMatches:
         kwargs = {k: data[k] for k in _NPZ_ARRAYS if k in data}
         info = json.loads(str(data["info_json"])) if "info_json" in data else {}
         return cls(**kwargs, info=info)
+
+
+def first_unique_rows(rows: np.ndarray, tol: float = DUPLICATE_TOLERANCE_PX) -> np.ndarray:
+    """Sorted indices of the first occurrence of each distinct row of ``rows`` ``[N, ...]``
+    (rows equal within ``tol`` in every value are one)."""
+    if len(rows) == 0:
+        return np.zeros(0, dtype=np.int64)
+    keys = np.round(np.asarray(rows).reshape(len(rows), -1) / tol).astype(np.int64)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    return np.sort(first)
+
+
+def _distinct(points: np.ndarray, tol_px: float = DUPLICATE_TOLERANCE_PX) -> int:
+    if len(points) == 0:
+        return 0
+    return len(np.unique(np.round(points / tol_px).astype(np.int64), axis=0))
 
 
 def atomic_save_npz(path: str | os.PathLike, arrays: dict[str, np.ndarray]) -> None:

@@ -153,22 +153,26 @@ def has_implicit_complete_edges(data: HeteroData) -> bool:
 
 
 def materialize_complete_edges(data: HeteroData) -> HeteroData:
-    """Replaces every implicit complete edge type by an explicit ``edge_index`` (in place).
+    """A shallow copy of ``data`` with every implicit complete edge type (a ``dense`` marker
+    and no ``edge_index``, whatever its node types are called) given an explicit
+    ``edge_index``; ``data`` itself is not changed, and neither are its explicit edge types.
 
     Works on single graphs and on batches, on any device. Memory grows O(N^2): intended for
     sparse or pruned attention, for PyG code that needs every edge, and as the reference path
     that tests compare the dense path against.
     """
+    implicit = implicit_edge_types(data)
+    out = copy.copy(data)
     num_graphs = _num_graphs(data)
-    legacy = [et for et in implicit_edge_types(data) if et not in keys_.COMPLETE_EDGE_TYPES]
-    for et in (*keys_.COMPLETE_EDGE_TYPES, *legacy):
-        src, _, dst = et
-        data[et].edge_index = complete_edge_index(
-            _batch_of(data, src), _batch_of(data, dst), num_graphs
-        )
-        if keys_.DENSE in data[et]:
-            del data[et][keys_.DENSE]
-    return data
+    for src, rel, dst in implicit:
+        for nt in (src, dst):
+            if nt not in data.node_types:
+                raise ValueError(f"Expected node type '{nt}' of implicit edge type "
+                                 f"{(src, rel, dst)} in the graph (got {data.node_types})")
+        out[(src, rel, dst)].edge_index = complete_edge_index(
+            _batch_of(data, src), _batch_of(data, dst), num_graphs)
+        del out[(src, rel, dst)][keys_.DENSE]
+    return out
 
 
 def drop_legacy_cross_edges(data: HeteroData) -> HeteroData:

@@ -87,8 +87,13 @@ class FixedSizeResample(BaseTransform):
                     store[key] = value[idx]
             store.num_nodes = idx.numel()
         data[keys_.LINE_EDGE].edge_index = line_edge_index(li.numel())
-        if explicit:
-            materialize_complete_edges(data)
+        if explicit:  # the complete edges of the kept nodes, rebuilt
+            for et in keys_.COMPLETE_EDGE_TYPES:
+                if et in data.edge_types:
+                    if keys_.EDGE_INDEX in data[et]:
+                        del data[et][keys_.EDGE_INDEX]
+                    data[et][keys_.DENSE] = torch.ones(1, dtype=torch.bool)
+            data = materialize_complete_edges(data)
         return data
 
     def __repr__(self) -> str:

@@ -27,7 +27,12 @@ from strl_pyg.data.matches import PairMatches
 from strl_pyg.geometry import Pose, normalize_points
 
 __all__ = ["BaselineResult", "BASELINE_METHODS", "MIN_POINTS", "estimate_relative_pose",
-           "mean_focal", "normalised_matches", "have_poselib"]
+           "mean_focal", "normalised_matches", "have_poselib", "fundamental_matrix",
+           "MIN_POINTS_FUNDAMENTAL"]
+
+#: Point matches of the seven/eight-point fundamental-matrix estimate (its minimal sample is
+#: 7; MAGSAC's final fit uses 8).
+MIN_POINTS_FUNDAMENTAL = 8
 
 #: Methods accepted by :func:`estimate_relative_pose`.
 BASELINE_METHODS = ("opencv", "poselib")
@@ -120,6 +125,28 @@ def estimate_relative_pose(
             ) from err
         return _poselib(matches, poselib, threshold_px, confidence, max_iterations, seed)
     return _opencv(matches, threshold_px, confidence, max_iterations, seed)
+
+
+def fundamental_matrix(matches: PairMatches, threshold_px: float = 1.0, seed: int = 0,
+                       confidence: float = 0.9999, max_iterations: int = 10_000
+                       ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The fundamental matrix ``F`` (``x1^T F x0 = 0``, pixels) of the point matches by
+    OpenCV's ``USAC_MAGSAC``, for pairs without intrinsics: the epipolar geometry they
+    determine when no metric pose can be had. Returns ``(F [3, 3], inlier mask [Np])`` or
+    ``None`` (fewer than :data:`MIN_POINTS_FUNDAMENTAL` matches, or no model)."""
+    if matches.num_points < MIN_POINTS_FUNDAMENTAL:
+        return None
+    cv2.setRNGSeed(int(seed))
+    try:
+        F, mask = cv2.findFundamentalMat(
+            np.ascontiguousarray(matches.points0, dtype=np.float64),
+            np.ascontiguousarray(matches.points1, dtype=np.float64),
+            cv2.USAC_MAGSAC, float(threshold_px), confidence, max_iterations)
+    except cv2.error:
+        return None
+    if F is None or F.shape != (3, 3) or mask is None or not np.isfinite(F).all():
+        return None
+    return F / np.linalg.norm(F), mask.reshape(-1).astype(bool)
 
 
 def have_poselib() -> bool:

@@ -17,7 +17,7 @@ with one scale per method (``benchmarks/bench_pose.py --calibrate``).
 from __future__ import annotations
 
 import copy
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -27,7 +27,9 @@ from strl_pyg.estimation.classical import estimate_relative_pose
 from strl_pyg.geometry import Pose
 from strl_pyg.utils.threads import available_cores, shared_pool
 
-__all__ = ["bootstrap_covariance", "MIN_BOOTSTRAP", "BOOTSTRAPPED"]
+__all__ = ["bootstrap_covariance", "bootstrap_resamples", "Bootstrap", "cap_covariance",
+           "MIN_BOOTSTRAP", "BOOTSTRAPPED", "FAR_ROTATION_DEG", "FAR_TRANSLATION_DEG",
+           "MAX_SIGMA_DEG"]
 
 #: The methods whose records carry first-order + bootstrap covariances (``guided``: the
 #: bootstrap of its chosen classical solve, on the matches that solve used; ``fused``: the
@@ -37,10 +39,58 @@ BOOTSTRAPPED = ("poselib", "opencv", "guided", "fused")
 #: Fewest resamples that give a covariance (a 5x5 covariance from fewer is mostly noise).
 MIN_BOOTSTRAP = 3
 
+#: A resample whose pose is this far from the estimate (rotation, or translation direction)
+#: found another solution, not the same one with other noise: far beyond the first-order
+#: spread of any pair the solvers call supported (tenths of a degree to a few degrees).
+FAR_ROTATION_DEG = 10.0
+FAR_TRANSLATION_DEG = 30.0
+
+#: The largest RMS angle a sigma can state: no rotation or direction is further than 180 deg
+#: from another, so a larger sigma says nothing more (:func:`cap_covariance`).
+MAX_SIGMA_DEG = 180.0
+
+
+@dataclass
+class Bootstrap:
+    """:func:`bootstrap_resamples`: the second moment ``covariance`` ``[5, 5]`` of the
+    resampled poses about the estimate, how many ``resamples`` gave a pose, and how many of
+    them are ``far`` (:data:`FAR_ROTATION_DEG` / :data:`FAR_TRANSLATION_DEG`): resamples that
+    disagree with the estimate about the solution itself."""
+
+    covariance: np.ndarray
+    resamples: int
+    far: int
+
+
+def cap_covariance(cov: np.ndarray) -> tuple[np.ndarray, bool]:
+    """``cov`` ``[5, 5]`` (tangent parameters, rad) with its rotation and translation blocks
+    each scaled down so that the RMS angle ``sqrt(trace)`` is at most :data:`MAX_SIGMA_DEG`;
+    and whether it was capped. A first-order Gaussian in a chart of the sphere or of SO(3)
+    means nothing beyond that (the calibrated bootstrap of an ambiguous pair reached 203 deg)."""
+    cov = np.array(cov, dtype=np.float64, copy=True)
+    limit = np.radians(MAX_SIGMA_DEG) ** 2
+    capped = False
+    for sl in (slice(0, 3), slice(3, 5)):
+        tr = float(np.trace(cov[sl, sl]))
+        if tr > limit:
+            cov[sl, :] *= np.sqrt(limit / tr)
+            cov[:, sl] *= np.sqrt(limit / tr)
+            capped = True
+    return cov, capped
+
 
 def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poselib",
                          n: int = 8, threshold_px: float = 1.0, seed: int = 0,
                          workers: int | None = None) -> np.ndarray | None:
+    """The covariance of :func:`bootstrap_resamples` (``None`` with fewer than
+    :data:`MIN_BOOTSTRAP` poses); arguments as there."""
+    boot = bootstrap_resamples(matches, pose, method, n, threshold_px, seed, workers)
+    return None if boot is None else boot.covariance
+
+
+def bootstrap_resamples(matches: PairMatches, pose: Pose, method: str = "poselib",
+                        n: int = 8, threshold_px: float = 1.0, seed: int = 0,
+                        workers: int | None = None) -> Bootstrap | None:
     """Covariance ``[5, 5]`` (float64) of the robust estimate ``pose`` of ``matches``, from
     ``n`` bootstrap resamples of its point matches, in the tangent parameters of
     :func:`strl_pyg.estimation.fusion.pose_to_tangent` (rotation increment ``w``, rad; translation
@@ -120,4 +170,7 @@ def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poseli
                         R0, t0, basis).numpy().astype(np.float64)
     # second moment about the estimate (the chart origin), not about the resamples' mean: when
     # the resamples agree on another solution, that offset is part of the uncertainty
-    return X.T @ X / len(X)
+    rot = np.degrees(np.linalg.norm(X[:, :3], axis=1))
+    trans = np.degrees(np.linalg.norm(X[:, 3:], axis=1))
+    far = int(((rot > FAR_ROTATION_DEG) | (trans > FAR_TRANSLATION_DEG)).sum())
+    return Bootstrap(X.T @ X / len(X), len(X), far)

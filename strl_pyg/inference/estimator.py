@@ -50,7 +50,7 @@ from strl_pyg.estimation.classical import (
     MIN_POINTS,
     estimate_relative_pose,  # noqa: F401  (0.1.x name here)
 )
-from strl_pyg.estimation.uncertainty import BOOTSTRAPPED
+from strl_pyg.estimation.uncertainty import BOOTSTRAPPED, MAX_SIGMA_DEG, cap_covariance
 from strl_pyg.inference.inputs import (
     FOCAL_RANGE,
     NORMALISED_K_MAX,  # noqa: F401  (importable from here like the module's other names)
@@ -185,6 +185,27 @@ register_method("vp_checked", _vp_checked)
 
 
 # ----------------------------------------------------------------------------- estimator
+#: Why every pose of a pair without intrinsics is ``"unreliable"``.
+NO_INTRINSICS = ("no metric pose without intrinsics K0, K1 (the network's pose from "
+                 "coordinates normalised by the image size is not one): the pair's epipolar "
+                 "geometry is its fundamental matrix, info['fundamental_matrix']")
+
+
+def _attach_fundamental(estimate: PoseEstimate, matches: PairMatches, threshold_px: float,
+                        seed: int) -> None:
+    """The route without intrinsics: the fundamental matrix of the point matches (OpenCV
+    MAGSAC, pixels) in the recommended record's ``info``, with its inlier mask."""
+    from strl_pyg.estimation.classical import fundamental_matrix
+
+    found = fundamental_matrix(matches, threshold_px, seed)
+    info = dict(estimate.pose.info)  # the record may share its dict with a method's
+    info["fundamental_matrix"] = None if found is None else found[0]
+    if found is not None:
+        info["fundamental_inliers"] = int(found[1].sum())
+        info["fundamental_inlier_mask"] = found[1]
+    estimate.pose.info = info
+
+
 def _unique(items: list[str]) -> list[str]:
     return list(dict.fromkeys(items))
 
@@ -304,7 +325,11 @@ class PoseEstimator:
             raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")
         warnings = input_warnings(matches.image_size0, matches.image_size1, matches.K0,
                                   matches.K1)
-        n, degenerate = matches.num_points, None
+        # every decision (minimum counts, support, bootstrap sigma) counts correspondences,
+        # not rows: a match repeated k times is one observation
+        matches, repeats = matches.deduplicated()
+        warnings += repeats
+        n, degenerate = matches.num_distinct_points, None
         if zero_parallax(matches):
             degenerate = (f"zero parallax: most of the {n} point matches moved less than "
                           f"{ZERO_PARALLAX_PX} px (identical or near-identical images): the "
@@ -328,7 +353,8 @@ class PoseEstimator:
                 res = MethodResult(name, "degenerate", warnings=[degenerate])
             elif n < spec.min_points:
                 res = MethodResult(name, "degenerate", warnings=[
-                    f"too few point matches for {name}: {n} (needs {spec.min_points})"])
+                    f"too few point matches for {name}: {n} distinct (needs "
+                    f"{spec.min_points})"])
             elif spec.needs_intrinsics and not matches.has_intrinsics:
                 res = MethodResult(name, "failed",
                                    warnings=[f"{name} needs intrinsics K0, K1 (got none)"])
@@ -358,6 +384,12 @@ class PoseEstimator:
             if scale is not None and res.covariance is not None:
                 res.covariance = res.covariance * scale
                 res.info["calibration_scale"] = scale
+            if res.covariance is not None:
+                res.covariance, capped = cap_covariance(res.covariance)
+                if capped:
+                    res.info["sigma_capped"] = True
+                    res.warnings.append(f"{name}: sigma capped at {MAX_SIGMA_DEG:g} deg (its "
+                                        "covariance stated more: the pose is ambiguous)")
             ctx.results[name] = res
         problems = intrinsics_problems(matches.image_size0, matches.image_size1, matches.K0,
                                        matches.K1)
@@ -366,7 +398,16 @@ class PoseEstimator:
             for name, res in ctx.results.items():
                 if why not in res.warnings:  # a known result may carry it already
                     ctx.results[name] = res.unreliable([why])
-        return self._recommend(ctx.results, warnings, matches)
+        if not matches.has_intrinsics:
+            # the network then reads coordinates normalised by the image size, not by K: its
+            # rotation and its calibrated sigma are not those of a calibrated pair
+            for name, res in ctx.results.items():
+                if NO_INTRINSICS not in res.warnings:
+                    ctx.results[name] = res.unreliable([NO_INTRINSICS])
+        estimate = self._recommend(ctx.results, warnings, matches)
+        if not matches.has_intrinsics:
+            _attach_fundamental(estimate, matches, self.threshold_px, self.seed)
+        return estimate
 
     def estimate_images(self, image0: np.ndarray, image1: np.ndarray, K0: Any = None,
                         K1: Any = None, frontend_config: Any = None) -> PoseEstimate:

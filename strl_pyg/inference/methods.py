@@ -35,7 +35,11 @@ import torch
 
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.estimation.classical import estimate_relative_pose, have_poselib
-from strl_pyg.estimation.uncertainty import bootstrap_covariance
+from strl_pyg.estimation.uncertainty import (
+    FAR_ROTATION_DEG,
+    FAR_TRANSLATION_DEG,
+    bootstrap_resamples,
+)
 from strl_pyg.inference.inputs import network_pose
 from strl_pyg.inference.record import MethodResult
 
@@ -114,8 +118,8 @@ def _classical(name: str) -> MethodFn:
             # first order (noise around a right solution) + bootstrap (instability of the
             # solution itself), see strl_pyg.estimation.uncertainty
             start = time.perf_counter()
-            boot = bootstrap_covariance(matches, res.pose, name, ctx.bootstrap, thr,
-                                        ctx.seed)
+            boot = bootstrap_resamples(matches, res.pose, name, ctx.bootstrap, thr,
+                                       ctx.seed)
             rec.time_ms += (time.perf_counter() - start) * 1e3
             ctx.cache[f"bootstrap_{name}"] = boot  # guided and fused reuse it
         else:
@@ -359,8 +363,8 @@ def _guided(matches: PairMatches, ctx: MethodContext) -> MethodResult:
             boot = ctx.cache[key]
         else:
             sub = matches if subset is None else matches.select(point_index=subset)
-            boot = bootstrap_covariance(sub, res.pose, base, n_boot,
-                                        ctx.threshold_px, ctx.seed)
+            boot = bootstrap_resamples(sub, res.pose, base, n_boot,
+                                       ctx.threshold_px, ctx.seed)
         rec.time_ms += (time.perf_counter() - start) * 1e3
     return _add_bootstrap(rec, boot, n_boot, "first-order")
 
@@ -373,8 +377,15 @@ def _add_bootstrap(rec: MethodResult, boot: np.ndarray | None, n_boot: int, kind
     if rec.covariance is None:
         return rec
     if boot is not None:
-        rec.covariance = rec.covariance + boot
+        rec.covariance = rec.covariance + boot.covariance
         rec.info["covariance"] = f"{kind} + {source}bootstrap ({n_boot})"
+        rec.info["bootstrap_far"] = boot.far
+        if boot.far:
+            rec.warnings.append(
+                f"{rec.method}: {boot.far} of {boot.resamples} bootstrap resamples found "
+                f"another pose (over {FAR_ROTATION_DEG:g} deg in rotation or "
+                f"{FAR_TRANSLATION_DEG:g} deg in translation away): the matches do not "
+                "single out this solution; its sigma includes the others")
     else:
         rec.info["covariance"] = kind
         if n_boot:

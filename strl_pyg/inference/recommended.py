@@ -123,8 +123,9 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
         if est.methods[name].status == "ok":
             break
         if (est.pose.status == "unreliable" and est.pose.method == name
-                and intrinsics_problems(m.image_size0, m.image_size1, m.K0, m.K1)):
-            break  # every method reads the same K: the later ones are "unreliable" too
+                and (not m.has_intrinsics
+                     or intrinsics_problems(m.image_size0, m.image_size1, m.K0, m.K1))):
+            break  # every method reads the same K (or none): the later ones are unreliable too
     return est
 
 

@@ -9,11 +9,12 @@ from typing import Any
 from torch import Tensor
 
 from strl_pyg.geometry import Pose, quaternion_to_rotation
+from strl_pyg.nn.encoders import INPUT_MODES
 from strl_pyg.nn.heads import TRANSLATION_MODES
 from strl_pyg.utils.dataclass import strict_from_dict
 
 __all__ = ["StrLPoseConfig", "PoseOutput", "GeometricOutput", "ABLATIONS", "NO_INTRINSICS",
-           "VISUAL_MODES", "TRANSLATION_MODES"]
+           "VISUAL_MODES", "TRANSLATION_MODES", "INPUT_MODES", "PAPER"]
 
 ABLATIONS: dict[str, dict[str, Any]] = {
     "baseline": dict(use_lines=False, line_mp=False, visual=None, visual_graph=False,
@@ -34,6 +35,12 @@ ABLATIONS: dict[str, dict[str, Any]] = {
 }
 
 VISUAL_MODES = (None, "pixel", "cnn")
+
+#: The paper's own choices where the package departs from them by default: its node inputs
+#: (the four coordinates, ``inputs="paper"``). ``StrLPoseConfig.ablation(row, **PAPER)`` is a
+#: row of Table 3 exactly as the paper describes it; training with ``--loss paper`` adds the
+#: paper's aleatoric loss (:class:`strl_pyg.training.loss.PoseLoss`).
+PAPER: dict[str, Any] = {"inputs": "paper"}
 
 
 @dataclass
@@ -57,6 +64,10 @@ class StrLPoseConfig:
     patch_features: int = 3  # per-image features of patch0/patch1 (C * p * p; RGB, p = 1)
     image_channels: int = 3  # channels of image0/image1 for visual="cnn"
     translation: str = "direction"  # "direction" (unit vector, scale-free data) | "metric"
+    # node inputs of the SCE: "flow" (beyond the paper: coordinates, displacement and its
+    # divergence / curl products, standardised) | "paper" (the four coordinates); a checkpoint
+    # saved without this key was trained with "paper" (from_dict)
+    inputs: str = "flow"
     dropout: float = 0.0  # attention-weight dropout
     # Beyond the paper: the geometric head (per-node inlier logits -> weighted essential solve,
     # strl_pyg.geometry.essential). The paper's regression head is always present; this adds a
@@ -89,6 +100,8 @@ class StrLPoseConfig:
             raise ValueError(
                 f"Expected translation in {TRANSLATION_MODES} (got {self.translation!r})"
             )
+        if self.inputs not in INPUT_MODES:
+            raise ValueError(f"Expected inputs in {INPUT_MODES} (got {self.inputs!r})")
         if not 0.0 <= self.dropout < 1.0:
             raise ValueError(f"Expected dropout in [0, 1) (got {self.dropout!r})")
         if not isinstance(self.geometric, bool):
@@ -117,6 +130,10 @@ class StrLPoseConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> StrLPoseConfig:
+        """The config of a stored dict; one without ``inputs`` predates the field and was
+        trained on the paper's inputs."""
+        if isinstance(d, dict) and "inputs" not in d:
+            d = {**d, "inputs": "paper"}
         return strict_from_dict(cls, d)
 
 

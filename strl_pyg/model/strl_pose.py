@@ -105,7 +105,7 @@ class StrLPose(nn.Module):
         cfg.validate()
         C = cfg.hidden
         # Feature encoders (Figure 1, left)
-        self.sce = SpatialCoordinateEncoder(C)
+        self.sce = SpatialCoordinateEncoder(C, inputs=cfg.inputs)
         self.lse = LineSegmentEncoder(cfg.line_channels) if cfg.line_mp else None
         self.pe = PixelEncoder(cfg.patch_features, C) if cfg.visual == "pixel" else None
         self.image_encoder = ImageEncoder(cfg.image_channels, C) if cfg.visual == "cnn" else None

@@ -5,10 +5,12 @@ fusion and the output heads."""
 from strl_pyg.nn.attention import AttentionConv, CompleteEdges
 from strl_pyg.nn.dual_graph import DualGraphLayer
 from strl_pyg.nn.encoders import (
+    INPUT_MODES,
     ImageEncoder,
     LineSegmentEncoder,
     PixelEncoder,
     SpatialCoordinateEncoder,
+    flow_features,
     sample_at_pixels,
 )
 from strl_pyg.nn.fusion import WeightedFusion
@@ -24,6 +26,8 @@ __all__ = [
     "LineEndpointConv",
     "DualGraphLayer",
     "SpatialCoordinateEncoder",
+    "flow_features",
+    "INPUT_MODES",
     "LineSegmentEncoder",
     "PixelEncoder",
     "ImageEncoder",

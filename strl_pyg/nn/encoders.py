@@ -11,6 +11,8 @@ from strl_pyg.nn.mlp import mlp, reset_mlp
 
 __all__ = [
     "SpatialCoordinateEncoder",
+    "flow_features",
+    "INPUT_MODES",
     "LineSegmentEncoder",
     "PixelEncoder",
     "ImageEncoder",
@@ -38,21 +40,93 @@ class _MLPEncoder(nn.Module):
         return f"{self.__class__.__name__}({self.in_features}, {self.out_channels})"
 
 
+#: Node inputs of the Spatial Coordinate Encoder: ``"paper"``, the four normalised coordinates
+#: ``[x0, y0, x1, y1]`` of the paper; ``"flow"``, those plus the displacement ``u = x1 - x0``
+#: and its first-order flow products ``x0 . u`` (divergence: expansion / contraction under
+#: forward motion) and ``x0 x u`` (curl: rotation about the optical axis), each feature
+#: standardised with fixed per-feature statistics (buffers, stored in the checkpoint).
+INPUT_MODES = ("paper", "flow")
+
+#: Per-feature ``(mean, std)`` of the ``"flow"`` inputs before a training set's own statistics
+#: are fitted (:meth:`SpatialCoordinateEncoder.fit_standardisation`): measured on the
+#: ``lines_small`` training pairs with image swap (benchmarks/study_pose_recipe.py
+#: ``--stats``); symmetric features get mean 0.
+FLOW_DEFAULT_STATS = (
+    (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+    (0.30, 0.22, 0.30, 0.22, 0.09, 0.05, 0.03, 0.02),
+)
+
+
+def flow_features(coords: Tensor) -> Tensor:
+    r"""``[x0, y0, x1, y1, u_x, u_y, x0 \cdot u, x0 \times u]`` of ``[N, 4]`` coordinates
+    ``[x0, y0, x1, y1]`` (normalised), with ``u = x1 - x0``; ``[N, 8]``."""
+    x0, x1 = coords[:, :2], coords[:, 2:]
+    u = x1 - x0
+    div = (x0 * u).sum(-1, keepdim=True)
+    curl = x0[:, :1] * u[:, 1:] - x0[:, 1:] * u[:, :1]
+    return torch.cat([coords, u, div, curl], dim=-1)
+
+
 class SpatialCoordinateEncoder(_MLPEncoder):
     r"""Spatial Coordinate Encoder (SCE): :math:`\mathbf{f}^0_{i,N} =
     \mathrm{MLP}([x_0 \Vert y_0 \Vert x_1 \Vert y_1])` on the normalised coordinates of a match
-    (point or line endpoint) in image 0 and image 1.
+    (point or line endpoint) in image 0 and image 1 (``inputs="paper"``).
+
+    With ``inputs="flow"`` (beyond the paper, the package's default) the MLP reads
+    :math:`[x_0, y_0, x_1, y_1, \mathbf{u}, \mathbf{x}_0 \cdot \mathbf{u},
+    \mathbf{x}_0 \times \mathbf{u}]` with :math:`\mathbf{u} = \mathbf{x}_1 - \mathbf{x}_0`
+    (:func:`flow_features`), each feature standardised by the buffers ``feature_mean`` /
+    ``feature_std`` (not trained; :meth:`fit_standardisation` sets them from a training set).
+    The displacement that carries the translation is ~0.1 of a normalised image, and a mean
+    pool cannot tell expansion from contraction unless a node already holds a product such as
+    :math:`\mathbf{x}_0 \cdot \mathbf{u}`.
 
     Args:
         out_channels (int): Output size :math:`C`.
+        inputs (str, optional): ``"paper"`` or ``"flow"``. (default: :obj:`"paper"`)
 
     Shapes:
         - **input:** :math:`(N, 4)` ``[pos0 || pos1]``, normalised coordinates
         - **output:** :math:`(N, C)`
     """
 
-    def __init__(self, out_channels: int) -> None:
-        super().__init__(4, out_channels, [out_channels // 2, out_channels])
+    def __init__(self, out_channels: int, inputs: str = "paper") -> None:
+        if inputs not in INPUT_MODES:
+            raise ValueError(f"Expected inputs in {INPUT_MODES} (got {inputs!r})")
+        self.inputs = inputs
+        super().__init__(4 if inputs == "paper" else 8, out_channels,
+                         [out_channels // 2, out_channels])
+        if inputs == "flow":
+            mean, std = (torch.tensor(v, dtype=torch.float32) for v in FLOW_DEFAULT_STATS)
+            self.register_buffer("feature_mean", mean)
+            self.register_buffer("feature_std", std)
+        else:
+            self.feature_mean = self.feature_std = None
+
+    @torch.no_grad()
+    def fit_standardisation(self, coords: Tensor, symmetric: bool = True) -> None:
+        """Sets ``feature_mean`` / ``feature_std`` from ``[N, 4]`` node coordinates of a
+        training set (``inputs="flow"`` only). With ``symmetric`` (training with image swap),
+        the statistics are those of the nodes and their swapped copies."""
+        if self.inputs != "flow":
+            raise ValueError(f"Expected an encoder with inputs='flow' (got {self.inputs!r})")
+        if coords.dim() != 2 or coords.shape[1] != 4 or coords.shape[0] < 2 \
+                or not bool(torch.isfinite(coords).all()):
+            raise ValueError(f"Expected finite [N >= 2, 4] coordinates "
+                             f"(got {tuple(coords.shape)})")
+        if symmetric:
+            coords = torch.cat([coords, coords[:, [2, 3, 0, 1]]])
+        f = flow_features(coords.double())
+        self.feature_mean.copy_(f.mean(0))
+        self.feature_std.copy_(f.std(0).clamp_min(1e-6))
+
+    def forward(self, x: Tensor) -> Tensor:
+        if self.inputs == "flow":
+            x = (flow_features(x) - self.feature_mean.to(x)) / self.feature_std.to(x)
+        return self.mlp(x)
+
+    def __repr__(self) -> str:
+        return f"{self.__class__.__name__}({self.out_channels}, inputs={self.inputs!r})"
 
 
 class LineSegmentEncoder(_MLPEncoder):

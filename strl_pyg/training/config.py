@@ -66,6 +66,10 @@ class TrainConfig:
     swap_prob: float = 0.5  # training pairs have their images exchanged with this probability
     init_from: str | None = None  # start from these weights (model.pt or last.pt); fine-tuning
     grad_clip: float | None = 10.0  # max gradient norm (None: off)
+    # pose loss (strl_pyg.training.loss.LOSS_FORMS): "balanced" (beta-NLL, w's variance on a
+    # detached residual, angular translation term) | "paper" (the paper's aleatoric loss); a
+    # config stored without this key predates it: "paper" loss on "paper" inputs (from_dict)
+    loss: str = "balanced"
     seed: int = 0  # model initialisation (and, unless data_seed is set, the data below)
     # pairs, batch order and resampling (None: ``seed``); rows of an ablation share it so they
     # train on the same pairs in the same order while ``seed`` varies the initialisation
@@ -99,6 +103,8 @@ class TrainConfig:
             if self.scene_mix not in DISTRIBUTIONS:
                 raise ValueError(f"Expected scene_mix in {tuple(DISTRIBUTIONS)} "
                                  f"(got {self.scene_mix!r})")
+        if self.loss not in ("paper", "balanced"):
+            raise ValueError(f"Expected loss in ('paper', 'balanced') (got {self.loss!r})")
         if self.data_seed is not None and (not isinstance(self.data_seed, int)
                                            or self.data_seed < 0):
             raise ValueError(f"Expected a non-negative integer data_seed (got {self.data_seed!r})")
@@ -144,6 +150,11 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
+        """The config of a stored dict; one without ``loss`` was written before the balanced
+        loss and the flow inputs existed, and is read as the paper's recipe."""
+        if isinstance(d, dict) and "loss" not in d:
+            overrides = {"inputs": "paper", **(d.get("model_overrides") or {})}
+            d = {**d, "loss": "paper", "model_overrides": overrides}
         return strict_from_dict(cls, d)
 
 
@@ -168,6 +179,12 @@ def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     ap.add_argument("--matches", choices=("ground_truth", "frontend"), default=d.matches,
                     help="generated scenes: the generator's matches or front-end matches on "
                          "the rendered images (cached in --cache-dir)")
+    ap.add_argument("--loss", choices=("balanced", "paper"), default=d.loss,
+                    help="pose loss: balanced (default; beta-NLL and an angular translation "
+                         "term) or the paper's aleatoric loss; --loss paper --set inputs=paper "
+                         "is the paper's recipe")
+    ap.add_argument("--grad-clip", type=float, default=d.grad_clip,
+                    help="max gradient norm (0: off); the norm is logged every step")
     ap.add_argument("--outlier-augment", type=float, default=d.outlier_augment,
                     help="up to this fraction of point matches shuffled into outliers")
     ap.add_argument("--geo-ess-start", type=int, default=d.geo_ess_start,

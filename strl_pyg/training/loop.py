@@ -198,7 +198,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     model_cfg = cfg.model_config()
     model = StrLPose(model_cfg).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    loss_fn = PoseLoss(translation=model_cfg.translation)
+    loss_fn = PoseLoss(translation=model_cfg.translation, form=cfg.loss)
     geo_fn = GeometricLoss(cfg.geo_threshold_px, cfg.geo_cls_weight,
                            cfg.geo_ess_weight) if model_cfg.geometric else None
     start_step, history = 0, []
@@ -240,6 +240,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
                          f"validates every {cfg.val_every} steps and at the end")
     if len(train_ds):
         check_graph_channels(model_cfg, cfg.patch_size, train_ds[0])
+    if model_cfg.inputs == "flow" and not resume and not cfg.init_from and len(train_ds):
+        fit_input_statistics(model, train_ds, cfg.swap_prob > 0)
     collate = _collater(model_cfg)
     data_seed = cfg.resolved_data_seed
     sampler = StepBatchSampler(len(train_ds), cfg.batch_size, start_step, cfg.steps, data_seed,
@@ -302,8 +304,12 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
             logs["loss"] = logs["loss"] + geo_logs["loss"]
         optimizer.zero_grad(set_to_none=True)
         logs["loss"].backward()
-        if cfg.grad_clip:
-            torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+        # the norm is logged so that a clip active on every step shows in the curves
+        grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(),
+                                                   cfg.grad_clip or float("inf"))
+        logs["grad_norm"] = grad_norm.detach()
+        logs["clipped"] = (grad_norm > cfg.grad_clip).float() if cfg.grad_clip else \
+            torch.zeros(())
         optimizer.step()
         step += 1
         pairs_seen += T_gt.shape[0] * world
@@ -358,6 +364,22 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
 
 
 # ----------------------------------------------------------------------------- command line
+def fit_input_statistics(model: StrLPose, dataset: Any, symmetric: bool,
+                         max_pairs: int = 128) -> None:
+    """Sets the flow inputs' standardisation (``model.sce``) from the node coordinates of the
+    first ``max_pairs`` training pairs (with their swapped copies when ``symmetric``); they
+    are buffers, so the checkpoint keeps them."""
+    coords = []
+    for i in range(min(max_pairs, len(dataset))):
+        g = dataset[i]
+        for t in (keys_.POINT, keys_.ENDPOINT):
+            if t in g.node_types and keys_.POS0 in g[t] and g[t][keys_.POS0].shape[0]:
+                coords.append(torch.cat([g[t][keys_.POS0], g[t][keys_.POS1]], -1).float())
+    if coords:
+        model.sce.fit_standardisation(torch.cat(coords).cpu(), symmetric=symmetric)
+        model.sce.to(next(model.parameters()).device)
+
+
 def _parse_value(text: str):
     try:
         return json.loads(text)
@@ -392,6 +414,7 @@ def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> T
         matches=args.matches, outlier_augment=args.outlier_augment,
         geo_ess_start=args.geo_ess_start, data_seed=args.data_seed,
         checkpoint_every=args.checkpoint_every, checkpoint_minutes=args.checkpoint_minutes,
+        loss=args.loss, grad_clip=args.grad_clip if args.grad_clip > 0 else None,
     )
 
 

@@ -9,6 +9,7 @@ Every check raises :class:`MatchFormatError` (a ``ValueError``) with a one-line
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from typing import Any
 
@@ -87,6 +88,7 @@ def index_per_node(m0: np.ndarray, n0: int, n1: int, name: str):
         raise MatchFormatError(
             f"Expected '{name}' values in [-1, {n1}) (got {int(m0[bad][0])})")
     idx0 = np.flatnonzero(m0 >= 0)
+    warn_one_to_many(m0[idx0], 1, name)
     return idx0, m0[idx0]
 
 
@@ -102,7 +104,22 @@ def index_pairs(pairs: np.ndarray, n0: int, n1: int, name: str):
         if bad.any():
             raise MatchFormatError(
                 f"Expected '{name}[:, {col}]' in [0, {n}) (got {int(pairs[bad][0, col])})")
+    warn_one_to_many(pairs[:, 0], 0, name)
+    warn_one_to_many(pairs[:, 1], 1, name)
     return pairs[:, 0], pairs[:, 1]
+
+
+def warn_one_to_many(idx: np.ndarray, image: int, name: str) -> None:
+    """Warns (``UserWarning``, one line) when matches in ``name`` reuse keypoints of
+    ``image``: a matcher's index arrays are one-to-one, so a repeat is usually a bug in how
+    they were built (every match pointing at keypoint 0)."""
+    if len(idx) == 0:
+        return
+    uniq = len(np.unique(idx))
+    if uniq < len(idx):
+        warnings.warn(f"Expected one-to-one matches in '{name}' (got {len(idx)} matches onto "
+                      f"{uniq} distinct keypoints of image {image}): each correspondence "
+                      "counts once in the estimate", UserWarning, stacklevel=4)
 
 
 def as_indices(arr: np.ndarray, name: str) -> np.ndarray:

@@ -1,0 +1,320 @@
+"""A short controlled study of the network's training recipe (issue "A network that learns its
+pose"): which of the paper's choices keeps the regression head from learning the translation.
+
+Every run is the ablation's ``baseline`` row on the ablation's protocol (width 64, 3 layers,
+4 heads, batch 16, Adam 3e-4 constant, swap 0.5, clip 10, ``lines_small`` pairs, data seed 0),
+cut to :data:`STEPS` steps; runs differ in one thing at a time:
+
+=========  ==========================  =======================================================
+variant    node inputs (``inputs``)    pose loss (``--loss``)
+=========  ==========================  =======================================================
+paper      ``paper`` (x0, y0, x1, y1)  ``paper`` (aleatoric on all 7 components)
+flow       ``flow`` (+ u, x0.u, x0xu,  ``paper``
+           standardised)
+balanced   ``paper``                   ``balanced`` (beta-NLL 0.5, w's variance detached,
+                                       + angle of t)
+both       ``flow``                    ``balanced`` (the package's new default recipe)
+=========  ==========================  =======================================================
+
+on two kinds of matches: ``gt`` (the generator's matches, 1200 training pairs) and ``fe``
+(front-end matches of the ablation's cache: SIFT + LSD and our line matcher, 2000 pairs).
+``seeds`` adds seeds 1 and 2 of a variant.
+
+Scored per run: the validation curves (the training's own held-out pairs, every 250 steps),
+the share of steps whose gradient norm was clipped, the gradient norms that the rotation and
+the translation terms send into the shared layers (everything below the pose head, on 8 fixed
+training batches of the final weights), and the final weights' translation and rotation
+errors on front-end matches of the ablation's ``driving`` set (50 held-out forward-motion
+pairs) and the real KITTI 06 and dino slices.
+
+    python benchmarks/study_pose_recipe.py --root /work/study train fe:paper fe:both ...
+    python benchmarks/study_pose_recipe.py --root /work/study score
+    python benchmarks/study_pose_recipe.py --root /work/study report
+
+Runs live under ``--root`` (not in the repository); ``score`` writes one small JSON per run
+into :data:`RESULTS` (committed), and ``report`` reads only those.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results_pose_recipe"
+TRAIN_SCRIPT = HERE.parent / "examples" / "train.py"
+STEPS = 1000
+VARIANTS = {
+    "paper": (["--set", "inputs=paper", "--loss", "paper"]),
+    "flow": (["--set", "inputs=flow", "--loss", "paper"]),
+    "balanced": (["--set", "inputs=paper", "--loss", "balanced"]),
+    "both": (["--set", "inputs=flow", "--loss", "balanced"]),
+}
+COMMON = ["--model", "baseline", "--scene-mix", "lines_small", "--data-seed", "0",
+          "--val-pairs", "100", "--val-every", "250", "--batch-size", "16", "--lr", "3e-4",
+          "--set", "hidden=64", "--set", "layers=3", "--set", "heads=4",
+          "--checkpoint-minutes", "3", "--no-progress", "--no-tensorboard"]
+MATCHES = {
+    "gt": ["--matches", "ground_truth", "--train-pairs", "1200"],
+    "fe": ["--matches", "frontend", "--train-pairs", "2000"],
+}
+EVAL_SETS = ("driving", "kitti06", "dino")
+
+
+def run_id(matches: str, variant: str, seed: int) -> str:
+    return f"{matches}-{variant}-s{seed}"
+
+
+def parse_run(spec: str) -> tuple[str, str, int]:
+    """``fe:both`` or ``fe:both:1`` -> (matches, variant, seed)."""
+    parts = spec.split(":")
+    if len(parts) not in (2, 3) or parts[0] not in MATCHES or parts[1] not in VARIANTS:
+        raise SystemExit(f"error: expected MATCHES:VARIANT[:SEED] with MATCHES in "
+                         f"{tuple(MATCHES)} and VARIANT in {tuple(VARIANTS)} (got {spec!r})")
+    return parts[0], parts[1], int(parts[2]) if len(parts) == 3 else 0
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    root = Path(args.root)
+    for spec in args.runs:
+        matches, variant, seed = parse_run(spec)
+        out = root / "runs" / run_id(matches, variant, seed)
+        cmd = [sys.executable, str(TRAIN_SCRIPT), *COMMON, *MATCHES[matches],
+               *VARIANTS[variant], "--seed", str(seed), "--steps", str(args.steps),
+               "--cache-dir", str(Path(args.ablation_root) / "cache"), "--out", str(out)]
+        if (out / "last.pt").exists():
+            cmd.append("--resume")
+        out.mkdir(parents=True, exist_ok=True)
+        t0 = time.time()
+        print(f"[{time.strftime('%H:%M:%S')}] {out.name}: start", flush=True)
+        env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+        with open(out / "train.log", "a") as log:
+            rc = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env=env).returncode
+        print(f"[{time.strftime('%H:%M:%S')}] {out.name}: exit {rc} after "
+              f"{time.time() - t0:.0f} s", flush=True)
+        if rc:
+            return rc
+    return 0
+
+
+# ----------------------------------------------------------------------------- scoring
+def _clip_share(run: Path) -> tuple[float | None, float | None]:
+    """Fraction of training steps whose gradient norm exceeded the clip, and the median norm."""
+    path = run / "log.csv"
+    if not path.exists():
+        return None, None
+    norms, clipped = [], []
+    with open(path) as f:
+        for row in csv.DictReader(f):
+            if row["split"] == "train" and row["key"] == "grad_norm":
+                norms.append(float(row["value"]))
+            elif row["split"] == "train" and row["key"] == "clipped":
+                clipped.append(float(row["value"]))
+    if not norms:
+        return None, None
+    import numpy as np
+
+    return float(np.mean(clipped)), float(np.median(norms))
+
+
+def gradient_shares(run: Path, batches: int = 8) -> dict[str, float]:
+    """Gradient norms of the rotation and the translation terms of the run's own loss in the
+    shared layers (every parameter outside the pose head), on ``batches`` fixed training
+    batches of the final weights; medians over the batches."""
+    import numpy as np
+    import torch
+
+    from strl_pyg.data import keys as K
+    from strl_pyg.model.strl_pose import StrLPose
+    from strl_pyg.training.checkpoints import load_checkpoint
+    from strl_pyg.training.config import TrainConfig
+    from strl_pyg.training.data import _Resampled, build_datasets
+    from strl_pyg.training.loop import _collater
+    from strl_pyg.training.loss import PoseLoss
+
+    state = load_checkpoint(run / "last.pt")
+    cfg = TrainConfig.from_dict(state["train_config"])
+    model = StrLPose(cfg.model_config())
+    model.load_state_dict(state["model"])
+    model.train()
+    train, _ = build_datasets(cfg)
+    loss_fn = PoseLoss(translation=model.config.translation, form=cfg.loss)
+    shared = [p for n, p in model.named_parameters() if not n.startswith("pose_head.")]
+    collate = _collater(model.config)
+    data = _Resampled(train, cfg.num_points, cfg.num_lines, 12345, cfg.swap_prob)
+    rot, trans = [], []
+    for b in range(batches):
+        gen = torch.Generator().manual_seed(b)
+        idx = torch.randperm(len(train), generator=gen)[:cfg.batch_size].tolist()
+        batch = collate([data[(i, -2, j)] for j, i in enumerate(idx)])
+        out = model(batch)
+        # the two terms separately: the loss's own split into rotation and translation
+        for which, acc in (("rot", rot), ("trans", trans)):
+            term = _term(loss_fn, out, batch[K.T_0TO1], which)
+            grads = torch.autograd.grad(term, shared, retain_graph=True, allow_unused=True)
+            acc.append(float(torch.sqrt(sum((g.square().sum() for g in grads
+                                             if g is not None), torch.zeros(())))))
+    return {"grad_rot": float(np.median(rot)), "grad_trans": float(np.median(trans)),
+            "log_var_rot": float(out.log_var[:, :4].mean()),
+            "log_var_trans": float(out.log_var[:, 4:].mean())}
+
+
+def _term(loss_fn, out, T, which: str):
+    """The rotation or the translation term of ``loss_fn`` alone (the other weight 0)."""
+    from strl_pyg.training.loss import PoseLoss
+
+    f = PoseLoss(loss_fn.translation, rot_weight=float(which == "rot"),
+                 trans_weight=float(which == "trans"), form=loss_fn.form, beta=loss_fn.beta,
+                 angle_weight=loss_fn.angle_weight)
+    return f(out, T)["loss"]
+
+
+def eval_errors(run: Path, sets: dict) -> dict[str, list]:
+    import ablation_eval as ae
+
+    from strl_pyg.model.strl_pose import StrLPose
+
+    return ae.model_errors(StrLPose.load(run / "model.pt"), sets)
+
+
+def cmd_score(args: argparse.Namespace) -> int:
+    import ablation_eval as ae
+    import bench_pose as bp
+    import torch
+
+    torch.set_num_threads(1)
+    root = Path(args.root)
+    cache = Path(args.ablation_root) / "eval_cache"
+    sets = {"driving": bp.generated_pairs("driving", ae.GENERATED_PAIRS, cache),
+            "kitti06": bp.kitti_pairs(1, cache), "dino": bp.dino_pairs(cache)}
+    sets = {k: v for k, v in sets.items() if v}
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    if not (RESULTS / "poselib.json").exists():
+        ae.save_json(RESULTS / "poselib.json", ae.poselib_errors(sets))
+    for run in sorted((root / "runs").iterdir()):
+        path = RESULTS / f"{run.name}.json"
+        if not (run / "model.pt").exists() or (path.exists() and not args.again):
+            continue
+        state = torch.load(run / "last.pt", map_location="cpu", weights_only=False)
+        clip, norm = _clip_share(run)
+        ae.save_json(path, {
+            "run": run.name, "step": int(state["step"]), "history": state["history"],
+            "clipped_share": clip, "grad_norm_median": norm, **gradient_shares(run),
+            "errors": eval_errors(run, sets)})
+        print(f"[{time.strftime('%H:%M:%S')}] {run.name}: scored -> {path}", flush=True)
+    return 0
+
+
+# ----------------------------------------------------------------------------- report
+def _load() -> dict[str, dict]:
+    return {p.stem: json.loads(p.read_text()) for p in sorted(RESULTS.glob("*-s*.json"))}
+
+
+def _med(rows: list, which: int):
+    import numpy as np
+
+    x = np.array([r[which] for r in rows if r is not None], dtype=float)
+    return float(np.median(x)) if x.size else float("nan")
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from common import banner
+
+    runs = _load()
+    if not runs:
+        raise SystemExit(f"error: expected scored runs in {RESULTS} (got none)")
+    poselib = json.loads((RESULTS / "poselib.json").read_text())
+    lines = ["# The training recipe: a controlled study", "", "```", banner().strip(), "```",
+             "", "`python benchmarks/study_pose_recipe.py report` (runs trained with `train`, "
+             "scored with `score`; see the script's docstring for the protocol). Validation: "
+             "the run's own 100 held-out pairs (same match kind as training); mean / median "
+             "translation-direction error (deg). Driving / KITTI 06 / dino: the final "
+             "weights on front-end matches, median rotation / translation error (deg). "
+             "Gradient norms: the rotation and translation terms' gradients in the shared "
+             "layers (median of 8 training batches, final weights); clipped: share of steps "
+             "whose gradient norm exceeded 10.", ""]
+    head = ("| run | step | val trans mean / median | val rot mean | driving rot / trans | "
+            "KITTI 06 rot / trans | dino rot / trans | grad rot / trans | clipped | "
+            "s_rot / s_trans |")
+    lines += [head, "|" + "---|" * (head.count("|") - 1)]
+    for name, r in runs.items():
+        h = r["history"][-1]
+        e = r["errors"]
+        cells = [name, str(r["step"]),
+                 f"{h['trans_err_deg']:.1f} / {h['trans_err_med']:.1f}",
+                 f"{h['rot_err_deg']:.2f}"]
+        for s in EVAL_SETS:
+            cells.append(f"{_med(e[s], 0):.2f} / {_med(e[s], 1):.1f}" if s in e else "-")
+        cells.append(f"{r['grad_rot']:.2f} / {r['grad_trans']:.2f}")
+        cells.append("-" if r["clipped_share"] is None else f"{100 * r['clipped_share']:.0f} %")
+        cells.append(f"{r['log_var_rot']:.1f} / {r['log_var_trans']:.1f}")
+        lines.append("| " + " | ".join(cells) + " |")
+    cells = ["PoseLib (same matches)", "-", "-", "-"]
+    for s in EVAL_SETS:
+        cells.append(f"{_med(poselib[s], 0):.2f} / {_med(poselib[s], 1):.1f}"
+                     if s in poselib else "-")
+    lines.append("| " + " | ".join(cells + ["-", "-", "-"]) + " |")
+    lines += ["", "Validation curves: ![curves](figures/pose_recipe_curves.png)", ""]
+    out = Path(args.out)
+    out.write_text("\n".join(lines) + "\n")
+    plot(runs, HERE / "figures" / "pose_recipe_curves.png")
+    print(f"wrote {out}")
+    return 0
+
+
+def plot(runs: dict[str, dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharex=True)
+    for name, r in runs.items():
+        steps = [h["step"] for h in r["history"]]
+        style = "-" if name.startswith("fe") else "--"
+        for ax, key in zip(axes, ("trans_err_deg", "trans_err_med"), strict=True):
+            ax.plot(steps, [h[key] for h in r["history"]], style, marker="o", ms=3,
+                    label=name)
+    for ax, title in zip(axes, ("mean", "median"), strict=True):
+        ax.set_title(f"validation translation-direction error, {title}")
+        ax.set_xlabel("training step")
+        ax.set_ylabel("degrees")
+        ax.grid(alpha=0.3)
+    axes[1].legend(fontsize=7, title="matches-variant-seed", title_fontsize=7)
+    fig.suptitle("Training recipe study (baseline row; solid: front-end matches, "
+                 "dashed: generator's matches)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--root", default=os.environ.get("STRL_STUDY_ROOT", "outputs/study"))
+    ap.add_argument("--ablation-root", default=os.environ.get(
+        "STRL_ABLATION_ROOT", str(Path.home() / ".cache" / "strl-pyg" / "ablation")),
+        help="the ablation's root (its front-end training cache and evaluation cache)")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    t = sub.add_parser("train", help="train runs MATCHES:VARIANT[:SEED], one after another")
+    t.add_argument("runs", nargs="+")
+    t.add_argument("--steps", type=int, default=STEPS)
+    s = sub.add_parser("score", help="score the finished runs into results_pose_recipe/")
+    s.add_argument("--again", action="store_true", help="re-score runs already scored")
+    r = sub.add_parser("report", help="the table and the curves")
+    r.add_argument("--out", default=str(HERE / "results_pose_recipe.md"))
+    args = ap.parse_args(argv)
+    return {"train": cmd_train, "score": cmd_score, "report": cmd_report}[args.cmd](args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
