@@ -84,7 +84,7 @@ def test_init_from_another_architecture_names_the_mismatch(tmp_path):
         assert text.startswith("Expected weights matching this run's model config")
         assert "\n" not in text and "Error(s) in loading" not in text
         assert "config fields (file vs model) hidden 16 vs 32, layers 1 vs 2" in text
-        assert "mis-shaped (file vs model) keys sce.mlp.0.weight [8, 4] vs [16, 4]" in text
+        assert "mis-shaped (file vs model) keys sce.mlp.0.weight [8, 8] vs [16, 8]" in text
         assert "missing keys layers.1." in text and "in all)" in text
     # the same architecture loads; a geometric head may start from regression-only weights
     init_weights(tiny(), tmp_path / "model.pt")

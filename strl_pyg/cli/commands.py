@@ -61,6 +61,8 @@ def load_model(path: str | os.PathLike | None):
     from strl_pyg.model.strl_pose import StrLPose
 
     path = Path(path) if path else default_checkpoint()
+    if path.is_dir():
+        raise UsageError(f"Expected a model checkpoint file at '{path}' (got a folder)")
     if not path.is_file():
         raise UsageError(f"Expected a model checkpoint at '{path}' (got no such file); train one "
                          "with 'strl-pose train' or pass --checkpoint")
@@ -288,16 +290,33 @@ def cmd_predict(args) -> int:
     recommended pose needs, :mod:`strl_pyg.inference.recommended`). Exit status (:data:`EXIT_CODES`)
     0 when the pose's status is ``"ok"``, 1 when it is ``"degenerate"`` or ``"failed"``, 3
     when it is ``"unreliable"`` (printed either way)."""
-    inputs = read_pair(args)  # fail on bad files before any heavy work
-    model = load_model(args.checkpoint)
-    from strl_pyg.frontend import FrontendConfig
+    methods = "regression" if args.no_baseline else args.methods
+    _check_methods(methods)  # before the images and the model are read
+    if args.matches:
+        if args.image0 or args.image1:
+            raise UsageError(f"Expected either two images or --matches (got both: "
+                             f"{args.image0} and --matches {args.matches})")
+        matches = _read_match_file(args)
+        K0 = matches.K0
+        model = load_model(args.checkpoint)
+        from strl_pyg.inference.estimator import PoseEstimator
 
-    img0, img1, K0, K1 = inputs
-    from strl_pyg.inference.recommended import estimate_methods
+        names = None if methods in ("recommended", "all") else _method_names(methods)
+        est = PoseEstimator(model, methods=names, bootstrap=args.bootstrap).estimate(matches)
+    else:
+        if not (args.image0 and args.image1):
+            raise UsageError("Expected two images, or --matches FILE (got "
+                             f"{'one image' if args.image0 else 'neither'})")
+        inputs = read_pair(args)  # fail on bad files before any heavy work
+        model = load_model(args.checkpoint)
+        from strl_pyg.frontend import FrontendConfig
 
-    est = estimate_methods(model, img0, img1, K0, K1, FrontendConfig(detector=args.detector),
-                           "regression" if args.no_baseline else args.methods,
-                           bootstrap=args.bootstrap)
+        img0, img1, K0, K1 = inputs
+        from strl_pyg.inference.recommended import estimate_methods
+
+        est = estimate_methods(model, img0, img1, K0, K1,
+                               FrontendConfig(detector=args.detector), methods,
+                               bootstrap=args.bootstrap)
     code = STATUS_EXIT[est.status]
     if args.json:
         print(json.dumps({**est.to_dict(), "translation_kind": model.config.translation,
@@ -306,6 +325,46 @@ def cmd_predict(args) -> int:
     print(f"matches: {est.num_points} points, {est.num_lines} lines")
     _print_estimate(est)
     return code
+
+
+def _method_names(methods: str) -> tuple[str, ...]:
+    return tuple(m.strip() for m in methods.split(",") if m.strip())
+
+
+def _check_methods(methods: str) -> None:
+    """``--methods``: 'recommended', 'all' or registered names; one line naming the closest
+    registered name otherwise (checked before any image or model is read)."""
+    if methods in ("recommended", "all"):
+        return
+    import difflib
+
+    from strl_pyg.inference.estimator import METHODS
+
+    names = _method_names(methods)
+    unknown = [m for m in names if m not in METHODS]
+    if unknown or not names:
+        close = difflib.get_close_matches(unknown[0], list(METHODS), n=1) if unknown else []
+        hint = f"; did you mean '{close[0]}'?" if close else ""
+        raise UsageError(f"Expected --methods 'recommended', 'all' or names from "
+                         f"{', '.join(METHODS)} (got {methods!r}){hint}")
+
+
+def _read_match_file(args):
+    """``predict --matches``: a match file of this package (``strl-pose match``) or of another
+    tool (:func:`~strl_pyg.data.load_external_matches`), with ``--K`` / ``--K0`` / ``--K1``
+    and, for files without image sizes, the sizes of ``--image-size``."""
+    from strl_pyg.cli.inputs import _check_input_file, _intrinsics
+
+    _check_input_file(args.matches, "match file (.npz) for --matches")
+    K0, K1 = _intrinsics(args)
+    from strl_pyg.data.external import load_external_matches
+
+    size = args.image_size
+    try:
+        return load_external_matches(args.matches, image_size0=size, image_size1=size,
+                                     K0=K0, K1=K1)
+    except (ValueError, TypeError, OSError) as err:
+        raise UsageError(str(err).splitlines()[0]) from None
 
 
 def cmd_train(args, parser) -> int:
@@ -347,11 +406,24 @@ def cmd_evaluate(argv: list[str]) -> int:
 
 
 # ----------------------------------------------------------------------------- parser
-def _add_pair_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("image0", help="reference image")
-    p.add_argument("image1", help="target image")
+def _image_size(text: str) -> tuple[int, int]:
+    """argparse type of ``--image-size``: ``H,W`` in pixels."""
+    try:
+        h, w = (int(v) for v in text.replace("x", ",").split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"Expected H,W in pixels (got {text!r})") from None
+    if h < 1 or w < 1:
+        raise argparse.ArgumentTypeError(f"Expected H,W >= 1 (got {text!r})")
+    return h, w
+
+
+def _add_pair_args(p: argparse.ArgumentParser, optional_images: bool = False) -> None:
+    nargs = "?" if optional_images else None
+    p.add_argument("image0", nargs=nargs, help="reference image")
+    p.add_argument("image1", nargs=nargs, help="target image")
     p.add_argument("--K", help="intrinsics of both images: 'fx,fy,cx,cy', 9 numbers or a file "
-                               "(3x3, 3x4, or KITTI calib.txt)")
+                               "(3x3, 3x4, KITTI calib.txt, COLMAP cameras.txt, Strecha "
+                               ".camera)")
     p.add_argument("--K0", help="intrinsics of image 0 (same formats)")
     p.add_argument("--K1", help="intrinsics of image 1 (default: --K0)")
     p.add_argument("--detector", choices=("sift", "orb"), default="sift")
@@ -365,7 +437,35 @@ class _Parser(argparse.ArgumentParser):
     instead of argparse's usage block."""
 
     def error(self, message: str):
-        raise UsageError(f"Expected valid arguments (got {message}); see '{self.prog} --help'")
+        hint = _did_you_mean(self, message)
+        raise UsageError(f"Expected valid arguments (got {message}){hint}; see "
+                         f"'{self.prog} --help'")
+
+
+def _did_you_mean(parser: argparse.ArgumentParser, message: str) -> str:
+    """``", did you mean --K?"`` for an unrecognised flag close to one of the parser's or of
+    its commands' (case first: ``--k`` is ``--K``)."""
+    import difflib
+
+    if "unrecognized arguments:" not in message:
+        return ""
+    options = set(parser._option_string_actions)
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                options |= set(sub._option_string_actions)
+    hints = []
+    for token in message.split("unrecognized arguments:", 1)[1].split():
+        flag = token.split("=", 1)[0]
+        if not flag.startswith("-"):
+            continue
+        same_case = [o for o in options if o.lower() == flag.lower()]
+        close = same_case or difflib.get_close_matches(flag, sorted(options), n=1, cutoff=0.75)
+        if close:
+            hints.append((flag, close[0]))
+    if len(hints) == 1:
+        return f"; did you mean {hints[0][1]}?"
+    return "; did you mean " + ", ".join(f"{c} for {f}" for f, c in hints) + "?" if hints else ""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -385,11 +485,17 @@ def build_parser() -> argparse.ArgumentParser:
     _add_pair_args(p)
     p.add_argument("--out", required=True, help="output .npz (PairMatches.save keys)")
     p.add_argument("--png", default=None, help="also draw the matches to this PNG")
-    p = sub.add_parser("predict", help="relative pose of two images",
+    p = sub.add_parser("predict", help="relative pose of two images, or of a match file",
                        formatter_class=argparse.RawDescriptionHelpFormatter,
                        epilog="exit codes:\n" + "\n".join(
                            f"  {k:<4} {v}" for k, v in EXIT_CODES.items()))
-    _add_pair_args(p)
+    _add_pair_args(p, optional_images=True)
+    p.add_argument("--matches", default=None, metavar="FILE",
+                   help="estimate from this match file instead of two images: 'strl-pose "
+                        "match' output, or SuperGlue / LightGlue / GlueStick / kornia / mkpts "
+                        ".npz (docs/match_formats.md)")
+    p.add_argument("--image-size", default=None, type=_image_size, metavar="H,W",
+                   help="with --matches: the images' size when the file holds none")
     p.add_argument("--checkpoint", default=None, help="default: the shipped weights")
     p.add_argument("--json", action="store_true", help="print JSON only")
     p.add_argument("--no-baseline", action="store_true", help="the network's regression only")

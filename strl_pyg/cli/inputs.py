@@ -51,9 +51,49 @@ def _K_from_numbers(values: list[float], source: str) -> np.ndarray:
                      f"{source} (got {len(values)})")
 
 
+#: COLMAP camera models (``cameras.txt``) whose first parameters are ``f, cx, cy``
+#: (``SIMPLE_*``, one focal length) or ``fx, fy, cx, cy``; the rest are distortion terms.
+COLMAP_ONE_FOCAL = ("SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL", "SIMPLE_RADIAL_FISHEYE",
+                    "RADIAL_FISHEYE")
+COLMAP_TWO_FOCALS = ("PINHOLE", "OPENCV", "OPENCV_FISHEYE", "FULL_OPENCV", "FOV",
+                     "THIN_PRISM_FISHEYE")
+
+
+def _colmap_K(text: str, source: str) -> np.ndarray:
+    """K of the one camera of a COLMAP ``cameras.txt`` (``CAMERA_ID MODEL WIDTH HEIGHT
+    PARAMS[]``), in this package's pixel convention: COLMAP puts the centre of the top-left
+    pixel at (0.5, 0.5), OpenCV and this package at (0, 0), so ``c = c_colmap - 0.5``."""
+    cams = [ln.split() for ln in text.splitlines() if ln.strip() and not ln.startswith("#")]
+    distinct = {tuple(c[1:]) for c in cams}
+    if len(distinct) != 1:
+        raise UsageError(f"Expected one camera in the COLMAP cameras file {source} (got "
+                         f"{len(distinct)}: give each image's with --K0 / --K1 as fx,fy,cx,cy)")
+    model, params = cams[0][1], cams[0][4:]
+    try:
+        v = [float(x) for x in params]
+    except ValueError as err:
+        raise UsageError(f"Expected numbers as the camera parameters in {source} "
+                         f"(got {err})") from None
+    if model in COLMAP_ONE_FOCAL and len(v) >= 3:
+        fx = fy = v[0]
+        cx, cy, rest = v[1], v[2], v[3:]
+    elif model in COLMAP_TWO_FOCALS and len(v) >= 4:
+        fx, fy, cx, cy, rest = v[0], v[1], v[2], v[3], v[4:]
+    else:
+        raise UsageError(f"Expected a COLMAP camera model in "
+                         f"{COLMAP_ONE_FOCAL + COLMAP_TWO_FOCALS} with its parameters in "
+                         f"{source} (got {model} with {len(v)} parameters)")
+    if any(abs(x) > 0 for x in rest):
+        print(f"note: {model} distortion parameters in {source} are not applied: the "
+              "matches must come from undistorted images", file=sys.stderr)
+    return np.array([[fx, 0.0, cx - 0.5], [0.0, fy, cy - 0.5], [0.0, 0.0, 1.0]])
+
+
 def read_intrinsics(text_or_path: str) -> np.ndarray:
     """Intrinsics from ``"fx,fy,cx,cy"``, nine comma-separated numbers, or a file holding a
-    3x3 matrix (DeMoN ``cam.txt``), a 3x4 projection, or KITTI ``calib.txt`` (``P0:`` row)."""
+    3x3 matrix (DeMoN ``cam.txt``), a 3x4 projection, KITTI ``calib.txt`` (``P0:`` row), a
+    COLMAP ``cameras.txt`` (one camera) or a Strecha ``.camera`` file (K, then distortion,
+    R, centre and size: the first nine numbers)."""
     path = Path(text_or_path)
     if path.is_dir():
         raise UsageError(f"Expected an intrinsics file or 'fx,fy,cx,cy' (got the folder "
@@ -64,6 +104,22 @@ def read_intrinsics(text_or_path: str) -> np.ndarray:
         except (OSError, UnicodeDecodeError) as err:
             raise UsageError(f"Expected a text intrinsics file at '{path}' (got "
                              f"{type(err).__name__})") from None
+        first = next((ln.split() for ln in text.splitlines()
+                      if ln.strip() and not ln.startswith("#")), [])
+        if len(first) >= 5 and first[0].isdigit() and first[1].replace("_", "").isalpha():
+            K = _colmap_K(text, f"'{path}'")
+            from strl_pyg.data.matches import check_K
+
+            try:
+                return check_K(K, "K")
+            except ValueError as err:
+                raise UsageError(str(err)) from err
+        if path.suffix == ".camera":  # Strecha: K (3 rows), distortion, R, centre, W H
+            nums = text.split()
+            if len(nums) < 9:
+                raise UsageError(f"Expected a Strecha .camera file starting with a 3x3 K in "
+                                 f"'{path}' (got {len(nums)} numbers)")
+            text = " ".join(nums[:9])
         rows = {ln.split(":", 1)[0].strip(): ln.split(":", 1)[1] for ln in text.splitlines()
                 if ":" in ln}
         body = rows.get("P0", rows.get("P2", text if not rows else None))

@@ -10,7 +10,7 @@ import json
 import os
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -27,6 +27,7 @@ __all__ = [
     "ENDPOINTS_AS_DETECTED",
     "DUPLICATE_TOLERANCE_PX",
     "first_unique_rows",
+    "Deduplicated",
 ]
 
 #: Two matches closer than this (pixels, in every coordinate of both images) are one
@@ -311,9 +312,33 @@ class PairMatches:
         )
         return PairMatches(**kwargs)
 
-    def deduplicated(self, tol_px: float = DUPLICATE_TOLERANCE_PX) -> tuple[PairMatches,
-                                                                           list[str]]:
-        """The matches with each correspondence once, and one-line notes of what was found.
+    @classmethod
+    def from_normalized(cls, x0: Any, x1: Any, K0: Any, K1: Any, image_size0: Any,
+                        image_size1: Any, lines0: Any = None, lines1: Any = None,
+                        **kwargs: Any) -> PairMatches:
+        """Matches from normalised camera coordinates (``x = K^-1 [u, v, 1]``, as kornia's
+        and OpenCV's essential-matrix functions take them): ``x0``, ``x1`` ``[Np, 2]``,
+        ``lines0``, ``lines1`` ``[Nl, 2, 2]``, converted to pixels with ``K0`` / ``K1``
+        (required: they define the conversion); ``image_size0/1`` ``(H, W)`` as the pixel
+        frame the checks use. Other arguments as the constructor."""
+        K0, K1 = check_K(K0, "K0"), check_K(K1, "K1")
+        if K0 is None or K1 is None:
+            raise ValueError("Expected K0 and K1 to convert normalised coordinates to pixels "
+                             "(got None)")
+
+        def to_px(x: Any, K: np.ndarray, name: str, tail: tuple[int, ...]) -> np.ndarray:
+            arr = cls._coords(x, name, tail)
+            flat = arr.reshape(-1, 2)
+            return (flat @ K[:2, :2].T + K[:2, 2]).reshape(arr.shape)
+
+        return cls(to_px(x0, K0, "x0", (2,)), to_px(x1, K1, "x1", (2,)),
+                   to_px(lines0, K0, "lines0", (2, 2)), to_px(lines1, K1, "lines1", (2, 2)),
+                   image_size0=image_size0, image_size1=image_size1, K0=K0, K1=K1, **kwargs)
+
+    def deduplicated(self, tol_px: float = DUPLICATE_TOLERANCE_PX) -> Deduplicated:
+        """The matches with each correspondence once, one-line notes of what was found, and
+        for every input point row the row of its correspondence in the result
+        (:class:`Deduplicated`).
 
         Repeated rows (both images' coordinates within ``tol_px``) are kept once, the first
         occurrence with its score: a match listed ``k`` times is one observation, so it must
@@ -323,7 +348,8 @@ class PairMatches:
         :attr:`num_distinct_points` of them can constrain a pose. Returns ``self`` when
         nothing was repeated."""
         notes = []
-        pi = first_unique_rows(np.concatenate([self.points0, self.points1], axis=1), tol_px)
+        pi, inverse = first_unique_rows(np.concatenate([self.points0, self.points1], axis=1),
+                                        tol_px, return_inverse=True)
         li = first_unique_rows(np.concatenate([self.lines0, self.lines1], axis=1), tol_px)
         dp, dl = self.num_points - len(pi), self.num_lines - len(li)
         if dp or dl:
@@ -341,7 +367,7 @@ class PairMatches:
                 notes.append(f"{extra} point matches reuse a point of image {side} that another "
                              f"match already uses (one-to-many): {out.num_distinct_points} "
                              "distinct correspondences")
-        return out, notes
+        return Deduplicated(out, notes, inverse)
 
     @property
     def num_distinct_points(self) -> int:
@@ -378,14 +404,32 @@ class PairMatches:
         return cls(**kwargs, info=info)
 
 
-def first_unique_rows(rows: np.ndarray, tol: float = DUPLICATE_TOLERANCE_PX) -> np.ndarray:
+def first_unique_rows(rows: np.ndarray, tol: float = DUPLICATE_TOLERANCE_PX,
+                      return_inverse: bool = False):
     """Sorted indices of the first occurrence of each distinct row of ``rows`` ``[N, ...]``
-    (rows equal within ``tol`` in every value are one)."""
+    (rows equal within ``tol`` in every value are one); with ``return_inverse``, also for
+    every row the position of its distinct row among those indices."""
     if len(rows) == 0:
-        return np.zeros(0, dtype=np.int64)
+        empty = np.zeros(0, dtype=np.int64)
+        return (empty, empty) if return_inverse else empty
     keys = np.round(np.asarray(rows).reshape(len(rows), -1) / tol).astype(np.int64)
-    _, first = np.unique(keys, axis=0, return_index=True)
-    return np.sort(first)
+    _, first, inv = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    if not return_inverse:
+        return first[order]
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return first[order], rank[inv.reshape(-1)]
+
+
+class Deduplicated(NamedTuple):
+    """:meth:`PairMatches.deduplicated`: the ``matches`` with each correspondence once, the
+    ``notes`` (one line each), and ``point_inverse`` ``[Np_input]``: the row in ``matches`` of
+    every input point row."""
+
+    matches: PairMatches
+    notes: list[str]
+    point_inverse: np.ndarray
 
 
 def _distinct(points: np.ndarray, tol_px: float = DUPLICATE_TOLERANCE_PX) -> int:

@@ -206,6 +206,14 @@ def _attach_fundamental(estimate: PoseEstimate, matches: PairMatches, threshold_
     estimate.pose.info = info
 
 
+def _spread_px(matches: PairMatches) -> float:
+    """The larger extent (pixels) of the point matches in either image; ``inf`` without
+    point matches."""
+    if matches.num_points == 0:
+        return float("inf")
+    return float(max(np.ptp(matches.points0, axis=0).max(), np.ptp(matches.points1, axis=0).max()))
+
+
 def _unique(items: list[str]) -> list[str]:
     return list(dict.fromkeys(items))
 
@@ -327,10 +335,17 @@ class PoseEstimator:
                                   matches.K1)
         # every decision (minimum counts, support, bootstrap sigma) counts correspondences,
         # not rows: a match repeated k times is one observation
-        matches, repeats = matches.deduplicated()
+        matches, repeats, rows = matches.deduplicated()
         warnings += repeats
         n, degenerate = matches.num_distinct_points, None
-        if zero_parallax(matches):
+        spread = _spread_px(matches)
+        if n and spread < 4.0 and min(*matches.image_size0, *matches.image_size1) >= 64:
+            degenerate = (f"Expected pixel coordinates (got all {matches.num_points} point "
+                          f"matches within {spread:.2g} px of each other in images of "
+                          f"{matches.image_size0[0]}x{matches.image_size0[1]} px: normalised "
+                          "coordinates? build the matches with PairMatches.from_normalized)")
+            warnings.append(degenerate)
+        elif zero_parallax(matches):
             degenerate = (f"zero parallax: most of the {n} point matches moved less than "
                           f"{ZERO_PARALLAX_PX} px (identical or near-identical images): the "
                           "translation is undefined")
@@ -404,6 +419,9 @@ class PoseEstimator:
             for name, res in ctx.results.items():
                 if NO_INTRINSICS not in res.warnings:
                     ctx.results[name] = res.unreliable([NO_INTRINSICS])
+        for res in ctx.results.values():  # per input row, as OpenCV's and PoseLib's masks
+            if res.info.get("inlier_mask") is not None and res.inliers is None:
+                res.inliers = np.asarray(res.info.pop("inlier_mask"), dtype=bool)[rows]
         estimate = self._recommend(ctx.results, warnings, matches)
         if not matches.has_intrinsics:
             _attach_fundamental(estimate, matches, self.threshold_px, self.seed)

@@ -32,8 +32,8 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-__all__ = ["DensePoseModule", "onnx_inputs", "export_onnx", "example_graph", "INPUT_NAMES",
-           "OUTPUT_NAMES"]
+__all__ = ["DensePoseModule", "onnx_inputs", "export_onnx", "example_graph", "exported_sizes",
+           "INPUT_NAMES", "OUTPUT_NAMES"]
 
 INPUT_NAMES = ("coords", "line_feat", "endpoint_idx", "line_edges", "visual")
 OUTPUT_NAMES = ("quaternion", "translation", "log_var")
@@ -85,6 +85,14 @@ def onnx_inputs(model: nn.Module, data: Any) -> tuple[Tensor, ...]:
     if inp.num_graphs != 1:
         raise ValueError(f"Expected one pair graph (got {inp.num_graphs})")
     n = inp.coords.shape[0]
+    want = exported_sizes(model)
+    got = {"nodes": n, "endpoints": 0 if inp.endpoint_idx is None else
+           int(inp.endpoint_idx.numel())}
+    if want is not None and {k: got[k] for k in want} != want:
+        raise ValueError(
+            f"Expected a pair graph at the exported sizes {want} (got {got}): the ONNX graph "
+            "fixes its sizes; resample the pair to the checkpoint's (prepare_graph does), "
+            "and a pair without point or without line matches cannot run on it")
     empty = torch.zeros(0, dtype=torch.long)
     out = (inp.coords.float(),
            inp.line_feat.float() if inp.line_feat is not None else torch.zeros(0, 8),
@@ -92,6 +100,22 @@ def onnx_inputs(model: nn.Module, data: Any) -> tuple[Tensor, ...]:
            inp.line_edges if inp.line_edges is not None else empty.reshape(2, 0),
            inp.visual.float() if inp.visual is not None else torch.zeros(n, 0))
     return tuple(x.cpu() for x in out)
+
+
+def exported_sizes(model: nn.Module) -> dict[str, int] | None:
+    """The node counts the exported graph fixes (``nodes``, and ``endpoints`` for models that
+    read lines), from the checkpoint's ``metadata["resample"]``; ``None`` when it does not
+    resample (the export then fixes the example's sizes)."""
+    md = getattr(model, "metadata", None)
+    rs = md.get("resample") if isinstance(md, dict) else None
+    if rs is None:
+        return None
+    points, lines = rs
+    cfg = model.config
+    out = {"nodes": points + (2 * lines if cfg.use_lines else 0)}
+    if cfg.line_mp:
+        out["endpoints"] = 2 * lines
+    return out
 
 
 def export_onnx(model: nn.Module, path: str | os.PathLike, example: Any = None,

@@ -57,6 +57,9 @@ class MethodResult:
         info: JSON-ready extras (e.g. the network's ``log_var``).
         raw: the library object (``PoseOutput``, ``BaselineResult``, ``FusedPose``); not
             serialised.
+        inliers: bool ``[Np]`` per point match of the input (repeated rows share their
+            correspondence's value): within the support band of the pose and in front of
+            both cameras; ``None`` for methods the support check does not read.
     """
 
     method: str | None
@@ -68,6 +71,7 @@ class MethodResult:
     num_inliers: int | None = None
     info: dict[str, Any] = field(default_factory=dict)
     raw: Any = field(default=None, repr=False)
+    inliers: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -92,7 +96,7 @@ class MethodResult:
         if self.status == "ok":
             info["unreliable_T_0to1"] = self.T_0to1
         return MethodResult(self.method, "unreliable", None, None, self.warnings + reasons,
-                            self.time_ms, self.num_inliers, info, self.raw)
+                            self.time_ms, self.num_inliers, info, self.raw, self.inliers)
 
     @property
     def sigma(self) -> dict[str, float] | None:
@@ -107,7 +111,8 @@ class MethodResult:
         return _jsonable({"method": self.method, "status": self.status, "T_0to1": self.T_0to1,
                           "sigma": self.sigma, "covariance": self.covariance,
                           "warnings": list(self.warnings), "time_ms": self.time_ms,
-                          "num_inliers": self.num_inliers, "info": self.info})
+                          "num_inliers": self.num_inliers, "info": self.info,
+                          "inliers": self.inliers})
 
 
 @dataclass

@@ -57,6 +57,7 @@ def check_support(res: MethodResult, matches: PairMatches, threshold_px: float =
     front = near & (z0[0] > 0) & (z1[0] > 0)
     k, m = int(front.sum()), int(near.sum())
     res.info["support_inliers"] = k
+    res.info["inlier_mask"] = front.numpy()  # PoseEstimator moves it to res.inliers
     res.info["behind_camera"] = m - k
     floor = min(min_inliers, n)
     if not (k < min_inlier_ratio * n or k < floor):

@@ -8,6 +8,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 from torch_geometric.nn import MessagePassing
+from torch_geometric.nn.dense.linear import Linear
 from torch_geometric.utils import softmax
 
 from strl_pyg.data.pair_graph import CompleteEdges  # the marker is data; re-exported here
@@ -119,13 +120,20 @@ class AttentionConv(MessagePassing):
     Args:
         channels (int or tuple): Size of each source and target feature (and of the output,
             which equals the target size because of the residual). A tuple
-            ``(src_channels, dst_channels)`` for bipartite inputs of different widths.
+            ``(src_channels, dst_channels)`` for bipartite inputs of different widths;
+            ``src_channels=-1`` infers the source width at the first call (lazy, as PyG's
+            layers), e.g. ``(-1, 64)`` under :func:`~torch_geometric.nn.to_hetero`. The
+            target width is the output width and must be given.
         heads (int, optional): Number of attention heads :math:`H`; must divide the target
             channels. (default: :obj:`4`)
         mlp_ratio (int, optional): Hidden width of :math:`F` as a multiple of the target
             channels. (default: :obj:`2`)
         dropout (float, optional): Dropout on the attention weights during training.
             (default: :obj:`0.0`)
+        edge_dim (int, optional): Size of edge features ``edge_attr``; when given, each
+            edge's features are projected and added to its key and value (as PyG's
+            ``TransformerConv``): :math:`\mathbf{k}^h_{ij} = \mathbf{W}^h_k \mathbf{f}_j +
+            \mathbf{W}^h_e \mathbf{e}_{ij}`. Explicit edges only. (default: :obj:`None`)
         **kwargs (optional): Additional arguments of
             :class:`torch_geometric.nn.conv.MessagePassing`.
 
@@ -136,8 +144,12 @@ class AttentionConv(MessagePassing):
           edge indices :math:`(2, |\mathcal{E}|)` or a :class:`CompleteEdges` marker (or
           :obj:`None` with ``complete=True``),
           graph ids :math:`(|\mathcal{V}|)` or :math:`((|\mathcal{V_s}|), (|\mathcal{V_t}|))`
-          or :obj:`None` (one graph), query :math:`(|\mathcal{V_t}|, C_t)` or :obj:`None`
-        - **output:** node features :math:`(|\mathcal{V}_t|, C_t)`
+          or :obj:`None` (one graph), query :math:`(|\mathcal{V_t}|, C_t)` or :obj:`None`,
+          edge features :math:`(|\mathcal{E}|, D_e)` or :obj:`None`
+        - **output:** node features :math:`(|\mathcal{V}_t|, C_t)`, or with
+          ``return_attention_weights=True`` a tuple of them and ``(edge_index, alpha)``:
+          the edges :math:`(2, |\mathcal{E}|)` (complete attention: every edge of the
+          complete graph, built for this call) and their weights :math:`(|\mathcal{E}|, H)`
     """
 
     def __init__(
@@ -146,11 +158,18 @@ class AttentionConv(MessagePassing):
         heads: int = 4,
         mlp_ratio: int = 2,
         dropout: float = 0.0,
+        edge_dim: int | None = None,
         **kwargs,
     ) -> None:
         kwargs.setdefault("aggr", "add")
         super().__init__(node_dim=0, **kwargs)
         src_channels, dst_channels = as_pair(channels)
+        if not isinstance(dst_channels, int) or dst_channels < 1:
+            raise ValueError(f"Expected the target channels (the output width, residual) as a "
+                             f"positive int; pass (-1, C) for lazy source channels (got "
+                             f"{channels!r})")
+        if not isinstance(src_channels, int) or (src_channels < 1 and src_channels != -1):
+            raise ValueError(f"Expected source channels >= 1 or -1 (lazy) (got {channels!r})")
         if dst_channels % heads != 0:
             raise ValueError(
                 f"Expected heads to divide the target channels (got {heads} heads for "
@@ -162,17 +181,23 @@ class AttentionConv(MessagePassing):
         self.dropout = dropout
         self.head_dim = dst_channels // heads
 
+        self.edge_dim = edge_dim
         self.lin_q = nn.Linear(dst_channels, dst_channels)
-        self.lin_k = nn.Linear(src_channels, dst_channels)
-        self.lin_v = nn.Linear(src_channels, dst_channels)
+        # PyG's Linear infers in_channels=-1 at the first call (lazy initialisation)
+        self.lin_k = Linear(src_channels, dst_channels, weight_initializer="kaiming_uniform")
+        self.lin_v = Linear(src_channels, dst_channels, weight_initializer="kaiming_uniform")
+        self.lin_edge = (Linear(edge_dim, dst_channels, bias=False,
+                                weight_initializer="kaiming_uniform")
+                         if edge_dim is not None else None)
         self.lin_out = nn.Linear(dst_channels, dst_channels)
         self.update_mlp = mlp([2 * dst_channels, mlp_ratio * dst_channels, dst_channels])
         self.reset_parameters()
 
     def reset_parameters(self) -> None:
         super().reset_parameters()
-        for lin in (self.lin_q, self.lin_k, self.lin_v, self.lin_out):
-            lin.reset_parameters()
+        for lin in (self.lin_q, self.lin_k, self.lin_v, self.lin_out, self.lin_edge):
+            if lin is not None:
+                lin.reset_parameters()
         reset_mlp(self.update_mlp)
 
     def forward(
@@ -184,7 +209,9 @@ class AttentionConv(MessagePassing):
         *,
         complete: bool = False,
         layout: DenseLayout | tuple[DenseLayout, DenseLayout] | None = None,
-    ) -> Tensor:
+        edge_attr: Tensor | None = None,
+        return_attention_weights: bool | None = None,
+    ) -> Tensor | tuple[Tensor, tuple[Tensor, Tensor]]:
         """Args: ``x`` node features (or a ``(source, target)`` pair); ``edge_index``
         ``[2, E]`` or a :class:`CompleteEdges` marker; ``batch`` graph ids for complete
         attention (a tensor, or a ``(source, target)`` pair); ``query`` the query features of
@@ -192,7 +219,10 @@ class AttentionConv(MessagePassing):
         within each graph of ``batch``, with ``edge_index=None``; ``layout``: for complete
         attention, a :class:`~strl_pyg.nn.DenseLayout` of the nodes (or a ``(source,
         target)`` pair) built once by the caller, in place of graph ids: the layer then never
-        synchronises with the host (graph ids are read on the host on every call)."""
+        synchronises with the host (graph ids are read on the host on every call);
+        ``edge_attr`` ``[E, edge_dim]`` features of the explicit edges (layers built with
+        ``edge_dim``); ``return_attention_weights=True``: also ``(edge_index, alpha [E, H])``
+        (for complete attention the complete edges are built for it: O(N^2), as asked)."""
         if complete:
             if edge_index is not None:
                 raise ValueError("Expected edge_index=None with complete=True (got an "
@@ -220,22 +250,55 @@ class AttentionConv(MessagePassing):
         v = self.lin_v(x_src).view(-1, H, D)
         size = (x_src.shape[0], x_dst.shape[0])
 
+        if (edge_attr is None) != (self.lin_edge is None):
+            raise ValueError(f"Expected edge_attr exactly when the layer has edge_dim (got "
+                             f"edge_dim={self.edge_dim} and edge_attr "
+                             f"{'None' if edge_attr is None else tuple(edge_attr.shape)})")
+        if edge_attr is not None and isinstance(edge_index, CompleteEdges):
+            raise ValueError("Expected explicit edges with edge_attr (got complete attention: "
+                             "materialise the edges and give their features)")
+        if isinstance(edge_index, CompleteEdges) and return_attention_weights:
+            # the weights of every complete edge, asked for: the reference path on them
+            from strl_pyg.data.pair_graph import complete_edge_index
+
+            ls, ld = _complete_layouts(edge_index, batch, layout, *size)
+
+            def ids(lay: DenseLayout) -> Tensor:
+                return lay.batch if lay.batch is not None else torch.zeros(
+                    lay.num_nodes, dtype=torch.long, device=q.device)
+
+            edge_index = complete_edge_index(ids(ls), ids(ld), ls.num_graphs)
+        alpha = None
         if isinstance(edge_index, CompleteEdges):
             msg = self._dense(q, k, v, *_complete_layouts(edge_index, batch, layout, *size))
         else:
-            alpha = self.edge_updater(edge_index, q=q, k=k, size=size)
-            msg = self.propagate(edge_index, v=v, alpha=alpha, size=size)
+            e = None
+            if edge_attr is not None:
+                if edge_attr.dim() != 2 or edge_attr.shape[0] != edge_index.shape[1]:
+                    raise ValueError(f"Expected edge_attr of shape [{edge_index.shape[1]}, "
+                                     f"{self.edge_dim}] (got {tuple(edge_attr.shape)})")
+                e = self.lin_edge(edge_attr).view(-1, H, D)
+            alpha = self.edge_updater(edge_index, q=q, k=k, e=e, size=size)
+            msg = self.propagate(edge_index, v=v, alpha=alpha, e=e, size=size)
         msg = self.lin_out(msg.reshape(-1, H * D))
-        return x_dst + self.update_mlp(torch.cat([x_dst, msg], dim=-1))
+        out = x_dst + self.update_mlp(torch.cat([x_dst, msg], dim=-1))
+        if return_attention_weights:
+            return out, (edge_index, alpha)
+        return out
 
     def edge_update(
-        self, q_i: Tensor, k_j: Tensor, index: Tensor, ptr: Tensor | None, size_i: int | None
+        self, q_i: Tensor, k_j: Tensor, e: Tensor | None, index: Tensor, ptr: Tensor | None,
+        size_i: int | None
     ) -> Tensor:
+        if e is not None:
+            k_j = k_j + e
         alpha = (q_i * k_j).sum(dim=-1) / math.sqrt(self.head_dim)
         alpha = softmax(alpha, index, ptr, size_i)
         return F.dropout(alpha, p=self.dropout, training=self.training)
 
-    def message(self, v_j: Tensor, alpha: Tensor) -> Tensor:
+    def message(self, v_j: Tensor, alpha: Tensor, e: Tensor | None) -> Tensor:
+        if e is not None:
+            v_j = v_j + e
         return alpha.unsqueeze(-1) * v_j
 
     # ------------------------------------------------------------------ dense fast path
@@ -273,7 +336,8 @@ class AttentionConv(MessagePassing):
         return ld.from_dense(out.transpose(1, 2))  # [n_dst, H, D], storage order
 
     def __repr__(self) -> str:
+        edge = f", edge_dim={self.edge_dim}" if self.edge_dim is not None else ""
         return (
             f"{self.__class__.__name__}({self.channels}, heads={self.heads}, "
-            f"mlp_ratio={self.mlp_ratio})"
+            f"mlp_ratio={self.mlp_ratio}{edge})"
         )

@@ -131,6 +131,8 @@ def load_external_matches(
     format: str = "auto",
     batch_index: int | None = None,
     line_endpoints: str = "auto",
+    image0: Any = None,
+    image1: Any = None,
 ) -> PairMatches:
     """Reads matches of another tool (``.npz`` or a dict of arrays / tensors); see the table
     in :mod:`strl_pyg.data.external.formats` for the layouts.
@@ -146,6 +148,9 @@ def load_external_matches(
         batch_index: Which pair of a batched input to read (required for batches > 1).
         line_endpoints: GlueStick only: ``"auto"`` orients matched lines by their endpoints'
             point matches and drops lines it cannot orient; ``"as_stored"`` trusts the file.
+        image0, image1: The images the matches come from (``(H, W)`` or ``(H, W, 3)``), for
+            the methods that read pixels (the network's visual branch, ``guided``); they
+            give the image sizes too. A file that stores images of its own refuses them.
     """
     source, data = _read_source(path_or_dict)
     fmt = detect_format(data) if format == "auto" else format
@@ -167,6 +172,13 @@ def load_external_matches(
     else:
         d = unbatch(data, RANKS[fmt], batch_index)
         kw = READERS[fmt](d, batch_index, line_endpoints)
+    for i, img in ((0, image0), (1, image1)):
+        if img is None:
+            continue
+        if kw.get(f"image{i}") is not None:
+            raise ValueError(f"Expected image{i} either in {source} or as an argument (got "
+                             "both)")
+        kw[f"image{i}"] = img
     for i, arg in ((0, image_size0), (1, image_size1)):
         kw[f"image_size{i}"] = image_size_from(
             arg, d.get(f"image_size{i}"), _SIZE_ORDER.get(fmt), i,

@@ -1,0 +1,278 @@
+"""Issue "First contact, round 4": each item reproduced as a user met it, then its fix."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+from torch_geometric.data import HeteroData
+
+from strl_pyg import PairMatches
+from strl_pyg.cli import main as cli_main
+from strl_pyg.cli.inputs import UsageError, read_intrinsics
+from strl_pyg.data import materialize_complete_edges
+from strl_pyg.data.external import load_external_matches
+from strl_pyg.estimation.uncertainty import MAX_SIGMA_DEG, cap_covariance
+from strl_pyg.inference import PoseEstimator
+from strl_pyg.nn import AttentionConv
+from strl_pyg.synthetic import generate_pair
+
+
+@pytest.fixture(scope="module")
+def pair():
+    return generate_pair(2_000_017)
+
+
+def _pm(pair, p0, p1, **kw):
+    return PairMatches(p0, p1, K0=pair.K, K1=pair.K, image_size0=pair.image0.shape[:2],
+                       image_size1=pair.image1.shape[:2], **kw)
+
+
+# ----------------------------------------------------------------------------- repeated matches
+@pytest.mark.parametrize("unique, times", [(1, 100), (3, 30)])
+def test_repeated_matches_are_one_correspondence(pair, unique, times):
+    """Before: one match x100 -> 'ok' from poselib, sigma 0.002 deg, 124 / 175 deg wrong;
+    3 unique x30 -> 'ok', 9 / 92 deg wrong."""
+    m = pair.matches
+    p0 = np.tile(m.points0[:unique], (times, 1))
+    p1 = np.tile(m.points1[:unique], (times, 1))
+    est = PoseEstimator(methods="poselib").estimate(_pm(pair, p0, p1))
+    assert est.status == "degenerate" and est.T_0to1 is None
+    assert any(f"{unique * times - unique} repeated point matches removed" in w
+               for w in est.warnings)
+    assert est.num_points == unique
+
+
+def test_repeating_every_match_does_not_shrink_sigma(pair):
+    """Before: every match x5 shrank sigma by ~sqrt(5)."""
+    m = pair.matches
+    once = PoseEstimator(methods="poselib").estimate(_pm(pair, m.points0, m.points1))
+    five = PoseEstimator(methods="poselib").estimate(
+        _pm(pair, np.tile(m.points0, (5, 1)), np.tile(m.points1, (5, 1))))
+    assert once.status == five.status == "ok"
+    np.testing.assert_allclose(five.pose.covariance, once.pose.covariance, rtol=1e-9)
+    assert five.pose.inliers.shape == (5 * m.num_points,)
+    np.testing.assert_array_equal(five.pose.inliers, np.tile(once.pose.inliers, 5))
+
+
+def test_all_matches_onto_one_keypoint_warn_at_load_and_are_degenerate(pair):
+    """Before: a SuperGlue dict whose 512 matches all point at keypoint 0 of image 1 was
+    accepted silently and gave 'ok' from opencv."""
+    m = pair.matches
+    n = m.num_points
+    d = {"keypoints0": m.points0, "keypoints1": m.points1,
+         "matches0": np.zeros(n, dtype=np.int64), "matching_scores0": np.ones(n)}
+    with pytest.warns(UserWarning, match=rf"onto 1 distinct keypoints of image 1"):
+        pm = load_external_matches(d, image_size0=pair.image0.shape[:2],
+                                   image_size1=pair.image1.shape[:2], K0=pair.K, K1=pair.K)
+    est = PoseEstimator(methods=("opencv", "poselib")).estimate(pm)
+    assert est.status == "degenerate"
+    assert any("one-to-many" in w for w in est.warnings)
+
+
+def test_deduplicated_keeps_first_rows_and_maps_every_input_row(pair):
+    m = pair.matches
+    idx = np.array([3, 1, 3, 0, 1, 2])
+    pm = _pm(pair, m.points0[idx], m.points1[idx])
+    out, notes, inverse = pm.deduplicated()
+    np.testing.assert_array_equal(out.points0, m.points0[[3, 1, 0, 2]])
+    np.testing.assert_array_equal(inverse, [0, 1, 0, 2, 1, 3])
+    assert len(notes) == 1 and "2 repeated point matches removed" in notes[0]
+    same, none, _ = _pm(pair, m.points0, m.points1).deduplicated()
+    assert none == [] and same.num_points == m.num_points
+
+
+def test_the_inlier_mask_marks_an_outlier_per_input_row(pair):
+    m = pair.matches
+    p1 = m.points1.copy()
+    p1[10] += 40.0
+    est = PoseEstimator(methods="poselib").estimate(_pm(pair, m.points0, p1))
+    assert est.pose.inliers.dtype == bool and est.pose.inliers.shape == (m.num_points,)
+    assert not est.pose.inliers[10] and est.pose.inliers.sum() >= m.num_points - 3
+    assert len(est.to_dict()["pose"]["inliers"]) == m.num_points
+
+
+# ----------------------------------------------------------------------------- coordinates
+def test_normalised_coordinates_with_a_pixel_K_are_named(pair):
+    """Before: 'degenerate', 'zero parallax'."""
+    m = pair.matches
+    Ki = np.linalg.inv(pair.K)
+    n0 = (np.c_[m.points0, np.ones(m.num_points)] @ Ki.T)[:, :2]
+    n1 = (np.c_[m.points1, np.ones(m.num_points)] @ Ki.T)[:, :2]
+    keep = (n0.min(1) > -3) & (n1.min(1) > -3)  # the in-image check allows 4 px outside
+    est = PoseEstimator(methods="poselib").estimate(_pm(pair, n0[keep], n1[keep]))
+    assert est.status == "degenerate"
+    assert any("Expected pixel coordinates" in w and "from_normalized" in w
+               for w in est.warnings)
+    pm = PairMatches.from_normalized(n0, n1, pair.K, pair.K, pair.image0.shape[:2],
+                                     pair.image1.shape[:2])
+    np.testing.assert_allclose(pm.points0, m.points0, atol=1e-9)
+    assert PoseEstimator(methods="poselib").estimate(pm).status == "ok"
+    with pytest.raises(ValueError, match="Expected K0 and K1"):
+        PairMatches.from_normalized(n0, n1, None, None, (10, 10), (10, 10))
+
+
+def test_external_matches_take_their_images(pair):
+    m = pair.matches
+    pm = load_external_matches({"mkpts0": m.points0, "mkpts1": m.points1},
+                               image0=pair.image0, image1=pair.image1, K0=pair.K, K1=pair.K)
+    assert pm.has_images and pm.image_size0 == tuple(pair.image0.shape[:2])
+
+
+# ----------------------------------------------------------------------------- sigma
+def test_cap_covariance_bounds_each_block_at_180_degrees():
+    """Before: 'ok', 2.1 / 1.5 deg off, sigma 203 / 127 deg (a Strecha wide pair)."""
+    cov = np.diag([4.0, 4.0, 4.0, 0.01, 0.01])  # rotation RMS ~ 198 deg
+    cov[0, 3] = cov[3, 0] = 0.1
+    capped, was = cap_covariance(cov)
+    assert was
+    assert math.degrees(math.sqrt(np.trace(capped[:3, :3]))) == pytest.approx(MAX_SIGMA_DEG)
+    np.testing.assert_allclose(capped[3:, 3:], cov[3:, 3:])  # the other block unchanged
+    assert np.all(np.linalg.eigvalsh(capped) >= -1e-12)
+    small = np.diag([1e-4] * 5)
+    np.testing.assert_array_equal(cap_covariance(small)[0], small)
+    assert not cap_covariance(small)[1]
+
+
+def test_a_clean_pair_has_no_far_bootstrap_resamples(pair):
+    est = PoseEstimator(methods="poselib").estimate(pair.matches)
+    assert est.pose.info["bootstrap_far"] == 0
+    assert not any("bootstrap resamples found another pose" in w for w in est.warnings)
+
+
+# ----------------------------------------------------------------------------- layers
+def test_materialize_complete_edges_on_a_users_graph_does_not_mutate_it():
+    """Before: TypeError in zeros() on a 'kp' graph, and a 'point' node type added."""
+    d = HeteroData()
+    d["kp"].x = torch.randn(4, 3)
+    d["kp", "all", "kp"].dense = torch.ones(1, dtype=torch.bool)
+    out = materialize_complete_edges(d)
+    assert out["kp", "all", "kp"].edge_index.shape == (2, 16)
+    assert d.node_types == ["kp"] and "edge_index" not in d["kp", "all", "kp"]
+    assert "dense" in d["kp", "all", "kp"] and "dense" not in out["kp", "all", "kp"]
+
+
+def _complete(bs, bd):
+    from strl_pyg.data.pair_graph import complete_edge_index
+
+    return complete_edge_index(bs, bd, int(max(bs.max(), bd.max())) + 1)
+
+
+def test_attention_conv_lazy_channels_and_attention_weights():
+    torch.manual_seed(0)
+    lazy = AttentionConv((-1, 16), heads=2)
+    xs, xd = torch.randn(5, 7), torch.randn(4, 16)
+    bs, bd = torch.tensor([0, 0, 1, 1, 1]), torch.tensor([0, 0, 1, 1])
+    dense = lazy((xs, xd), complete=True, batch=(bs, bd))
+    assert lazy.lin_k.weight.shape == (16, 7)
+    ei = _complete(bs, bd)
+    sparse, (ei2, alpha) = lazy((xs, xd), ei, return_attention_weights=True)
+    torch.testing.assert_close(dense, sparse, atol=1e-5, rtol=1e-5)
+    assert torch.equal(ei2, ei) and alpha.shape == (ei.shape[1], 2)
+    sums = torch.zeros(4, 2).index_add_(0, ei[1], alpha)
+    torch.testing.assert_close(sums, torch.ones(4, 2))
+    out, (ei3, alpha3) = lazy((xs, xd), complete=True, batch=(bs, bd),
+                              return_attention_weights=True)
+    torch.testing.assert_close(out, dense, atol=1e-5, rtol=1e-5)
+    assert torch.equal(ei3, ei) and torch.allclose(alpha3, alpha)
+    with pytest.raises(ValueError, match="target channels"):
+        AttentionConv(-1)
+
+
+def test_attention_conv_edge_features():
+    torch.manual_seed(1)
+    conv = AttentionConv(16, heads=4, edge_dim=3)
+    x = torch.randn(4, 16)
+    ei = torch.tensor([[0, 1, 2, 0], [1, 2, 3, 3]])
+    ea = torch.randn(4, 3)
+    a, b = conv(x, ei, edge_attr=ea), conv(x, ei, edge_attr=2 * ea)
+    assert a.shape == (4, 16) and not torch.allclose(a[1:], b[1:])
+    torch.testing.assert_close(a[0], b[0])  # node 0 receives no edge
+    assert "edge_dim=3" in repr(conv)
+    with pytest.raises(ValueError, match="edge_attr of shape"):
+        conv(x, ei, edge_attr=ea[:2])
+    with pytest.raises(ValueError, match="edge_attr exactly when"):
+        conv(x, ei)
+    with pytest.raises(ValueError, match="explicit edges with edge_attr"):
+        conv(x, complete=True, edge_attr=ea)
+    gx = torch.randn(4, 16, dtype=torch.float64, requires_grad=True)
+    conv64 = conv.double()
+    assert torch.autograd.gradcheck(lambda t: conv64(t, ei, edge_attr=ea.double()), (gx,))
+
+
+def test_onnx_inputs_of_a_pair_without_lines_fail_before_the_runtime(pair):
+    from strl_pyg.inference.export import onnx_inputs
+    from strl_pyg.inference.inputs import prepare_graph
+    from strl_pyg.model import StrLPose
+
+    model = StrLPose.from_pretrained()
+    no_lines = replace(pair.matches, lines0=None, lines1=None)
+    with pytest.raises(ValueError, match=r"Expected a pair graph at the exported sizes .*"
+                                         r"'endpoints': 0"):
+        onnx_inputs(model, prepare_graph(no_lines, model))
+
+
+# ----------------------------------------------------------------------------- command line
+def test_a_wrong_case_flag_gets_a_suggestion(capsys):
+    assert cli_main(["predict", "a.png", "b.png", "--k", "1,1,1,1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "did you mean --K?" in err
+
+
+def test_an_unknown_method_fails_before_anything_is_loaded(capsys, monkeypatch):
+    """Before: '--methods poselibb' failed after 6 s of loading."""
+    import strl_pyg.cli.commands as commands
+
+    def boom(*a, **k):
+        raise AssertionError("read before the method names were checked")
+
+    monkeypatch.setattr(commands, "load_model", boom)
+    monkeypatch.setattr(commands, "read_pair", boom)
+    assert cli_main(["predict", "a.png", "b.png", "--methods", "poselibb"]) == 2
+    err = capsys.readouterr().err
+    assert "did you mean 'poselib'?" in err and err.count("\n") == 1
+
+
+def test_a_folder_as_checkpoint_says_folder(tmp_path, pair, capsys):
+    path = pair.matches.save(tmp_path / "m.npz")
+    assert cli_main(["predict", "--matches", str(path), "--checkpoint", str(tmp_path)]) == 2
+    assert "(got a folder)" in capsys.readouterr().err
+    assert cli_main(["predict", "--matches", str(tmp_path)]) == 2
+    assert "(got a folder)" in capsys.readouterr().err
+
+
+def test_predict_reads_a_match_file(tmp_path, pair, capsys):
+    path = pair.matches.save(tmp_path / "m.npz")
+    code = cli_main(["predict", "--matches", str(path), "--methods", "poselib",
+                     "--bootstrap", "0", "--json"])
+    import json
+
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["pose"]["status"] == "ok" and out["pose"]["method"] == "poselib"
+    assert out["num_points"] == pair.matches.num_points
+    assert cli_main(["predict", "a.png", "--matches", str(path)]) == 2
+    assert "either two images or --matches" in capsys.readouterr().err
+
+
+def test_intrinsics_from_colmap_and_strecha_files(tmp_path):
+    (tmp_path / "cameras.txt").write_text(
+        "# Camera list with one line of data per camera:\n"
+        "1 PINHOLE 3072 2048 2759.48 2764.16 1520.69 1006.81\n")
+    K = read_intrinsics(str(tmp_path / "cameras.txt"))
+    # COLMAP's pixel centres are at +0.5: this package's (OpenCV's) are at 0
+    np.testing.assert_allclose(K, [[2759.48, 0, 1520.19], [0, 2764.16, 1006.31], [0, 0, 1]])
+    (tmp_path / "one.txt").write_text("1 SIMPLE_RADIAL 640 480 500 320.5 240.5 0.01\n")
+    np.testing.assert_allclose(read_intrinsics(str(tmp_path / "one.txt")),
+                               [[500, 0, 320], [0, 500, 240], [0, 0, 1]])
+    (tmp_path / "two.txt").write_text("1 PINHOLE 640 480 500 500 320 240\n"
+                                      "2 PINHOLE 640 480 600 600 320 240\n")
+    with pytest.raises(UsageError, match="Expected one camera"):
+        read_intrinsics(str(tmp_path / "two.txt"))
+    (tmp_path / "0004.jpg.camera").write_text(
+        "2759.48 0 1520.69\n0 2764.16 1006.81\n0 0 1\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n"
+        "-7.2 -7.5 0.2\n3072 2048\n")
+    np.testing.assert_allclose(read_intrinsics(str(tmp_path / "0004.jpg.camera")),
+                               [[2759.48, 0, 1520.69], [0, 2764.16, 1006.81], [0, 0, 1]])
