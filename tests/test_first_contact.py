@@ -65,7 +65,7 @@ def test_all_matches_onto_one_keypoint_warn_at_load_and_are_degenerate(pair):
     n = m.num_points
     d = {"keypoints0": m.points0, "keypoints1": m.points1,
          "matches0": np.zeros(n, dtype=np.int64), "matching_scores0": np.ones(n)}
-    with pytest.warns(UserWarning, match=rf"onto 1 distinct keypoints of image 1"):
+    with pytest.warns(UserWarning, match=r"onto 1 distinct keypoints of image 1"):
         pm = load_external_matches(d, image_size0=pair.image0.shape[:2],
                                    image_size1=pair.image1.shape[:2], K0=pair.K, K1=pair.K)
     est = PoseEstimator(methods=("opencv", "poselib")).estimate(pm)

@@ -353,7 +353,7 @@ def _read_match_file(args):
     """``predict --matches``: a match file of this package (``strl-pose match``) or of another
     tool (:func:`~strl_pyg.data.load_external_matches`), with ``--K`` / ``--K0`` / ``--K1``
     and, for files without image sizes, the sizes of ``--image-size``."""
-    from strl_pyg.cli.inputs import _check_input_file, _intrinsics
+    from strl_pyg.cli.inputs import _check_input_file
 
     _check_input_file(args.matches, "match file (.npz) for --matches")
     K0, K1 = _intrinsics(args)
