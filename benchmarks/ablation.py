@@ -79,9 +79,43 @@ TRAIN_ARGS = [
     "--set", "hidden=64", "--set", "layers=3", "--set", "heads=4",
     "--checkpoint-minutes", "5", "--no-progress", "--no-tensorboard",
 ]
+_BASE_ARGS = list(TRAIN_ARGS)
 TRAIN_SCRIPT = Path(__file__).resolve().parents[1] / "examples" / "train.py"
 #: Where the results that outlive the machine go (committed): see the module docstring.
 RESULTS = Path(__file__).resolve().parent / "results_ablation"
+
+
+#: The two training recipes (issue "A network that learns its pose"): ``paper`` is the paper's
+#: (its four coordinates per node, the aleatoric loss on all 7 components), the recipe of the
+#: first Table 3 (``results_ablation/``); ``balanced`` is the package's default since (flow
+#: node inputs, beta-NLL with an angular translation term; ``benchmarks/results_pose_recipe.md``)
+#: and is scored into ``results_ablation_balanced/``. Everything else is the same protocol.
+RECIPES = {"paper": ["--loss", "paper", "--set", "inputs=paper"],
+           "balanced": ["--loss", "balanced", "--set", "inputs=flow"]}
+#: The balanced recipe's plan: 3 seeds of baseline, LP, V and full, and L (seed 0 of every
+#: row first).
+PLAN_BALANCED = ([(r, 0) for r in ("baseline", "LP", "V", "full", "L")]
+                 + [(r, s) for s in (1, 2) for r in MULTI_SEED_ROWS])
+
+
+def use_recipe(name: str, root: Path) -> Path:
+    """Points the module at recipe ``name``: its training flags, plan, results folder; returns
+    its run root (``<root>/runs`` for the paper's, ``<root>/balanced`` for the other, so both
+    share the caches)."""
+    global RESULTS, PLAN
+    TRAIN_ARGS[:] = [a for a in _BASE_ARGS] + RECIPES[name]
+    if name == "paper":
+        return root
+    RESULTS = Path(__file__).resolve().parent / f"results_ablation_{name}"
+    PLAN = PLAN_BALANCED
+    run_root = root / name
+    run_root.mkdir(parents=True, exist_ok=True)
+    for shared in ("cache", "eval_cache"):
+        link = run_root / shared
+        (root / shared).mkdir(parents=True, exist_ok=True)
+        if not (link.exists() or link.is_symlink()):
+            link.symlink_to(root / shared, target_is_directory=True)
+    return run_root
 
 
 def run_name(row: str, seed: int) -> str:
@@ -513,6 +547,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--root", default=ROOT_DEFAULT, help="cache and run folders")
+    ap.add_argument("--recipe", choices=tuple(RECIPES), default="paper",
+                    help="training recipe (RECIPES): 'paper' (the first Table 3) or "
+                         "'balanced' (its own plan and results folder)")
     sub = ap.add_subparsers(dest="command", required=True)
     t = sub.add_parser("train", help="train (or resume) every run of the plan")
     t.add_argument("--only", nargs="*", choices=ROWS, help="only these rows")
@@ -544,6 +581,18 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--figure", default=str(here / "figures" / "ablation_curves.png"))
     c.add_argument("--results", default=str(RESULTS), help="the committed histories")
     args = ap.parse_args(argv)
+    args.root = str(use_recipe(args.recipe, Path(args.root)))
+    if args.recipe != "paper":
+        for key in ("results",):
+            if getattr(args, key, None) == str(here / "results_ablation"):
+                setattr(args, key, str(RESULTS))
+        for key, name in (("out", "results_ablation_{}.md"), ("figure", "ablation_{}.png")):
+            value = getattr(args, key, None)
+            if value is not None and Path(value).name in ("results_ablation.md",
+                                                         "results_ablation_curves.md",
+                                                         "ablation_curves.png"):
+                stem = "curves_" if "curves" in Path(value).name and key == "out" else ""
+                setattr(args, key, str(Path(value).parent / name.format(stem + args.recipe)))
     return {"train": cmd_train, "cache": cmd_cache, "status": cmd_status, "eval": cmd_eval,
             "report": cmd_report, "curves": cmd_curves}[args.command](args)
 

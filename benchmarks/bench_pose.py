@@ -58,7 +58,7 @@ from tqdm.auto import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import banner  # noqa: E402
 
-from strl_pyg.estimation.uncertainty import BOOTSTRAPPED  # noqa: E402
+from strl_pyg.inference import BOOTSTRAPPED  # noqa: E402  (derived from the registry)
 from strl_pyg.metrics.stats import coverage_interval, median_ratio_interval  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -30,6 +30,7 @@ def _tiny(row: str, tmp_path: Path, **kw) -> TrainConfig:
                        out_dir=str(tmp_path / "runs" / row.replace("+", "p")), **kw)
 
 
+@pytest.mark.slow
 def test_every_row_trains_and_infers_on_one_shared_cache(tmp_path, monkeypatch):
     first = train(_tiny("full", tmp_path), progress=False)
     folders = list((tmp_path / "cache").iterdir())

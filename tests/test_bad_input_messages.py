@@ -107,6 +107,7 @@ def test_one_method_name_as_a_str_is_one_method():
 
 
 # ----------------------------------------------------------------------------- command line
+@pytest.mark.slow
 def test_a_closed_stdout_ends_quietly(tmp_path):
     """Before: ``strl-pose predict --json | head`` ended with "error: Expected a usable path
     (got Broken pipe)", blaming a path."""

@@ -149,6 +149,7 @@ cache.build(_keys(n), [(i, 0.15) for i in range(n)], fake_match,
 """
 
 
+@pytest.mark.slow
 def test_killed_build_leaves_no_corrupt_entry_and_resumes(tmp_path):
     n = 14
     script = tmp_path / "build.py"

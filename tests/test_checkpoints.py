@@ -101,6 +101,7 @@ def test_cli_refuses_a_planted_pickle_in_one_line(command, tmp_path, capsys, mon
     assert not marker.exists()
 
 
+@pytest.mark.slow
 def test_examples_train_refuses_a_planted_pickle_in_a_subprocess(tmp_path):
     marker = tmp_path / "marker"
     evil = _plant(tmp_path / "evil.pt", marker)

@@ -184,6 +184,7 @@ def test_help_and_argument_errors_do_not_import_torch(argv, code):
     assert seconds < 5.0  # measured: ~0.3 s (benchmarks/bench_startup.py); loose for CI
 
 
+@pytest.mark.slow
 def test_import_strl_pyg_is_light_and_names_resolve_lazily():
     out, _ = _run_python(
         f"import sys, strl_pyg\nprint([m for m in {HEAVY!r} if m in sys.modules])\n"

@@ -167,6 +167,7 @@ def command_lines(draw, f):
     return argv
 
 
+@pytest.mark.slow
 @pytest.mark.usefixtures("stubs")
 def test_cli_exit_codes_and_messages_over_the_argument_space(files):
     f = files

@@ -56,6 +56,7 @@ def test_public_paths_that_became_folders_keep_their_names():
     assert callable(pose_auc) and callable(relative_pose_error)
 
 
+@pytest.mark.slow
 def test_python_dash_m_evaluation_and_the_console_script_entry_point():
     res = subprocess.run([sys.executable, "-m", "strl_pyg.evaluation", "--help"],
                          capture_output=True, text=True, cwd=REPO, timeout=300)

@@ -354,7 +354,9 @@ def test_the_pages_have_what_this_test_checks():
     assert any(c.program == "strl-pose" for p in PAGES for c in page_commands(p))
 
 
-@pytest.mark.parametrize("block", RUNNABLE, ids=[b.where for b in RUNNABLE])
+@pytest.mark.parametrize("block", [
+    pytest.param(b, marks=pytest.mark.slow) if "train(" in b.text else b for b in RUNNABLE
+], ids=[b.where for b in RUNNABLE])  # a block that trains is in the slow tier
 def test_marked_python_block_runs_as_a_script(block, tmp_path):
     assert block.lang == "python", f"{block.where}: {RUN_MARKER} before a {block.lang!r} block"
     script = tmp_path / "snippet.py"
@@ -370,6 +372,7 @@ def test_every_python_block_compiles_and_imports_existing_names():
     assert not bad, "\n".join(bad)
 
 
+@pytest.mark.slow
 def test_every_command_uses_only_flags_its_parser_knows():
     cmds = [c for page in PAGES for c in page_commands(page)]
     assert len(cmds) >= 10, [c.text for c in cmds]

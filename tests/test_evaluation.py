@@ -210,6 +210,7 @@ def test_python_dash_m_runs_the_command_line(tmp_path):
     assert err.startswith("error: Expected a checkpoint file") and err.count("\n") == 1, err
 
 
+@pytest.mark.slow
 def test_script_end_to_end_on_kitti_slice(kitti_root, tiny_checkpoint, tmp_path, capsys):
     out = tmp_path / "out"
     rc = _script().main([

@@ -36,7 +36,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 SEED = 2_000_017  # held out from training
 HAVE_POSELIB = METHODS["poselib"].available()
 KEYS = {"method", "status", "T_0to1", "sigma", "covariance", "warnings", "time_ms",
-        "num_inliers", "info"}
+        "num_inliers", "info", "inliers"}
 
 def readme_python_block(must_contain: str) -> str:
     """The first ```python block of README.md that contains ``must_contain``."""
@@ -393,6 +393,7 @@ def test_predict_text_says_status_method_and_warnings(pngs, capsys):
 
 
 # ----------------------------------------------------------------------------- README
+@pytest.mark.slow
 def test_readme_snippet_runs_from_another_directory(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
     res = subprocess.run([sys.executable, "-c", SNIPPET], cwd=tmp_path, env=env,

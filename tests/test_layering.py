@@ -10,7 +10,9 @@ modules, which stay lazy so that ``strl-pose --help`` is torch-free):
   the module that defines it;
 - no module-level import cycle;
 - no ``from x import _name`` across folders (what two folders share is public, in the lower);
-- no module over :data:`MAX_LINES` lines.
+- functions read in a sitting: no body over :data:`MAX_FUNCTION_LINES` lines (the docstring
+  not counted), except the few in :data:`LONG_FUNCTIONS`, which may shrink but not grow
+  (files are split by concept, not to fit a line cap: the module cap is gone).
 
 The root holds only the lazy face ``__init__.py`` and ``_compat.py`` (the table of old module
 paths), both above every folder. Each rule has a planted violation below to show it can fail.
@@ -29,7 +31,14 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "strl_pyg"
-MAX_LINES = 450
+MAX_FUNCTION_LINES = 80
+#: Functions longer than the guide when it replaced the module cap, at that length: they are
+#: to be split at their natural seams; until then they may not grow.
+LONG_FUNCTIONS = {
+    "strl_pyg/training/loop.py::train": 183,
+    "strl_pyg/model/inputs.py::gather_inputs": 138,
+    "strl_pyg/estimation/vanishing.py::vanishing_point_pose": 110,
+}
 
 #: Floor of each folder of strl_pyg, lowest first. A folder imports only lower floors.
 FLOORS: dict[str, int] = {
@@ -245,10 +254,36 @@ def test_planted_old_path_import_is_caught(tmp_path):
         "strl_pyg/a.py:1 imports strl_pyg.data.datasets"]
 
 
-def test_no_module_over_the_size_limit():
-    long = {str(p.relative_to(ROOT)): n for p in PACKAGE.rglob("*.py")
-            if (n := len(p.read_text().splitlines())) > MAX_LINES}
-    assert not long, f"modules over {MAX_LINES} lines: {long}"
+def function_lengths(package: Path) -> dict[str, int]:
+    """``"path::name" -> lines`` of every function body, its docstring not counted."""
+    out = {}
+    for p in sorted(package.rglob("*.py")):
+        for node in ast.walk(ast.parse(p.read_text())):
+            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(
+                    getattr(body[0], "value", None), ast.Constant) and isinstance(
+                    body[0].value.value, str):
+                body = body[1:]
+            if body:
+                key = f"{p.relative_to(package.parent).as_posix()}::{node.name}"
+                out[key] = max(out.get(key, 0), node.end_lineno - body[0].lineno + 1)
+    return out
+
+
+def test_functions_read_in_a_sitting():
+    long = {k: n for k, n in function_lengths(PACKAGE).items()
+            if n > LONG_FUNCTIONS.get(k, MAX_FUNCTION_LINES)}
+    assert not long, f"function bodies over {MAX_FUNCTION_LINES} lines (or grown): {long}"
+
+
+def test_the_function_guide_catches_a_planted_long_function(tmp_path):
+    pkg = tmp_path / "strl_pyg"
+    pkg.mkdir()
+    body = "\n".join(f"    x{i} = {i}" for i in range(MAX_FUNCTION_LINES + 1))
+    (pkg / "a.py").write_text(f'def f():\n    """Doc."""\n{body}\n')
+    assert function_lengths(pkg) == {"strl_pyg/a.py::f": MAX_FUNCTION_LINES + 1}
 
 
 # ----------------------------------------------------------------------------- planted
@@ -337,11 +372,13 @@ def test_blocker_blocks():
 
 @pytest.mark.parametrize("module", ["strl_pyg.geometry", "strl_pyg.data", "strl_pyg.nn",
                                     "strl_pyg.data.graph", "strl_pyg.model"])
+@pytest.mark.slow
 def test_lower_layers_import_without_opencv_and_kornia(module):
     res = _run(f"import {module}\nprint('ok')\n")
     assert res.returncode == 0 and res.stdout.strip() == "ok", res.stderr[-2000:]
 
 
+@pytest.mark.slow
 def test_graphs_and_layers_work_without_opencv_and_kornia():
     code = """
 import numpy as np, torch

@@ -207,6 +207,7 @@ def test_save_load_round_trip_and_errors(tmp_path):
         StrLPose.load(tmp_path / "absent.pt")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name,geometric", [("full", False), ("LP+R", False), ("full", True)])
 def test_a_compiled_forward_has_at_most_one_graph_break(name, geometric):
     """The forward reads the host once (the padded block size of a batch), in its own frame:

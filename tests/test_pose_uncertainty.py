@@ -154,7 +154,7 @@ def test_guided_covariance_is_first_order_plus_the_bootstrap_of_its_solve(kind, 
     it kept, like the classical records: on all matches it is the base method's own bootstrap
     (computed once), on the network's top matches the bootstrap of that subset."""
     from strl_pyg.estimation.classical import have_poselib
-    from strl_pyg.estimation.uncertainty import BOOTSTRAPPED
+    from strl_pyg.inference import BOOTSTRAPPED
     from strl_pyg.model.strl_pose import StrLPose
 
     assert "guided" in BOOTSTRAPPED

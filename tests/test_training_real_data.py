@@ -35,6 +35,7 @@ def test_kitti_absent_validation_sequences_fail_before_any_matching(kitti_root, 
     assert not (tmp_path / "cache").exists()  # refused before matching a single pair
 
 
+@pytest.mark.slow
 def test_kitti_trains_and_validates_on_the_sequences_that_exist(kitti_root, tmp_path):
     cfg = real_config(tmp_path, dataset="kitti", data_root=str(kitti_root),
                       train_sequences=["06"], val_sequences=["06"])
@@ -70,6 +71,7 @@ def demon_train_root(demon_root, tmp_path):
     return root
 
 
+@pytest.mark.slow
 def test_demon_trains_on_defaults_with_rgb_patches(demon_train_root, tmp_path):
     cfg = real_config(tmp_path, dataset="demon", data_root=str(demon_train_root), limit=None,
                       batch_size=1)
@@ -80,6 +82,7 @@ def test_demon_trains_on_defaults_with_rgb_patches(demon_train_root, tmp_path):
     assert result["step"] == 2 and (tmp_path / "run" / "model.pt").is_file()
 
 
+@pytest.mark.slow
 def test_demon_grey_model_gets_grey_patches(demon_train_root, tmp_path):
     """A grey model (e.g. fine-tuning the shipped weights) gets grey DeMoN graphs."""
     cfg = real_config(tmp_path, dataset="demon", data_root=str(demon_train_root), limit=None,

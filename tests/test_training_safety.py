@@ -96,6 +96,7 @@ def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=600, cwd=cwd)
 
 
+@pytest.mark.slow
 def test_bad_device_and_unknown_set_key_are_one_line(tmp_path):
     for device in ("tpu", "gpu"):
         with pytest.raises(ValueError, match=rf"Expected --device cpu, cuda.*'{device}'"):

@@ -138,12 +138,11 @@ def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-#: What each method is, beside its registry name (the one name the output uses for it).
-METHOD_LABELS = {"regression": "the network's pose head", "opencv": "OpenCV MAGSAC",
-                 "poselib": "PoseLib", "fused": "network + classical, information form",
-                 "geometric": "the network's weighted eight-point", "guided": "network-guided "
-                 "classical solve", "vp": "vanishing-point rotation + 2-point translation",
-                 "vp_checked": "PoseLib checked by the lines' vanishing direction"}
+def _label(method: str | None) -> str | None:
+    """What a method is in words: its registry entry's label (``MethodSpec.label``)."""
+    from strl_pyg.inference.estimator import METHODS
+
+    return METHODS[method].label if method in METHODS else method
 
 #: ``strl-pose predict``'s exit codes (also in its ``--help``).
 EXIT_CODES = {0: "a pose: status 'ok'",
@@ -162,11 +161,11 @@ def _print_estimate(est, indent: str = "") -> None:
     method's own result."""
     pose = est.pose
     if pose.status == "unreliable":
-        label = METHOD_LABELS.get(pose.method, pose.method)
+        label = _label(pose.method)
         print(f"{indent}pose: unreliable, no pose given (see the warnings); {pose.method} "
               f"({label}) computed, not to use: {_fmt_pose(pose.info['unreliable_T_0to1'])}")
     elif pose.status == "ok":
-        label = METHOD_LABELS.get(pose.method, pose.method)
+        label = _label(pose.method)
         print(f"{indent}pose: ok, from {pose.method} ({label}): {_fmt_pose(pose.T_0to1)}")
         if pose.sigma is not None:
             kind = pose.info.get("covariance", "network log-variance")

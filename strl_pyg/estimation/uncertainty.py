@@ -10,7 +10,8 @@ the solver is re-run on ``n`` resamples (with replacement) of the point matches 
 covariance of the resampled poses, in the tangent chart of the estimate, is returned. The
 estimators' ``poselib`` / ``opencv`` / ``guided`` records carry first-order + bootstrap
 covariances, the ``fused`` one information form + the classical bootstrap
-(:class:`strl_pyg.inference.PoseEstimator`, ``bootstrap=8``, :data:`BOOTSTRAPPED`), calibrated
+(:class:`strl_pyg.inference.PoseEstimator`, ``bootstrap=8``, ``MethodSpec.bootstrapped``),
+calibrated
 with one scale per method (``benchmarks/bench_pose.py --calibrate``).
 """
 
@@ -28,13 +29,13 @@ from strl_pyg.geometry import Pose
 from strl_pyg.utils.threads import available_cores, shared_pool
 
 __all__ = ["bootstrap_covariance", "bootstrap_resamples", "Bootstrap", "cap_covariance",
-           "MIN_BOOTSTRAP", "BOOTSTRAPPED", "FAR_ROTATION_DEG", "FAR_TRANSLATION_DEG",
+           "MIN_BOOTSTRAP", "FAR_ROTATION_DEG", "FAR_TRANSLATION_DEG",
            "MAX_SIGMA_DEG"]
 
-#: The methods whose records carry first-order + bootstrap covariances (``guided``: the
-#: bootstrap of its chosen classical solve, on the matches that solve used; ``fused``: the
-#: information-form covariance + the bootstrap of the classical estimate it starts from).
-BOOTSTRAPPED = ("poselib", "opencv", "guided", "fused")
+# Which methods' records carry first-order + bootstrap covariances is their registry entry's
+# (MethodSpec.bootstrapped; strl_pyg.inference.BOOTSTRAPPED lists them): ``guided`` carries
+# the bootstrap of its chosen classical solve, ``fused`` that of the classical estimate it
+# starts from.
 
 #: Fewest resamples that give a covariance (a 5x5 covariance from fewer is mostly noise).
 MIN_BOOTSTRAP = 3

@@ -2,11 +2,12 @@
 on the same matches, with the paper's tables; also the ``strl-pose evaluate`` command line.
 
 Per pair (:class:`~strl_pyg.evaluation.pairs.EvalPair`: matches, ground-truth ``T_0to1``,
-subset, id) the methods of :class:`~strl_pyg.inference.PoseEstimator`, by the registry's
-names (:data:`METHODS`: ``regression``, ``opencv``, ``poselib``, ``fused``, ``geometric``,
-``guided``), estimate ``T_0to1`` (``X1 = R X0 + t``) with the estimator's support checks and
-statuses: a method's pose counts only with status ``"ok"``. The 0.2 names (``strl``,
-``fused_opencv``, ``fused_poselib``) still work, with a warning (:data:`LEGACY_METHOD_NAMES`).
+subset, id) the methods of :class:`~strl_pyg.inference.PoseEstimator`, by the registry's names
+(:data:`METHODS`, the registry: ``regression``, ``opencv``, ``poselib``, ``fused``,
+``geometric``, ``guided``, ``vp``, ``vp_checked``), estimate ``T_0to1`` (``X1 = R X0 + t``)
+with the estimator's support checks and statuses: a method's pose counts only with status
+``"ok"``. The 0.2 names (``strl``, ``fused_opencv``, ``fused_poselib``) still work, with a
+warning (:data:`LEGACY_METHOD_NAMES`).
 
 The job is in three modules: the pairs (:mod:`strl_pyg.evaluation.pairs`: generated, DeMoN,
 KITTI),
@@ -61,7 +62,7 @@ from strl_pyg.synthetic.config import LINE_SCENE_KINDS, SCENE_KINDS
 from strl_pyg.utils.io import one_line
 
 __all__ = [
-    "METHODS",
+    "METHODS",  # noqa: F822  (module __getattr__: the registry's current names)
     "AUC_THRESHOLDS",
     "SHORT_SEGMENT_LENGTHS",
     "EvalPair",
@@ -82,9 +83,20 @@ __all__ = [
     "main",
 ]
 
-#: The methods ``evaluate`` scores: the registry of
-#: :class:`~strl_pyg.inference.PoseEstimator`, by the same names.
-METHODS = ("regression", "opencv", "poselib", "fused", "geometric", "guided")
+def registered_methods() -> tuple[str, ...]:
+    """The methods ``evaluate`` scores: the registry of
+    :class:`~strl_pyg.inference.PoseEstimator` (``METHODS`` of this module), by the same
+    names, a method registered later included."""
+    from strl_pyg.inference.estimator import METHODS as REGISTRY
+
+    return tuple(REGISTRY)
+
+
+def __getattr__(name: str) -> Any:
+    if name == "METHODS":
+        return registered_methods()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 #: Names of the 0.2 runner -> registry names (accepted with a DeprecationWarning). The former
 #: ``fused_opencv`` / ``fused_poselib`` are the registry's ``fused``, which fuses with the
@@ -99,7 +111,7 @@ def available_methods() -> tuple[str, ...]:
     """:data:`METHODS` whose dependencies are installed (PoseLib's only when importable)."""
     from strl_pyg.inference.estimator import METHODS as REGISTRY
 
-    return tuple(m for m in METHODS if REGISTRY[m].available())
+    return tuple(m for m in REGISTRY if REGISTRY[m].available())
 
 
 def resolve_methods(methods: Iterable[str] | None, model: Any) -> tuple[str, ...]:
@@ -123,12 +135,12 @@ def resolve_methods(methods: Iterable[str] | None, model: Any) -> tuple[str, ...
                 warnings.warn(f"method '{name}' is now called '{new}' (the PoseEstimator "
                               f"registry's name)", DeprecationWarning, stacklevel=3)
                 name = new
-            if name not in METHODS:
-                raise ValueError(f"Expected methods from {METHODS} (got {name!r})")
+            if name not in registered_methods():
+                raise ValueError(f"Expected methods from {registered_methods()} (got {name!r})")
             if name not in out:
                 out.append(name)
     if not out:
-        raise ValueError(f"Expected methods from {METHODS} (got none)")
+        raise ValueError(f"Expected methods from {registered_methods()} (got none)")
     return tuple(out)
 
 
@@ -273,9 +285,9 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
                    default=0.0, help="synthetic outliers")
     p.add_argument("--methods", nargs="+", default=None,
                    help=f"names of PoseEstimator's registry, space- or comma-separated, from "
-                        f"{', '.join(METHODS)} (default: all available; PoseLib's only if "
-                        f"importable); the 0.2 names strl, fused_opencv, fused_poselib still "
-                        f"work, with a warning")
+                        f"{', '.join(registered_methods())} (default: all available; "
+                        f"PoseLib's only if importable); the 0.2 names strl, fused_opencv, "
+                        f"fused_poselib still work, with a warning")
     p.add_argument("--no-resample", action="store_true",
                    help="feed all matches instead of resampling to 384 points / 192 lines")
     p.add_argument("--resample-seed", type=_NON_NEGATIVE_INT, default=0)

@@ -45,6 +45,8 @@ __all__ = [
     "methods_needed",
     "NETWORK_METHODS",
     "DEPENDENCIES",
+    "BOOTSTRAPPED",
+    "methods_where",
 ]
 
 # 0.2 code read other names of the module this folder was: they resolve too
@@ -74,7 +76,7 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "MIN_INLIER_RATIO": "strl_pyg.inference.support",
     "MIN_SUPPORT_INLIERS": "strl_pyg.inference.support",
     "SUPPORT_BAND": "strl_pyg.inference.support",
-    "SUPPORT_CHECKED": "strl_pyg.inference.support",
+    "SUPPORT_CHECKED": "strl_pyg.inference.estimator",
     "CHEIRALITY_MIN": "strl_pyg.inference.support",
     "check_support": "strl_pyg.inference.support",
     "NORMALISED_K_MAX": "strl_pyg.inference.inputs",
@@ -83,6 +85,8 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "estimate_recommended": "strl_pyg.inference.recommended",
     "estimate_methods": "strl_pyg.inference.recommended",
     "methods_needed": "strl_pyg.inference.recommended",
-    "NETWORK_METHODS": "strl_pyg.inference.recommended",
-    "DEPENDENCIES": "strl_pyg.inference.recommended",
+    "NETWORK_METHODS": "strl_pyg.inference.estimator",
+    "DEPENDENCIES": "strl_pyg.inference.estimator",
+    "BOOTSTRAPPED": "strl_pyg.inference.estimator",
+    "methods_where": "strl_pyg.inference.estimator",
 }, globals(), fallback="strl_pyg.inference.estimator")

@@ -50,7 +50,7 @@ from strl_pyg.estimation.classical import (
     MIN_POINTS,
     estimate_relative_pose,  # noqa: F401  (0.1.x name here)
 )
-from strl_pyg.estimation.uncertainty import BOOTSTRAPPED, MAX_SIGMA_DEG, cap_covariance
+from strl_pyg.estimation.uncertainty import MAX_SIGMA_DEG, cap_covariance
 from strl_pyg.inference.inputs import (
     FOCAL_RANGE,
     NORMALISED_K_MAX,  # noqa: F401  (importable from here like the module's other names)
@@ -83,7 +83,6 @@ from strl_pyg.inference.support import (
     CHEIRALITY_MIN,
     MIN_INLIER_RATIO,
     MIN_SUPPORT_INLIERS,
-    SUPPORT_CHECKED,
     check_support,
 )
 
@@ -110,13 +109,29 @@ POINT_POOR_MAX_POINTS = 30
 # ----------------------------------------------------------------------------- registry
 @dataclass(frozen=True)
 class MethodSpec:
-    """A registered method: ``fn``, the point matches it needs (fewer: ``"degenerate"``),
-    whether it needs ``K0``/``K1`` (missing: ``"failed"``) and whether it is installed."""
+    """Everything about one registered method, the one record every other table is derived
+    from (:func:`methods_where`): ``fn``; the point matches it needs (fewer:
+    ``"degenerate"``); whether it needs ``K0``/``K1`` (missing: ``"failed"``) and whether it is
+    installed; ``label``, what it is in words (the CLI prints it); whether it ``reads_lines``
+    (the front end then matches lines for it) and ``uses_network`` (the model is loaded for
+    it); ``depends_on``, the methods whose results it reads (``"classical"``: PoseLib if
+    installed, else OpenCV); ``support_checked``, whether its pose must be supported by the
+    point matches (:func:`~strl_pyg.inference.support.check_support`); ``bootstrapped``,
+    whether its covariance carries the classical bootstrap (its calibration then holds only
+    for the bootstrap count it was fitted with); ``classical_base``, whether it starts from
+    the classical solver's pose (its calibration was fitted with PoseLib as that base)."""
 
     fn: MethodFn
     min_points: int = MIN_POINTS
     needs_intrinsics: bool = True
     available: Callable[[], bool] = lambda: True
+    label: str = ""
+    reads_lines: bool = False
+    uses_network: bool = False
+    depends_on: tuple[str, ...] = ()
+    support_checked: bool = True
+    bootstrapped: bool = False
+    classical_base: bool = False
 
 
 #: ``name -> MethodSpec``, run in this order.
@@ -125,11 +140,49 @@ METHODS: dict[str, MethodSpec] = {}
 
 def register_method(name: str, fn: MethodFn, *, min_points: int = MIN_POINTS,
                     needs_intrinsics: bool = True, available: Callable[[], bool] | None = None,
-                    replace_existing: bool = False) -> None:
-    """Adds a method to :data:`METHODS` (run after the ones registered before it)."""
+                    replace_existing: bool = False, **spec: Any) -> None:
+    """Adds a method to :data:`METHODS` (run after the ones registered before it); ``spec``:
+    the other fields of :class:`MethodSpec` (``label``, ``reads_lines``, ...). The method is
+    then in ``strl-pose predict --methods``, ``evaluate``, the support check and the labels."""
     if name in METHODS and not replace_existing:
         raise ValueError(f"Expected a new method name (got {name!r}, already registered)")
-    METHODS[name] = MethodSpec(fn, min_points, needs_intrinsics, available or (lambda: True))
+    known = {f for f in MethodSpec.__dataclass_fields__} - {"fn", "min_points",
+                                                             "needs_intrinsics", "available"}
+    unknown = sorted(set(spec) - known)
+    if unknown:
+        raise ValueError(f"Expected MethodSpec fields {sorted(known)} (got {unknown})")
+    METHODS[name] = MethodSpec(fn, min_points, needs_intrinsics, available or (lambda: True),
+                               **{"label": name, **spec})
+
+
+def methods_where(**flags: Any) -> tuple[str, ...]:
+    """The registered methods whose :class:`MethodSpec` has these field values, in
+    registration order: ``methods_where(uses_network=True)``."""
+    return tuple(n for n, s in METHODS.items()
+                 if all(getattr(s, k) == v for k, v in flags.items()))
+
+
+#: Tables derived from the registry (module ``__getattr__``: always the registry's current
+#: state, a method registered later included).
+DERIVED = {
+    "SUPPORT_CHECKED": lambda: methods_where(support_checked=True),
+    "BOOTSTRAPPED": lambda: methods_where(bootstrapped=True),
+    "NETWORK_METHODS": lambda: methods_where(uses_network=True),
+    "LINE_METHODS": lambda: methods_where(reads_lines=True),
+    "DEPENDENCIES": lambda: {n: s.depends_on for n, s in METHODS.items() if s.depends_on},
+    "METHOD_LABELS": lambda: {n: s.label for n, s in METHODS.items()},
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in DERIVED:
+        return DERIVED[name]()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def classical_method() -> str:
+    """The classical solver other methods start from: PoseLib if installed, else OpenCV."""
+    return "poselib" if METHODS["poselib"].available() else "opencv"
 
 
 def recommended_order(model: torch.nn.Module | None,
@@ -174,14 +227,23 @@ def _measured_with_missing_poselib(model: torch.nn.Module | None) -> bool:
     return "poselib" in _stored_order(model) and not METHODS["poselib"].available()
 
 
-register_method("regression", _regression, needs_intrinsics=False)
-register_method("opencv", _classical("opencv"))
-register_method("poselib", _classical("poselib"), available=have_poselib)
-register_method("fused", _fused)
-register_method("geometric", _geometric)
-register_method("guided", _guided)
-register_method("vp", _vp)
-register_method("vp_checked", _vp_checked)
+register_method("regression", _regression, needs_intrinsics=False, uses_network=True,
+                reads_lines=True, support_checked=False, label="the network's pose head")
+register_method("opencv", _classical("opencv"), bootstrapped=True, label="OpenCV MAGSAC")
+register_method("poselib", _classical("poselib"), available=have_poselib, bootstrapped=True,
+                label="PoseLib")
+register_method("fused", _fused, uses_network=True, reads_lines=True, bootstrapped=True,
+                classical_base=True, depends_on=("regression", "classical"),
+                label="network + classical, information form")
+register_method("geometric", _geometric, uses_network=True, reads_lines=True,
+                label="the network's weighted eight-point")
+register_method("guided", _guided, uses_network=True, reads_lines=True, bootstrapped=True,
+                classical_base=True, depends_on=("classical",),
+                label="network-guided classical solve")
+register_method("vp", _vp, reads_lines=True,
+                label="vanishing-point rotation + 2-point translation")
+register_method("vp_checked", _vp_checked, reads_lines=True, depends_on=("classical", "vp"),
+                label="PoseLib checked by the lines' vanishing direction")
 
 
 # ----------------------------------------------------------------------------- estimator
@@ -204,6 +266,51 @@ def _attach_fundamental(estimate: PoseEstimate, matches: PairMatches, threshold_
         info["fundamental_inliers"] = int(found[1].sum())
         info["fundamental_inlier_mask"] = found[1]
     estimate.pose.info = info
+
+
+def _checked_pair(matches: PairMatches) -> tuple[PairMatches, list[str], np.ndarray,
+                                                  str | None]:
+    """The pair's one input check: the matches with each correspondence once (every decision,
+    minimum counts, support, bootstrap sigma, counts correspondences, not rows), the input
+    warnings, the row of every input point in them, and why the pair is degenerate (or
+    ``None``)."""
+    warnings = input_warnings(matches.image_size0, matches.image_size1, matches.K0,
+                              matches.K1)
+    matches, repeats, rows = matches.deduplicated()
+    warnings += repeats
+    n, degenerate = matches.num_distinct_points, None
+    spread = _spread_px(matches)
+    if n and spread < 4.0 and min(*matches.image_size0, *matches.image_size1) >= 64:
+        degenerate = (f"Expected pixel coordinates (got all {matches.num_points} point "
+                      f"matches within {spread:.2g} px of each other in images of "
+                      f"{matches.image_size0[0]}x{matches.image_size0[1]} px: normalised "
+                      "coordinates? build the matches with PairMatches.from_normalized)")
+    elif zero_parallax(matches):
+        degenerate = (f"zero parallax: most of the {n} point matches moved less than "
+                      f"{ZERO_PARALLAX_PX} px (identical or near-identical images): the "
+                      "translation is undefined")
+    if degenerate is not None:
+        warnings.append(degenerate)
+    return matches, warnings, rows, degenerate
+
+
+def _pair_rules(results: dict[str, MethodResult], matches: PairMatches,
+                rows: np.ndarray) -> None:
+    """What holds for every method of a pair, applied in place: intrinsics that fail the
+    checks or none at all make every pose ``"unreliable"``; inlier masks go to the input's
+    rows."""
+    problems = intrinsics_problems(matches.image_size0, matches.image_size1, matches.K0,
+                                   matches.K1)
+    reasons = [f"{BAD_INTRINSICS}: " + "; ".join(problems)] if problems else []
+    if not matches.has_intrinsics:
+        # the network then reads coordinates normalised by the image size, not by K: its
+        # rotation and its calibrated sigma are not those of a calibrated pair
+        reasons.append(NO_INTRINSICS)
+    for name, res in results.items():
+        new = [why for why in reasons if why not in res.warnings]  # a known result may
+        results[name] = res = res.unreliable(new)  # carry them already
+        if res.info.get("inlier_mask") is not None and res.inliers is None:
+            res.inliers = np.asarray(res.info.pop("inlier_mask"), dtype=bool)[rows]
 
 
 def _spread_px(matches: PairMatches) -> float:
@@ -241,7 +348,7 @@ class PoseEstimator:
             first order only. Their calibration scales apply only when the checkpoint's
             ``metadata["calibration_bootstrap"]`` (0 when absent) equals it; otherwise the
             record keeps the uncalibrated covariance and says so in ``warnings``.
-        min_inlier_ratio, min_inliers: a solver's pose (:data:`SUPPORT_CHECKED`) is
+        min_inlier_ratio, min_inliers: a solver's pose (``MethodSpec.support_checked``) is
             ``"failed"`` when the matches do not support it: fewer of the point matches lie
             within :data:`SUPPORT_BAND` x ``threshold_px`` of it (Sampson distance; the band
             keeps correct poses of 2 px matches) than this fraction of them, or than
@@ -331,101 +438,75 @@ class PoseEstimator:
         call, :attr:`PoseEstimate.methods`); they are taken as they are, not run again."""
         if not isinstance(matches, PairMatches):
             raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")
-        warnings = input_warnings(matches.image_size0, matches.image_size1, matches.K0,
-                                  matches.K1)
-        # every decision (minimum counts, support, bootstrap sigma) counts correspondences,
-        # not rows: a match repeated k times is one observation
-        matches, repeats, rows = matches.deduplicated()
-        warnings += repeats
-        n, degenerate = matches.num_distinct_points, None
-        spread = _spread_px(matches)
-        if n and spread < 4.0 and min(*matches.image_size0, *matches.image_size1) >= 64:
-            degenerate = (f"Expected pixel coordinates (got all {matches.num_points} point "
-                          f"matches within {spread:.2g} px of each other in images of "
-                          f"{matches.image_size0[0]}x{matches.image_size0[1]} px: normalised "
-                          "coordinates? build the matches with PairMatches.from_normalized)")
-            warnings.append(degenerate)
-        elif zero_parallax(matches):
-            degenerate = (f"zero parallax: most of the {n} point matches moved less than "
-                          f"{ZERO_PARALLAX_PX} px (identical or near-identical images): the "
-                          "translation is undefined")
-            warnings.append(degenerate)
+        matches, warnings, rows, degenerate = _checked_pair(matches)
         ctx = MethodContext(self.seed, self.threshold_px, self.bootstrap, self.device,
                             self.resample, load_model=lambda: self.model)
         # the model (the shipped one when None was given) calibrates the classical methods
         # too, also when no network method runs (the default predict path: PoseLib only);
         # before, PoseEstimator(methods=["poselib"]) gave uncalibrated sigmas without a word
         model = self.model
-        calibration = _calibration(model)
-        md = getattr(model, "metadata", None) if model is not None else None
-        fitted_boot = int(md.get("calibration_bootstrap", 0)) if isinstance(md, dict) else 0
         for name in self.method_names:
-            spec = METHODS[name]
             if known and name in known:
                 ctx.results[name] = known[name]
                 continue
-            if degenerate is not None:
-                res = MethodResult(name, "degenerate", warnings=[degenerate])
-            elif n < spec.min_points:
-                res = MethodResult(name, "degenerate", warnings=[
-                    f"too few point matches for {name}: {n} distinct (needs "
-                    f"{spec.min_points})"])
-            elif spec.needs_intrinsics and not matches.has_intrinsics:
-                res = MethodResult(name, "failed",
-                                   warnings=[f"{name} needs intrinsics K0, K1 (got none)"])
-            else:
-                try:
-                    res = spec.fn(matches, ctx)
-                except Exception as err:
-                    if self.raise_errors:
-                        raise
-                    first = str(err).splitlines()[0] if str(err) else ""
-                    res = MethodResult(name, "failed", info={"raised": type(err).__name__},
-                                       warnings=[f"{name} raised {type(err).__name__}: {first}"])
-            res = self._support(res, matches)
-            scale = calibration.get(name)
-            if (scale is not None and name in BOOTSTRAPPED and res.covariance is not None
-                    and fitted_boot != self.bootstrap):
-                res.warnings.append(
-                    f"{name}: covariance not calibrated (the checkpoint's scale was fitted with "
-                    f"bootstrap={fitted_boot}, this estimate used bootstrap={self.bootstrap})")
-                scale = None
-            if (scale is not None and name in ("guided", "fused") and res.covariance is not None
-                    and _measured_with_missing_poselib(model)):
-                res.warnings.append(
-                    f"{name}: covariance not calibrated (the checkpoint's scale was fitted with "
-                    "PoseLib as its classical base, which is not installed here)")
-                scale = None
-            if scale is not None and res.covariance is not None:
-                res.covariance = res.covariance * scale
-                res.info["calibration_scale"] = scale
-            if res.covariance is not None:
-                res.covariance, capped = cap_covariance(res.covariance)
-                if capped:
-                    res.info["sigma_capped"] = True
-                    res.warnings.append(f"{name}: sigma capped at {MAX_SIGMA_DEG:g} deg (its "
-                                        "covariance stated more: the pose is ambiguous)")
-            ctx.results[name] = res
-        problems = intrinsics_problems(matches.image_size0, matches.image_size1, matches.K0,
-                                       matches.K1)
-        if problems:  # every method reads K (the network normalises its coordinates by it)
-            why = f"{BAD_INTRINSICS}: " + "; ".join(problems)
-            for name, res in ctx.results.items():
-                if why not in res.warnings:  # a known result may carry it already
-                    ctx.results[name] = res.unreliable([why])
-        if not matches.has_intrinsics:
-            # the network then reads coordinates normalised by the image size, not by K: its
-            # rotation and its calibrated sigma are not those of a calibrated pair
-            for name, res in ctx.results.items():
-                if NO_INTRINSICS not in res.warnings:
-                    ctx.results[name] = res.unreliable([NO_INTRINSICS])
-        for res in ctx.results.values():  # per input row, as OpenCV's and PoseLib's masks
-            if res.info.get("inlier_mask") is not None and res.inliers is None:
-                res.inliers = np.asarray(res.info.pop("inlier_mask"), dtype=bool)[rows]
+            res = self._support(self._run(name, matches, ctx, degenerate), matches)
+            ctx.results[name] = self._calibrated(name, res, model)
+        _pair_rules(ctx.results, matches, rows)
         estimate = self._recommend(ctx.results, warnings, matches)
         if not matches.has_intrinsics:
             _attach_fundamental(estimate, matches, self.threshold_px, self.seed)
         return estimate
+
+    def _run(self, name: str, matches: PairMatches, ctx: MethodContext,
+             degenerate: str | None) -> MethodResult:
+        """One method's own result on the checked matches (before the support check)."""
+        spec, n = METHODS[name], matches.num_distinct_points
+        if degenerate is not None:
+            return MethodResult(name, "degenerate", warnings=[degenerate])
+        if n < spec.min_points:
+            return MethodResult(name, "degenerate", warnings=[
+                f"too few point matches for {name}: {n} distinct (needs {spec.min_points})"])
+        if spec.needs_intrinsics and not matches.has_intrinsics:
+            return MethodResult(name, "failed",
+                                warnings=[f"{name} needs intrinsics K0, K1 (got none)"])
+        try:
+            return spec.fn(matches, ctx)
+        except Exception as err:
+            if self.raise_errors:
+                raise
+            first = str(err).splitlines()[0] if str(err) else ""
+            return MethodResult(name, "failed", info={"raised": type(err).__name__},
+                                warnings=[f"{name} raised {type(err).__name__}: {first}"])
+
+    def _calibrated(self, name: str, res: MethodResult, model: Any) -> MethodResult:
+        """``res`` with its covariance scaled by the checkpoint's calibration where it applies
+        (or a warning why not), then capped at :data:`MAX_SIGMA_DEG` per block."""
+        scale = _calibration(model).get(name)
+        md = getattr(model, "metadata", None) if model is not None else None
+        fitted_boot = int(md.get("calibration_bootstrap", 0)) if isinstance(md, dict) else 0
+        spec = METHODS[name]
+        if (scale is not None and spec.bootstrapped and res.covariance is not None
+                and fitted_boot != self.bootstrap):
+            res.warnings.append(
+                f"{name}: covariance not calibrated (the checkpoint's scale was fitted with "
+                f"bootstrap={fitted_boot}, this estimate used bootstrap={self.bootstrap})")
+            scale = None
+        if (scale is not None and spec.classical_base and res.covariance is not None
+                and _measured_with_missing_poselib(model)):
+            res.warnings.append(
+                f"{name}: covariance not calibrated (the checkpoint's scale was fitted with "
+                "PoseLib as its classical base, which is not installed here)")
+            scale = None
+        if scale is not None and res.covariance is not None:
+            res.covariance = res.covariance * scale
+            res.info["calibration_scale"] = scale
+        if res.covariance is not None:
+            res.covariance, capped = cap_covariance(res.covariance)
+            if capped:
+                res.info["sigma_capped"] = True
+                res.warnings.append(f"{name}: sigma capped at {MAX_SIGMA_DEG:g} deg (its "
+                                    "covariance stated more: the pose is ambiguous)")
+        return res
 
     def estimate_images(self, image0: np.ndarray, image1: np.ndarray, K0: Any = None,
                         K1: Any = None, frontend_config: Any = None) -> PoseEstimate:
@@ -449,8 +530,10 @@ class PoseEstimator:
         return self.estimate(matches)
 
     def _support(self, res: MethodResult, matches: PairMatches) -> MethodResult:
+        spec = METHODS.get(res.method)
         return check_support(res, matches, self.threshold_px, self.min_inlier_ratio,
-                             self.min_inliers, self.min_in_front)
+                             self.min_inliers, self.min_in_front,
+                             checked=spec is not None and spec.support_checked)
 
     def _recommend(self, results: dict[str, MethodResult], warnings: list[str],
                    matches: PairMatches) -> PoseEstimate:
@@ -467,7 +550,8 @@ class PoseEstimator:
         # the regression stands in only while some solver's pose is supported or none was
         # refused for lack of support
         unsupported = any(r.info.get("unsupported") for r in results.values()) and not any(
-            r.status == "ok" for m, r in results.items() if m in SUPPORT_CHECKED)
+            r.status == "ok" for m, r in results.items()
+            if m in METHODS and METHODS[m].support_checked)
         fallback = None  # (record, notes so far) of the first "unreliable" pose
         for m in order:
             r = results[m]

@@ -23,33 +23,34 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["estimate_recommended", "estimate_methods", "methods_needed", "NETWORK_METHODS",
-           "DEPENDENCIES"]
+__all__ = ["estimate_recommended", "estimate_methods", "methods_needed",
+           "NETWORK_METHODS", "DEPENDENCIES"]  # noqa: F822  (module __getattr__: the registry's)
 
-#: Methods that run the network (they read line segments and image patches).
-NETWORK_METHODS = ("regression", "geometric", "guided", "fused")
-#: Methods that read line segments: the network's and the vanishing-point solver.
-LINE_METHODS = (*NETWORK_METHODS, "vp", "vp_checked")
-#: Methods a method reads the results of (classical: the first installed of the two).
-DEPENDENCIES = {"fused": ("regression", "classical"), "guided": ("classical",),
-                "vp_checked": ("classical", "vp")}
+# NETWORK_METHODS, LINE_METHODS, DEPENDENCIES: derived from the registry (MethodSpec), read
+# through the estimator's module __getattr__ so a method registered later is in them too
 
 
-def _classical() -> str:
-    from strl_pyg.inference.estimator import METHODS
+def __getattr__(name: str):
+    if name in ("NETWORK_METHODS", "LINE_METHODS", "DEPENDENCIES"):
+        from strl_pyg.inference import estimator
 
-    return "poselib" if METHODS["poselib"].available() else "opencv"
+        return getattr(estimator, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def methods_needed(names: Any) -> tuple[str, ...]:
     """``names`` with the methods they depend on, in registration order (the order
     :class:`~strl_pyg.inference.estimator.PoseEstimator` runs them)."""
-    from strl_pyg.inference.estimator import METHODS
+    from strl_pyg.inference.estimator import METHODS, classical_method
 
-    want = set()
-    for name in names:
+    want, todo = set(), list(names)
+    while todo:  # dependencies of dependencies too
+        name = todo.pop()
+        if name in want:
+            continue
         want.add(name)
-        want.update(_classical() if d == "classical" else d for d in DEPENDENCIES.get(name, ()))
+        deps = METHODS[name].depends_on if name in METHODS else ()
+        todo.extend(classical_method() if d == "classical" else d for d in deps)
     return tuple(m for m in METHODS if m in want)
 
 
@@ -90,7 +91,7 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
     def match(run):
         """Matches for the methods ``run`` (lines only if one reads them), once per kind;
         ``(lines, None)``, or the estimator's own "degenerate" estimate when nothing matches."""
-        lines = cfg.lines and any(m in LINE_METHODS for m in run)
+        lines = cfg.lines and any(METHODS[m].reads_lines for m in run if m in METHODS)
         if lines not in matches:
             try:
                 matches[lines] = match_images(image0, image1, K0, K1,

@@ -1,9 +1,10 @@
 """The support check of a method's pose: do the point matches support it?
 
-A checked pose (:data:`SUPPORT_CHECKED`) is ``"failed"`` when too few point matches lie within
-:data:`SUPPORT_BAND` x the inlier threshold of it (Sampson distance, every solver counted
-alike) and in front of both cameras, and ``"unreliable"`` when too many of those near it lie
-behind a camera (its sign or decomposition is wrong).
+A checked pose (``MethodSpec.support_checked``; ``strl_pyg.inference.SUPPORT_CHECKED`` lists
+them) is ``"failed"`` when too few point matches lie within :data:`SUPPORT_BAND` x the inlier
+threshold of it (Sampson distance, every solver counted alike) and in front of both cameras,
+and ``"unreliable"`` when too many of those near it lie behind a camera (its sign or
+decomposition is wrong).
 """
 
 from __future__ import annotations
@@ -16,16 +17,14 @@ from strl_pyg.geometry import Pose, pose_sampson
 from strl_pyg.geometry.essential import triangulated_depths
 from strl_pyg.inference.record import MethodResult
 
-__all__ = ["MIN_INLIER_RATIO", "MIN_SUPPORT_INLIERS", "SUPPORT_BAND", "SUPPORT_CHECKED",
-           "CHEIRALITY_MIN", "check_support"]
+__all__ = ["MIN_INLIER_RATIO", "MIN_SUPPORT_INLIERS", "SUPPORT_BAND", "CHEIRALITY_MIN",
+           "check_support"]
 
 #: Defaults of :class:`PoseEstimator` ``min_inlier_ratio`` and ``min_inliers``, and the
 #: support band in units of the inlier threshold.
 MIN_INLIER_RATIO = 0.1
 MIN_SUPPORT_INLIERS = 12
 SUPPORT_BAND = 2.0
-#: The methods whose poses need that support (their inliers are counted on the point matches).
-SUPPORT_CHECKED = ("poselib", "opencv", "guided", "geometric", "fused", "vp", "vp_checked")
 #: Of the point matches within the support band of a checked pose, at least this fraction must
 #: triangulate in front of both cameras, else the pose is ``"unreliable"``. The Sampson
 #: distance cannot tell ``t`` from ``-t`` (nor a twisted decomposition): on the 47 dino pairs
@@ -38,15 +37,17 @@ CHEIRALITY_MIN = 0.9
 def check_support(res: MethodResult, matches: PairMatches, threshold_px: float = 1.0,
                   min_inlier_ratio: float = MIN_INLIER_RATIO,
                   min_inliers: int = MIN_SUPPORT_INLIERS,
-                  min_in_front: float = CHEIRALITY_MIN) -> MethodResult:
+                  min_in_front: float = CHEIRALITY_MIN, checked: bool = True) -> MethodResult:
     """``res`` as ``"failed"`` when the point matches within :data:`SUPPORT_BAND` x
     ``threshold_px`` of its pose (Sampson distance, every solver counted alike: OpenCV's
     own count is ``recoverPose``'s cheirality mask, which drops distant points) and in
     front of both cameras are fewer than ``min(min_inliers, n)`` or ``min_inlier_ratio``
     of the ``n`` point matches; as ``"unreliable"`` when fewer than
-    ``min_in_front`` of the matches within the band lie in front of both cameras."""
+    ``min_in_front`` of the matches within the band lie in front of both cameras. With
+    ``checked=False`` (a method whose ``MethodSpec.support_checked`` is false: the
+    regression) ``res`` is returned unchanged."""
     n = matches.num_points
-    if (res.status != "ok" or res.method not in SUPPORT_CHECKED or res.T_0to1 is None
+    if (res.status != "ok" or not checked or res.T_0to1 is None
             or n <= 0 or not matches.has_intrinsics):
         return res
     pose = Pose.from_matrix(torch.as_tensor(res.T_0to1, dtype=torch.float64))
