@@ -278,9 +278,9 @@ def test_evaluate_runs_the_registry_and_scores_what_pose_estimator_gives(tiny_ch
 def test_old_method_names_are_accepted_with_a_warning():
     from strl_pyg.evaluation import resolve_methods
 
-    with pytest.warns(DeprecationWarning, match="'strl' is now called 'regression'"):
+    with pytest.warns(FutureWarning, match="'strl' is now called 'regression'"):
         assert resolve_methods(["strl", "opencv"], object()) == ("regression", "opencv")
-    with pytest.warns(DeprecationWarning, match="'fused_opencv' is now called 'fused'"):
+    with pytest.warns(FutureWarning, match="'fused_opencv' is now called 'fused'"):
         assert resolve_methods("fused_opencv,poselib", object()) == ("fused", "poselib")
     with pytest.raises(ValueError, match="Expected methods from"):
         resolve_methods(["magic"], object())

@@ -276,3 +276,49 @@ def test_intrinsics_from_colmap_and_strecha_files(tmp_path):
         "-7.2 -7.5 0.2\n3072 2048\n")
     np.testing.assert_allclose(read_intrinsics(str(tmp_path / "0004.jpg.camera")),
                                [[2759.48, 0, 1520.69], [0, 2764.16, 1006.81], [0, 0, 1]])
+
+
+# ----------------------------------------------------------------------------- smaller items
+def test_twelve_bit_data_in_a_sixteen_bit_png_is_not_dark(tmp_path, pair):
+    """Before: v // 257 made 4095 into 15: 'degenerate', 'featureless'."""
+    import cv2
+
+    from strl_pyg.utils.images import read_image_file
+
+    twelve = [(img.astype(np.uint32) * 4095 // 255).astype(np.uint16)
+              for img in (pair.image0, pair.image1)]
+    cv2.imwrite(str(tmp_path / "a.png"), twelve[0])
+    back = read_image_file(tmp_path / "a.png")
+    assert back.dtype == np.uint8 and np.abs(back.astype(int) - pair.image0).max() <= 1
+    est = PoseEstimator(methods="opencv").estimate_images(*twelve, K0=pair.K)
+    assert est.status == "ok"
+
+
+def test_a_missing_data_root_is_one_line(capsys):
+    """Before: two UserWarnings blaming the sequences."""
+    import warnings
+
+    from strl_pyg.cli import main
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert main(["train", "--dataset", "kitti", "--data-root", "/nonexistent/kitti",
+                     "--steps", "1", "--out", "/tmp/never_written_run"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no such folder" in err
+
+
+def test_the_match_drawing_has_a_title_a_legend_and_subsamples(pair):
+    from strl_pyg.viz.matches import draw_matches
+
+    m = replace(pair.matches, image0=pair.image0, image1=pair.image1)
+    plain = draw_matches(m, layout="horizontal")
+    few = draw_matches(m, layout="horizontal", max_points=10, max_lines=5, title="t",
+                       legend=True, point_inliers=np.ones(m.num_points, bool))
+    assert few.shape[1] == plain.shape[1] and few.shape[0] > plain.shape[0]  # header band
+    band = few[: few.shape[0] - plain.shape[0]]
+    assert (band < 128).any() and (band == 255).mean() > 0.8  # text on white
+    # fewer matches drawn: less of the image is covered by drawing
+    changed = lambda c: (c[-plain.shape[0]:] != plain).any(-1).mean()  # noqa: E731
+    assert changed(few) > 0 and (draw_matches(m, layout="horizontal", max_points=10,
+                                               max_lines=5) != plain).any()

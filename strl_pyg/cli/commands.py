@@ -241,8 +241,11 @@ def cmd_demo(args) -> int:
               f"{est.pose.sigma['translation_deg']:.3f} deg")
     p_err, l_err = epipolar_residuals(matches, T_gt)
     out = Path(args.out)
-    png = save_matches_png(out / "demo_matches.png", matches, point_inliers=p_err < 2.0,
-                           line_inliers=l_err < 2.0)
+    png = save_matches_png(
+        out / "demo_matches.png", matches, point_inliers=p_err < 2.0, line_inliers=l_err < 2.0,
+        layout="horizontal", max_points=200, max_lines=60, max_connectors=25, legend=True,
+        title=f"strl-pose demo ({args.kind}, seed {args.seed}): matches; inlier = epipolar "
+              "error < 2 px under the true pose")
     print(f"matches drawn (green: epipolar error < 2 px under the true pose): {png}")
     if args.json:
         print(json.dumps({**est.to_dict(), "prediction": _jsonable(pred), "errors": report}))

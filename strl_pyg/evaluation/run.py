@@ -98,9 +98,10 @@ def __getattr__(name: str) -> Any:
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-#: Names of the 0.2 runner -> registry names (accepted with a DeprecationWarning). The former
-#: ``fused_opencv`` / ``fused_poselib`` are the registry's ``fused``, which fuses with the
-#: first ``"ok"`` classical pose (PoseLib when installed).
+#: Names of the 0.2 runner -> registry names (accepted with a FutureWarning, which Python
+#: shows to users by default). The former ``fused_opencv`` / ``fused_poselib`` are the
+#: registry's ``fused``, which fuses with the first ``"ok"`` classical pose (PoseLib when
+#: installed).
 LEGACY_METHOD_NAMES = {"strl": "regression", "fused_poselib": "fused", "fused_opencv": "fused"}
 
 # NETWORK_METHODS (the methods that need a network) is the estimator's one list, imported above
@@ -116,7 +117,7 @@ def available_methods() -> tuple[str, ...]:
 
 def resolve_methods(methods: Iterable[str] | None, model: Any) -> tuple[str, ...]:
     """Registry names of ``methods`` (comma-separated items allowed; old names with a
-    :class:`DeprecationWarning`); ``None``: :func:`available_methods`, without the network
+    :class:`FutureWarning`); ``None``: :func:`available_methods`, without the network
     methods when ``model`` is ``None``."""
     import warnings
 
@@ -133,7 +134,7 @@ def resolve_methods(methods: Iterable[str] | None, model: Any) -> tuple[str, ...
             if name in LEGACY_METHOD_NAMES:
                 new = LEGACY_METHOD_NAMES[name]
                 warnings.warn(f"method '{name}' is now called '{new}' (the PoseEstimator "
-                              f"registry's name)", DeprecationWarning, stacklevel=3)
+                              f"registry's name)", FutureWarning, stacklevel=3)
                 name = new
             if name not in registered_methods():
                 raise ValueError(f"Expected methods from {registered_methods()} (got {name!r})")

@@ -123,12 +123,12 @@ class StepBatchSampler(Sampler):
         return self.stop - self.start
 
 
-def build_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
+def build_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
     """Training and validation datasets of pair graphs (without resampling)."""
     from strl_pyg import datasets as D
 
     if cfg.dataset == "synthetic" and cfg.scene_mix is not None:
-        return _mixed_datasets(cfg)
+        return _mixed_datasets(cfg, progress)
     if cfg.dataset == "synthetic":
         from strl_pyg.synthetic import SceneConfig
 
@@ -165,7 +165,7 @@ def build_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
     # before any matching: a run must not train for hours and then have nothing to validate
     check_sources(cfg, train, val)
     for ds in (train, val):
-        ds.build_cache(num_workers=max(1, cfg.num_workers))
+        ds.build_cache(num_workers=max(1, cfg.num_workers), progress=progress)
     check_sources(cfg, train, val, matched=True)
     return train, val
 
@@ -248,7 +248,7 @@ def check_sources(cfg: TrainConfig, train: Any, val: Any, matched: bool = False)
                           "--val-sequences for a held-out figure", UserWarning, stacklevel=3)
 
 
-def _mixed_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
+def _mixed_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
     """Training / validation sets drawn from a named scene distribution
     (:func:`strl_pyg.synthetic.scene_distribution`: one scene configuration per seed)."""
     from strl_pyg import datasets as D
@@ -269,7 +269,7 @@ def _mixed_datasets(cfg: TrainConfig) -> tuple[Any, Any]:
         ds = D.SyntheticPairs(n, seed=base, scene_config=dist, patch_size=cfg.patch_size,
                               keep_images=keep, **kw)
         if kw:
-            ds.build_cache(num_workers=cfg.num_workers)
+            ds.build_cache(num_workers=cfg.num_workers, progress=progress)
         sets.append(ds)
     return sets[0], sets[1]
 

@@ -233,7 +233,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         ddp_model = torch.nn.parallel.DistributedDataParallel(model)
 
     if datasets is None:
-        datasets = build_datasets(cfg)
+        datasets = build_datasets(cfg, progress=progress and rank == 0)
     train_ds, val_ds = (_InMemory(d, cfg.in_memory) for d in datasets)
     if len(val_ds) == 0:  # refused here, not at the first validation after training steps
         raise ValueError("Expected a non-empty validation set (got 0 pairs): training "
@@ -426,6 +426,10 @@ def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
         check_device(cfg.device)
         if args.resume and args.overwrite:
             raise ValueError("Expected at most one of --resume and --overwrite (got both)")
+        if cfg.data_root is not None and not Path(cfg.data_root).is_dir():
+            what = "a file" if Path(cfg.data_root).exists() else "no such folder"
+            raise ValueError(f"Expected --data-root to be the {cfg.dataset} dataset's folder "
+                             f"(got {what}: '{cfg.data_root}')")
         result = train(cfg, resume=args.resume, progress=not args.no_progress,
                        overwrite=args.overwrite)
     except (ValueError, TypeError) as err:

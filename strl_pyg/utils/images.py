@@ -4,9 +4,10 @@ check of in-memory images.
 Every image the package reads (the command line's inputs, the datasets' files and HDF5
 groups) goes through :func:`decode_image`, so all of them follow one set of rules:
 
-* 8-bit images as they are, 16-bit ones scaled to 8 bits (:func:`to_uint8`: ``v // 257``,
-  so 65535 -> 255; a 12-bit image in a 16-bit file comes out dark, 4095 -> 15); any other
-  depth (float or 32-bit TIFF, EXR) is refused;
+* 8-bit images as they are, 16-bit ones scaled to 8 bits by the bit depth their values use
+  (:func:`to_uint8`: 8, 10, 12, 14 or 16 bits, ``v * 255 // (2^bits - 1)``: a 12-bit image
+  in a 16-bit file maps 4095 -> 255, a full 16-bit one 65535 -> 255 as ``v // 257``); any
+  other depth (float or 32-bit TIFF, EXR) is refused;
 * an alpha channel is dropped; grey + alpha becomes grey;
 * colour comes back as RGB ``(H, W, 3)`` (OpenCV decodes BGR), grey as ``(H, W)``;
   ``grayscale=True`` converts colour to grey (OpenCV's BT.601 weights).
@@ -45,10 +46,15 @@ _DTYPES = (np.uint8, np.uint16, np.float32, np.float64)
 
 
 def to_uint8(img: np.ndarray) -> np.ndarray:
-    """A uint16 image as uint8, ``v // 257`` (0 -> 0, 65535 -> 255; the one 16-bit rule of
-    files and arrays alike); other dtypes unchanged."""
+    """A uint16 image as uint8, scaled by the bit depth its values use (the smallest of 8, 10,
+    12, 14, 16 bits that holds its maximum): ``v * 255 // (2^bits - 1)``, so a 12-bit camera's
+    4095 and a 16-bit file's 65535 both become 255 (the one 16-bit rule of files and arrays
+    alike; ``v // 257`` turned 12-bit data into a dark, "featureless" image); other dtypes
+    unchanged."""
     if img.dtype == np.uint16:
-        return (img // 257).astype(np.uint8)
+        top = int(img.max()) if img.size else 0
+        bits = next(b for b in (8, 10, 12, 14, 16) if top < 2 ** b)
+        return (img.astype(np.uint32) * 255 // (2 ** bits - 1)).astype(np.uint8)
     return img
 
 

@@ -50,6 +50,10 @@ def draw_matches(
     connect: bool = True,
     max_connectors: int = 200,
     layout: str = "auto",
+    max_points: int | None = None,
+    max_lines: int | None = None,
+    title: str | None = None,
+    legend: bool = False,
 ) -> np.ndarray:
     """Draws the matches of ``matches`` (which must carry both images).
 
@@ -61,10 +65,16 @@ def draw_matches(
         max_connectors: at most this many connectors (evenly picked) to keep it readable.
         layout: ``"horizontal"`` (side by side), ``"vertical"`` (image 1 below image 0) or
             ``"auto"`` (vertical for wide images such as KITTI's, where W > 1.5 H).
+        max_points, max_lines: draw at most this many point / line matches (evenly picked,
+            every one when ``None``), so that hundreds of lines do not cover the images.
+        title: a line of text in a header band above the images.
+        legend: the colours' meaning in the header band (inlier, outlier; circles are points,
+            segments lines) and how many matches are drawn of how many.
 
     Returns:
         BGR uint8 canvas ``[max(H0, H1), W0 + W1, 3]`` (horizontal) or
-        ``[H0 + H1, max(W0, W1), 3]`` (vertical).
+        ``[H0 + H1, max(W0, W1), 3]`` (vertical), plus the header band when ``title`` or
+        ``legend`` is given.
     """
     if layout not in ("auto", "horizontal", "vertical"):
         raise ValueError(f"Expected layout 'auto', 'horizontal' or 'vertical' (got {layout!r})")
@@ -96,28 +106,68 @@ def draw_matches(
         return INLIER_COLOUR if mask is None or mask[i] else OUTLIER_COLOUR
 
     thick = max(1, int(round(min(canvas.shape[:2]) / 300)))
-    for i in range(matches.num_lines):
+    line_pick = _pick(matches.num_lines, max_lines)
+    point_pick = _pick(matches.num_points, max_points)
+    for i in line_pick:
         c = colour(lin, i)
         l0, l1 = matches.lines0[i], matches.lines1[i]
         cv2.line(canvas, pt(l0[0]), pt(l0[1]), c, thick, cv2.LINE_AA, shift=4)
         cv2.line(canvas, pt(l1[0] + shift), pt(l1[1] + shift), c, thick, cv2.LINE_AA, shift=4)
         cv2.circle(canvas, pt(l0[0]), 2 * sub, c, -1, cv2.LINE_AA, shift=4)  # endpoint 0
         cv2.circle(canvas, pt(l1[0] + shift), 2 * sub, c, -1, cv2.LINE_AA, shift=4)
-    for i in range(matches.num_points):
+    for i in point_pick:
         c = colour(pin, i)
         cv2.circle(canvas, pt(matches.points0[i]), 2 * sub, c, 1, cv2.LINE_AA, shift=4)
         cv2.circle(canvas, pt(matches.points1[i] + shift), 2 * sub, c, 1, cv2.LINE_AA, shift=4)
     if connect:
-        ends = [(matches.points0, matches.points1, pin),
-                (matches.lines0.mean(1), matches.lines1.mean(1), lin)]
-        for x0, x1, mask in ends:
-            if len(x0) == 0:
+        ends = [(matches.points0, matches.points1, pin, point_pick),
+                (matches.lines0.mean(1), matches.lines1.mean(1), lin, line_pick)]
+        for x0, x1, mask, drawn in ends:
+            if len(drawn) == 0:
                 continue
-            pick = np.unique(np.linspace(0, len(x0) - 1, min(len(x0), max_connectors)).astype(int))
-            for i in pick:
+            for i in drawn[_pick(len(drawn), max_connectors)]:
                 cv2.line(canvas, pt(x0[i]), pt(x1[i] + shift), colour(mask, i), 1,
                          cv2.LINE_AA, shift=4)
-    return canvas
+    if title is None and not legend:
+        return canvas
+    return _with_header(canvas, title, legend, (len(point_pick), matches.num_points),
+                        (len(line_pick), matches.num_lines), pin is not None or lin is not None)
+
+
+def _pick(n: int, at_most: int | None) -> np.ndarray:
+    """``min(n, at_most)`` indices spread evenly over ``range(n)``."""
+    if at_most is None or n <= at_most:
+        return np.arange(n)
+    return np.unique(np.linspace(0, n - 1, max(at_most, 1)).astype(int))
+
+
+def _with_header(canvas: np.ndarray, title: str | None, legend: bool, points: tuple,
+                 lines: tuple, masked: bool) -> np.ndarray:
+    """``canvas`` below a white band with the title and the legend."""
+    scale = max(0.45, canvas.shape[1] / 1600)
+    row = int(28 * scale / 0.6)
+    rows = [(title, (20, 20, 20))] if title else []
+    if legend:
+        drawn = (f"points (circles): {points[0]} of {points[1]} drawn; lines (segments): "
+                 f"{lines[0]} of {lines[1]} drawn")
+        rows.append((drawn, (60, 60, 60)))
+    band = np.full((row * (len(rows) + (1 if legend else 0)) + row // 2, canvas.shape[1], 3),
+                   255, np.uint8)
+    y = row
+    for text, colour in rows:
+        cv2.putText(band, text, (10, y), cv2.FONT_HERSHEY_SIMPLEX, scale, colour, 1,
+                    cv2.LINE_AA)
+        y += row
+    if legend:
+        x = 10
+        keys = [("inlier", INLIER_COLOUR), ("outlier", OUTLIER_COLOUR)] if masked else \
+            [("match (no inlier test)", INLIER_COLOUR)]
+        for text, colour in keys:
+            cv2.rectangle(band, (x, y - row // 2), (x + row // 2, y), colour, -1)
+            cv2.putText(band, text, (x + row // 2 + 6, y), cv2.FONT_HERSHEY_SIMPLEX, scale,
+                        (20, 20, 20), 1, cv2.LINE_AA)
+            x += int(row * 0.6 * len(text)) + row
+    return np.concatenate([band, canvas], axis=0)
 
 
 def save_matches_png(
