@@ -213,3 +213,24 @@ def test_kitti_epipolar_residuals(kitti_root):
     assert np.mean(pe < 2.0) >= 0.9
     assert np.mean(le < 2.0) >= 0.9
     assert np.median(pe) < 1.0
+
+
+def test_add_lines_equals_matching_with_lines():
+    """One pass per pair: the lines added to a points-only result are the lines of a full
+    match (the same points, fundamental matrix and inliers), without a second SIFT pass."""
+    from dataclasses import replace as dc_replace
+
+    from strl_pyg.frontend import FrontendConfig, match_images
+    from strl_pyg.frontend.pipeline import add_lines
+    from strl_pyg.synthetic import generate_pair
+
+    p = generate_pair(3)
+    full = match_images(p.image0, p.image1, p.K, p.K, FrontendConfig())
+    points = match_images(p.image0, p.image1, p.K, p.K, FrontendConfig(lines=False))
+    assert points.num_lines == 0
+    added = add_lines(points, FrontendConfig())
+    assert added.num_lines == full.num_lines > 0
+    np.testing.assert_array_equal(added.lines0, full.lines0)
+    np.testing.assert_array_equal(added.points0, full.points0)
+    with pytest.raises(ValueError, match="Expected matches of match_images"):
+        add_lines(dc_replace(points, info={}), FrontendConfig())

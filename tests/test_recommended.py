@@ -63,9 +63,22 @@ def test_few_points_put_the_line_solver_first_with_the_same_pose(model):
     from strl_pyg.geometry.pose import rotation_angle_deg
     from strl_pyg.inference.estimator import POINT_POOR_MAX_POINTS
 
+    import strl_pyg.frontend as frontend
+    from strl_pyg.frontend import pipeline
+
     p = generate_pair(2, SceneConfig(kind="street", image_size=(240, 320)))
     cfg = FrontendConfig(max_keypoints=40)
-    lazy = estimate_recommended(model, p.image0, p.image1, p.K, p.K, cfg)
+    calls = []
+    real = pipeline.match_images
+
+    def counted(*a, **k):
+        calls.append(k.get("config", a[4] if len(a) > 4 else None))
+        return real(*a, **k)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(frontend, "match_images", counted)
+        lazy = estimate_recommended(model, p.image0, p.image1, p.K, p.K, cfg)
+    assert len(calls) == 1  # one pass per pair: the lines join the points (was 2 passes)
     full = PoseEstimator(model).estimate_images(p.image0, p.image1, p.K, p.K, cfg)
     assert lazy.num_points <= POINT_POOR_MAX_POINTS and lazy.num_lines > 0
     assert lazy.pose.method == full.pose.method == "vp" and lazy.status == "ok"

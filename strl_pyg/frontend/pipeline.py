@@ -4,7 +4,7 @@ fundamental matrix, lines), with per-stage timings."""
 from __future__ import annotations
 
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from typing import Any
 
 import numpy as np
@@ -21,7 +21,7 @@ from strl_pyg.frontend.lines import detect_lines, match_lines, match_lines_by_de
 from strl_pyg.frontend.points import fit_fundamental, match_points, on_both
 from strl_pyg.utils.images import FRONTEND_MIN_SIDE, check_image
 
-__all__ = ["match_images", "check_frontend_image"]
+__all__ = ["match_images", "add_lines", "check_frontend_image"]
 
 
 def check_frontend_image(image: Any, name: str) -> np.ndarray:
@@ -83,30 +83,8 @@ def match_images(
     if cfg.filter_points and F is not None:
         p0, p1, p_scores, inl = p0[inl], p1[inl], p_scores[inl], inl[inl]
 
-    t = time.perf_counter()
-    if cfg.lines:
-        seg0, seg1 = on_both(lambda g: detect_lines(g, cfg), gray0, gray1, cfg.concurrent)
-    else:
-        seg0 = seg1 = np.zeros((0, 2, 2))
-    timings["lines_detect"] = 1e3 * (time.perf_counter() - t)
-
-    t = time.perf_counter()
-    if not cfg.lines:
-        l0 = l1 = np.zeros((0, 2, 2))
-        l_scores = np.zeros(0)
-        status = "skipped: lines=False in the FrontendConfig"
-    elif cfg.line_matcher == "descriptor":
-        l0, l1, l_scores = match_lines_by_descriptor(seg0, seg1, gray0, gray1, cfg)
-        status = (f"ok (descriptor matcher: {len(l0)} matches, endpoints as detected, not "
-                  "corresponding)")
-    elif F is None:
-        l0 = l1 = np.zeros((0, 2, 2))
-        l_scores = np.zeros(0)
-        status = "skipped: fewer than 8 point matches or no fundamental matrix"
-    else:
-        l0, l1, l_scores = match_lines(seg0, seg1, gray0, gray1, F, cfg, guide=(p0[inl], p1[inl]))
-        status = "ok"
-    timings["lines_match"] = 1e3 * (time.perf_counter() - t)
+    l0, l1, l_scores, seg0, seg1, status = _lines(gray0, gray1, F, p0[inl], p1[inl], cfg,
+                                                  timings)
     timings["total"] = 1e3 * (time.perf_counter() - t_start)
 
     if len(p0) == 0 and len(l0) == 0:
@@ -123,6 +101,9 @@ def match_images(
         "segments0": len(seg0),
         "segments1": len(seg1),
         "point_geometric_inliers": int(inl.sum()),
+        # what add_lines needs to match the lines later exactly as here (one pass per pair)
+        "fundamental": None if F is None else np.asarray(F, dtype=float).tolist(),
+        "fundamental_inliers": np.flatnonzero(inl).tolist(),
         "lines_status": status,
         LINE_ENDPOINTS: (ENDPOINTS_AS_DETECTED if cfg.line_matcher == "descriptor"
                          else ENDPOINTS_CORRESPONDING),
@@ -132,3 +113,63 @@ def match_images(
         p0, p1, lines0=l0, lines1=l1, point_scores=p_scores, line_scores=l_scores,
         K0=K0, K1=K1, image0=gray0, image1=gray1, info=info,
     )
+
+
+def _lines(gray0: np.ndarray, gray1: np.ndarray, F: np.ndarray | None, guide0: np.ndarray,
+           guide1: np.ndarray, cfg: FrontendConfig, timings: dict):
+    """Detects and matches the line segments (``cfg.lines``) under ``F`` with the inlier
+    points ``guide0/1``; returns ``(l0, l1, scores, seg0, seg1, status)`` and fills the
+    ``lines_detect`` / ``lines_match`` timings."""
+    t = time.perf_counter()
+    if cfg.lines:
+        seg0, seg1 = on_both(lambda g: detect_lines(g, cfg), gray0, gray1, cfg.concurrent)
+    else:
+        seg0 = seg1 = np.zeros((0, 2, 2))
+    timings["lines_detect"] = 1e3 * (time.perf_counter() - t)
+    t = time.perf_counter()
+    l0 = l1 = np.zeros((0, 2, 2))
+    l_scores = np.zeros(0)
+    if not cfg.lines:
+        status = "skipped: lines=False in the FrontendConfig"
+    elif cfg.line_matcher == "descriptor":
+        l0, l1, l_scores = match_lines_by_descriptor(seg0, seg1, gray0, gray1, cfg)
+        status = (f"ok (descriptor matcher: {len(l0)} matches, endpoints as detected, not "
+                  "corresponding)")
+    elif F is None:
+        status = "skipped: fewer than 8 point matches or no fundamental matrix"
+    else:
+        l0, l1, l_scores = match_lines(seg0, seg1, gray0, gray1, F, cfg, guide=(guide0, guide1))
+        status = "ok"
+    timings["lines_match"] = 1e3 * (time.perf_counter() - t)
+    return l0, l1, l_scores, seg0, seg1, status
+
+
+def add_lines(matches: PairMatches, config: FrontendConfig | None = None) -> PairMatches:
+    """The line matches of a pair matched with ``lines=False`` by :func:`match_images`, added
+    without detecting or matching the points again: the same result as matching the images
+    with ``lines=True`` (the points, their fundamental matrix and inliers are the ones
+    ``matches.info`` stores). ``matches`` must come from :func:`match_images` with its images.
+    """
+    cfg = config if config is not None else FrontendConfig()
+    if not cfg.lines:
+        return matches
+    info = dict(matches.info)
+    if "fundamental_inliers" not in info or not matches.has_images:
+        raise ValueError("Expected matches of match_images with their images and "
+                         "info['fundamental'] (got other matches)")
+    if info.get("config", {}).get("detector", cfg.detector) != cfg.detector:
+        raise ValueError(f"Expected the points' detector {info['config']['detector']!r} "
+                         f"(got {cfg.detector!r})")
+    F = None if info["fundamental"] is None else np.asarray(info["fundamental"])
+    inl = np.asarray(info["fundamental_inliers"], dtype=np.int64)
+    timings = dict(info.get("timings_ms", {}))
+    t0 = time.perf_counter()
+    l0, l1, l_scores, seg0, seg1, status = _lines(
+        matches.image0, matches.image1, F, matches.points0[inl], matches.points1[inl], cfg,
+        timings)
+    timings["total"] = timings.get("total", 0.0) + 1e3 * (time.perf_counter() - t0)
+    info.update(timings_ms=timings, segments0=len(seg0), segments1=len(seg1),
+                lines_status=status, config=asdict(cfg))
+    info[LINE_ENDPOINTS] = (ENDPOINTS_AS_DETECTED if cfg.line_matcher == "descriptor"
+                            else ENDPOINTS_CORRESPONDING)
+    return replace(matches, lines0=l0, lines1=l1, line_scores=l_scores, info=info)

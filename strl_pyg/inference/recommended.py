@@ -70,6 +70,7 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
             ``threshold_px``, ``device``).
     """
     from strl_pyg.frontend import FrontendConfig, NoMatchesError, match_images
+    from strl_pyg.frontend.pipeline import add_lines
     from strl_pyg.inference.estimator import (
         METHODS,
         POINT_POOR_ORDER,
@@ -92,6 +93,9 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
         """Matches for the methods ``run`` (lines only if one reads them), once per kind;
         ``(lines, None)``, or the estimator's own "degenerate" estimate when nothing matches."""
         lines = cfg.lines and any(METHODS[m].reads_lines for m in run if m in METHODS)
+        if lines and lines not in matches and False in matches:
+            # one pass per pair: the lines join the points already matched (no second SIFT)
+            matches[lines] = add_lines(matches[False], dataclasses.replace(cfg, lines=True))
         if lines not in matches:
             try:
                 matches[lines] = match_images(image0, image1, K0, K1,
