@@ -60,11 +60,10 @@ def test_few_points_put_the_line_solver_first_with_the_same_pose(model):
     the points first, then the lines for vp, and gives the pose of the run of every method."""
     import torch
 
-    from strl_pyg.geometry.pose import rotation_angle_deg
-    from strl_pyg.inference.estimator import POINT_POOR_MAX_POINTS
-
     import strl_pyg.frontend as frontend
     from strl_pyg.frontend import pipeline
+    from strl_pyg.geometry.pose import rotation_angle_deg
+    from strl_pyg.inference.estimator import POINT_POOR_MAX_POINTS
 
     p = generate_pair(2, SceneConfig(kind="street", image_size=(240, 320)))
     cfg = FrontendConfig(max_keypoints=40)
