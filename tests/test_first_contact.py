@@ -322,3 +322,18 @@ def test_the_match_drawing_has_a_title_a_legend_and_subsamples(pair):
     changed = lambda c: (c[-plain.shape[0]:] != plain).any(-1).mean()  # noqa: E731
     assert changed(few) > 0 and (draw_matches(m, layout="horizontal", max_points=10,
                                                max_lines=5) != plain).any()
+
+
+def test_the_focal_warning_of_a_downscaled_pair_quotes_the_users_numbers(tmp_path, pair,
+                                                                         capsys):
+    """Before: fx=153.8 at 1600 px, numbers the user never gave."""
+    import cv2
+
+    for name, img in (("a.png", pair.image0), ("b.png", pair.image1)):
+        cv2.imwrite(str(tmp_path / name), cv2.resize(img, (3200, 960)))
+    code = cli_main(["predict", str(tmp_path / "a.png"), str(tmp_path / "b.png"),
+                     "--K", "100000,100000,1600,480", "--methods", "opencv",
+                     "--bootstrap", "0"])
+    out = capsys.readouterr().out
+    assert code == 3
+    assert "fx=1e+05" in out and "(3200 px)" in out and "1600 px)" not in out

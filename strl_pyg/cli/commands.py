@@ -319,6 +319,8 @@ def cmd_predict(args) -> int:
         est = estimate_methods(model, img0, img1, K0, K1,
                                FrontendConfig(detector=args.detector), methods,
                                bootstrap=args.bootstrap)
+        if inputs.downscaled:
+            _intrinsics_in_original_frame(est, inputs)
     code = STATUS_EXIT[est.status]
     if args.json:
         print(json.dumps({**est.to_dict(), "translation_kind": model.config.translation,
@@ -327,6 +329,30 @@ def cmd_predict(args) -> int:
     print(f"matches: {est.num_points} points, {est.num_lines} lines")
     _print_estimate(est)
     return code
+
+
+def _intrinsics_in_original_frame(est, inputs) -> None:
+    """The intrinsics warnings of a pair matched downscaled (``--max-side``) quote the sizes
+    and K the user gave, not the downscaled ones (a 6000 px image's fx=4615 was quoted as
+    fx=153.8 at 1600 px)."""
+    from strl_pyg.inference.inputs import intrinsics_problems
+
+    (s0, s1, sK0, sK1), (o0, o1, oK0, oK1) = tuple(inputs), inputs.original
+    small = intrinsics_problems(s0.shape[:2], s1.shape[:2], sK0, sK1)
+    original = intrinsics_problems(o0.shape[:2], o1.shape[:2], oK0, oK1)
+    if not small or len(small) != len(original):
+        return
+    swap = dict(zip(small, original, strict=True))
+
+    def fix(text: str) -> str:
+        for a, b in swap.items():
+            text = text.replace(a, b)
+        return text
+
+    for rec in (est.pose, *est.methods.values()):
+        rec.warnings = [fix(w) for w in rec.warnings]
+        if "unreliable" in rec.info:
+            rec.info["unreliable"] = [fix(w) for w in rec.info["unreliable"]]
 
 
 def _method_names(methods: str) -> tuple[str, ...]:
