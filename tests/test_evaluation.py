@@ -49,7 +49,10 @@ def _script():
 
 def test_report_rows_columns_and_classical_accuracy(synthetic_report):
     rep = synthetic_report
-    assert rep.methods == available_methods()
+    # what the tiny model cannot run (no geometric head) is left out by default, not scored
+    # as "fail 4/4" (issue: 'fail 60/60' for methods a model lacks)
+    assert rep.methods == tuple(m for m in available_methods()
+                                if m not in ("geometric", "guided"))
     assert len(rep.results) == 4 * len(rep.methods)
     summary = rep.summary()
     assert list(summary) == ["synthetic/indoor", "synthetic/boxes", "all"]
@@ -68,8 +71,7 @@ def test_report_rows_columns_and_classical_accuracy(synthetic_report):
     # an untrained network is far off; the fusion follows the exact classical estimate
     assert summary["all"]["regression"]["rot_mean"] > 1.0
     assert summary["all"]["fused"]["rot_mean"] < 1.0
-    # the tiny model has no geometric head: the registry's geometric / guided say so (failed)
-    assert summary["all"]["geometric"]["failures"] == 4
+    assert "geometric" not in summary["all"] and "vp" in summary["all"]
 
 
 def test_markdown_and_json_render(synthetic_report, tmp_path):

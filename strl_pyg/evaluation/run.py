@@ -118,13 +118,19 @@ def available_methods() -> tuple[str, ...]:
 def resolve_methods(methods: Iterable[str] | None, model: Any) -> tuple[str, ...]:
     """Registry names of ``methods`` (comma-separated items allowed; old names with a
     :class:`FutureWarning`); ``None``: :func:`available_methods`, without the network
-    methods when ``model`` is ``None``."""
+    methods when ``model`` is ``None`` and without those that need the geometric head when
+    ``model`` has none (asked for by name, they run and say why they fail)."""
     import warnings
 
+    from strl_pyg.inference.estimator import METHODS as REGISTRY
+
+    head = bool(getattr(getattr(model, "config", None), "geometric", False))
     if methods is None:
         names = available_methods()
-        return names if model is not None else tuple(m for m in names
-                                                      if m not in NETWORK_METHODS)
+        if model is None:
+            return tuple(m for m in names if m not in NETWORK_METHODS)
+        # what the model cannot run is left out, not scored "fail 60/60"
+        return tuple(m for m in names if head or not REGISTRY[m].needs_geometric_head)
     if isinstance(methods, str):
         methods = [methods]
     out = []

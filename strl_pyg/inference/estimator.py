@@ -119,7 +119,9 @@ class MethodSpec:
     point matches (:func:`~strl_pyg.inference.support.check_support`); ``bootstrapped``,
     whether its covariance carries the classical bootstrap (its calibration then holds only
     for the bootstrap count it was fitted with); ``classical_base``, whether it starts from
-    the classical solver's pose (its calibration was fitted with PoseLib as that base)."""
+    the classical solver's pose (its calibration was fitted with PoseLib as that base);
+    ``needs_geometric_head``, whether it reads the network's geometric head (a checkpoint
+    without one cannot run it)."""
 
     fn: MethodFn
     min_points: int = MIN_POINTS
@@ -132,6 +134,7 @@ class MethodSpec:
     support_checked: bool = True
     bootstrapped: bool = False
     classical_base: bool = False
+    needs_geometric_head: bool = False
 
 
 #: ``name -> MethodSpec``, run in this order.
@@ -236,9 +239,9 @@ register_method("fused", _fused, uses_network=True, reads_lines=True, bootstrapp
                 classical_base=True, depends_on=("regression", "classical"),
                 label="network + classical, information form")
 register_method("geometric", _geometric, uses_network=True, reads_lines=True,
-                label="the network's weighted eight-point")
+                needs_geometric_head=True, label="the network's weighted eight-point")
 register_method("guided", _guided, uses_network=True, reads_lines=True, bootstrapped=True,
-                classical_base=True, depends_on=("classical",),
+                classical_base=True, depends_on=("classical",), needs_geometric_head=True,
                 label="network-guided classical solve")
 register_method("vp", _vp, reads_lines=True,
                 label="vanishing-point rotation + 2-point translation")
