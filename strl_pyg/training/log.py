@@ -136,8 +136,9 @@ def plot_history(history: list[dict[str, Any]], path: str | os.PathLike,
                 ax.plot(train[key][0], _running_mean(train[key][1]), color="C2", alpha=0.8,
                         lw=0.9, label="train (running mean)")
             ax.plot(steps, [h[key] for h in history], "o-", color="C0", label="Str-L Pose")
-            ax.plot(steps, [h["trivial_" + key] for h in history], "--", color="C1",
-                    label="mean pose")
+            trivial = [h.get("trivial_" + key, math.nan) for h in history]
+            if any(math.isfinite(v) for v in trivial):  # markers: one validation is a point
+                ax.plot(steps, trivial, "s--", ms=4, color="C1", label="mean pose")
         for step, label in marks:
             ax.axvline(step, color="grey", lw=0.8, ls=":")
             ax.text(step, ax.get_ylim()[1], f" {label}", va="top", fontsize=7, color="grey")
