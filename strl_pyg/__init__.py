@@ -12,12 +12,9 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from strl_pyg import _compat
 from strl_pyg.utils.lazy import lazy_exports
 
-__version__ = "0.3.0"
-
-_compat.install()  # old module paths (0.2.x) import with a DeprecationWarning
+__version__ = "0.4.0.dev0"
 
 __all__ = [
     "PairMatches",

@@ -1,5 +1,5 @@
-"""Old module paths of 0.2 resolve to the new ones with a DeprecationWarning naming the new
-path, and the public paths that did not move keep working."""
+"""The 0.2 module paths are gone (0.4); the public paths that did not move keep working, and
+the shipped checkpoints load."""
 
 from __future__ import annotations
 
@@ -10,35 +10,21 @@ from pathlib import Path
 
 import pytest
 
-from strl_pyg._compat import OLD_PATHS
-
 REPO = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.parametrize("old", sorted(OLD_PATHS))
-def test_every_old_path_imports_the_new_module_with_a_warning(old):
-    new = OLD_PATHS[old]
-    sys.modules.pop(old, None)
-    with pytest.warns(DeprecationWarning, match=rf"{old} is deprecated .*import {new} instead"):
-        module = importlib.import_module(old)
-    assert module is importlib.import_module(new)
-    assert sys.modules[old] is sys.modules[new]
+def test_the_0_2_module_paths_are_gone_and_say_where_to_look():
+    """0.4 removed the 0.2 paths (docs/changelog.md lists each with its replacement): an old
+    path is an ordinary ModuleNotFoundError, and the faces give only their own names."""
+    sys.modules.pop("strl_pyg.pose_methods", None)
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module("strl_pyg.pose_methods")
+    import strl_pyg.inference as face
 
-
-def test_old_from_imports_give_the_same_objects():
-    with pytest.warns(DeprecationWarning):
-        sys.modules.pop("strl_pyg.pose_methods", None)
-        from strl_pyg.pose_methods import MethodContext
-    import strl_pyg.data
-
-    sys.modules.pop("strl_pyg.data.datasets", None)
-    vars(strl_pyg.data).pop("datasets", None)  # set by an earlier import of the submodule
-    with pytest.warns(DeprecationWarning, match="import strl_pyg.datasets instead"):
-        from strl_pyg.data import datasets
-    from strl_pyg.datasets import KITTIOdometry
-    from strl_pyg.inference.methods import MethodContext as new
-
-    assert MethodContext is new and datasets.KITTIOdometry is KITTIOdometry
+    with pytest.raises(AttributeError, match="has no attribute 'np'"):
+        face.np  # noqa: B018  (0.3's fallback face gave every name of a module)
+    changelog = (REPO / "docs" / "changelog.md").read_text()
+    assert "`strl_pyg.pose_methods` | `strl_pyg.inference.methods`" in changelog
 
 
 def test_public_paths_that_became_folders_keep_their_names():

@@ -260,7 +260,8 @@ def test_package_exports():
 def test_readers_split_by_layout():
     """The layouts are split over modules (readers, shared checks): every format but strl has
     one reader and one rank table, and the shared error is one class."""
-    from strl_pyg.data import external_checks, external_readers
+    from strl_pyg.data.external import checks as external_checks
+    from strl_pyg.data.external import readers as external_readers
 
     assert set(FORMATS) == {"strl", *external_readers.READERS} == {"strl", *external_readers.RANKS}
     assert external_checks.MatchFormatError is MatchFormatError

@@ -277,13 +277,16 @@ def test_evaluate_runs_the_registry_and_scores_what_pose_estimator_gives(tiny_ch
                 assert r.trans_err == pytest.approx(float(tr[0]), abs=1e-9)
 
 
-def test_old_method_names_are_accepted_with_a_warning():
+def test_old_method_names_are_refused_with_their_new_name():
+    """0.3 accepted them with a DeprecationWarning that Python hid: '--methods strl' ran
+    without a word. 0.4 refuses them and names the registry's method."""
     from strl_pyg.evaluation import resolve_methods
 
-    with pytest.warns(FutureWarning, match="'strl' is now called 'regression'"):
-        assert resolve_methods(["strl", "opencv"], object()) == ("regression", "opencv")
-    with pytest.warns(FutureWarning, match="'fused_opencv' is now called 'fused'"):
-        assert resolve_methods("fused_opencv,poselib", object()) == ("fused", "poselib")
+    with pytest.raises(ValueError, match="0.2's 'strl' is 'regression'"):
+        resolve_methods(["strl", "opencv"], object())
+    with pytest.raises(ValueError, match="0.2's 'fused_opencv' is 'fused'"):
+        resolve_methods("fused_opencv,poselib", object())
+    assert resolve_methods("regression,opencv", object()) == ("regression", "opencv")
     with pytest.raises(ValueError, match="Expected methods from"):
         resolve_methods(["magic"], object())
 

@@ -287,7 +287,9 @@ def test_a_new_method_is_one_registration(pair, monkeypatch):
         return MethodResult("guess", "ok", np.eye(4))
 
     monkeypatch.setattr(inference, "METHODS", dict(inference.METHODS))
-    inference.register_method("guess", identity_guess)
+    # a new method's pose is support-checked by default (MethodSpec); the identity is not
+    # supported by a moving pair, so this ordering test opts out
+    inference.register_method("guess", identity_guess, support_checked=False)
     monkeypatch.setattr(inference, "RECOMMENDED_ORDER", ("guess", "opencv"))
     # a model without a measured order (the shipped one records its own)
     est = PoseEstimator(tiny(), methods=("opencv", "guess")).estimate(pair.matches)
@@ -314,11 +316,6 @@ def test_the_split_modules_stay_importable_from_inference():
     assert list(inference.METHODS) == ["regression", "opencv", "poselib", "fused", "geometric",
                                        "guided", "vp", "vp_checked"]
     assert inference.METHODS["fused"].fn is pose_methods._fused
-    # a name the module imported in 0.1.x (gone after the split, restored), also on the face
-    from strl_pyg.estimation import classical
-
-    assert inference.estimate_relative_pose is classical.estimate_relative_pose
-    assert face.estimate_relative_pose is classical.estimate_relative_pose
 
 
 def test_method_results_hold_a_pose_only_when_ok():

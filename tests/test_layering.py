@@ -14,8 +14,9 @@ modules, which stay lazy so that ``strl-pose --help`` is torch-free):
   not counted), except the few in :data:`LONG_FUNCTIONS`, which may shrink but not grow
   (files are split by concept, not to fit a line cap: the module cap is gone).
 
-The root holds only the lazy face ``__init__.py`` and ``_compat.py`` (the table of old module
-paths), both above every folder. Each rule has a planted violation below to show it can fail.
+The root holds only the lazy face ``__init__.py``, above every folder (the 0.2 module paths
+are gone: docs/changelog.md lists each with its replacement). Each rule has a planted
+violation below to show it can fail.
 """
 
 from __future__ import annotations
@@ -57,7 +58,7 @@ FLOORS: dict[str, int] = {
     "training": 7,    # the loop, config, data, loss, checkpoints
     "evaluation": 8,  # the evaluate command on the inference registry
     "cli": 9,         # strl-pose
-    "": 10,           # the package root: __init__ (lazy face) and _compat
+    "": 10,           # the package root: __init__ (the lazy face)
 }
 
 
@@ -196,8 +197,8 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
 
 
 # ----------------------------------------------------------------------------- the package
-def test_the_root_holds_only_the_face_and_the_compat_table():
-    assert sorted(p.name for p in PACKAGE.glob("*.py")) == ["__init__.py", "_compat.py"]
+def test_the_root_holds_only_the_face():
+    assert sorted(p.name for p in PACKAGE.glob("*.py")) == ["__init__.py"]
 
 
 def test_every_folder_has_a_floor_and_a_face_that_says_what_lives_there():
@@ -222,36 +223,6 @@ def test_no_private_name_crosses_a_folder():
 def test_no_module_level_import_cycle():
     cycle = find_cycle(module_level_graph(all_edges()))
     assert cycle is None, f"module-level import cycle: {' -> '.join(cycle)}"
-
-
-def old_path_imports(package: Path = PACKAGE, roots: tuple[Path, ...] = ()) -> list[str]:
-    """Imports of 0.2 module paths (:data:`strl_pyg._compat.OLD_PATHS`) in the code itself:
-    they work, but warn, and hide which folder the code depends on."""
-    from strl_pyg._compat import OLD_PATHS
-
-    bad = []
-    for path in [*package.rglob("*.py"), *(p for r in roots for p in r.rglob("*.py"))]:
-        for node in ast.walk(ast.parse(path.read_text())):
-            names = []
-            if isinstance(node, ast.Import):
-                names = [a.name for a in node.names]
-            elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
-                names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
-            bad += [f"{path.relative_to(package.parent)}:{node.lineno} imports {n}"
-                    for n in names if n in OLD_PATHS]
-    return bad
-
-
-def test_no_code_imports_an_old_module_path():
-    bad = old_path_imports(PACKAGE, (ROOT / "examples", ROOT / "benchmarks"))
-    assert not bad, "imports of deprecated 0.2 paths:\n" + "\n".join(bad)
-
-
-def test_planted_old_path_import_is_caught(tmp_path):
-    (tmp_path / "strl_pyg").mkdir()
-    (tmp_path / "strl_pyg" / "a.py").write_text("from strl_pyg.data import datasets\n")
-    assert old_path_imports(tmp_path / "strl_pyg") == [
-        "strl_pyg/a.py:1 imports strl_pyg.data.datasets"]
 
 
 def function_lengths(package: Path) -> dict[str, int]:

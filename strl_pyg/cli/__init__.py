@@ -24,11 +24,13 @@ __all__ = [
     "non_negative_int",
     "bootstrap_count",
     "cmd_bench",
+    "DEFAULT_WEIGHTS",
 ]
 
 # 0.2 code read other names of the module this folder was: they resolve too
 __getattr__, __dir__ = lazy_exports(__name__, {
     "run_guarded": "strl_pyg.cli.guard",
+    "DEFAULT_WEIGHTS": "strl_pyg.training.checkpoints",
     "read_intrinsics": "strl_pyg.cli.inputs",
     "read_image_file": "strl_pyg.cli.inputs",
     "default_checkpoint": "strl_pyg.cli.commands",
@@ -44,4 +46,4 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "non_negative_int": "strl_pyg.cli.inputs",
     "bootstrap_count": "strl_pyg.cli.inputs",
     "cmd_bench": "strl_pyg.cli.bench",
-}, globals(), fallback="strl_pyg.cli.commands")
+}, globals())

@@ -30,7 +30,7 @@ __all__ = [
 ]
 
 # 0.2 code read other names of the module this folder was: they resolve too
-__getattr__, __dir__ = lazy_exports(__name__, {
+_lazy_getattr, __dir__ = lazy_exports(__name__, {
     "AUC_THRESHOLDS": "strl_pyg.evaluation.run",
     "SHORT_SEGMENT_LENGTHS": "strl_pyg.evaluation.report",
     "EvalPair": "strl_pyg.evaluation.pairs",
@@ -41,13 +41,19 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "synthetic_eval_pairs": "strl_pyg.evaluation.pairs",
     "demon_eval_pairs": "strl_pyg.evaluation.pairs",
     "kitti_eval_pairs": "strl_pyg.evaluation.pairs",
-    "METHODS": "strl_pyg.evaluation.run",
     "LEGACY_METHOD_NAMES": "strl_pyg.evaluation.run",
-    "NETWORK_METHODS": "strl_pyg.evaluation.run",
     "available_methods": "strl_pyg.evaluation.run",
     "resolve_methods": "strl_pyg.evaluation.run",
     "predict_pose": "strl_pyg.evaluation.run",
     "evaluate_pairs": "strl_pyg.evaluation.run",
     "build_parser": "strl_pyg.evaluation.run",
     "main": "strl_pyg.evaluation.run",
-}, globals(), fallback="strl_pyg.evaluation.run")
+}, globals())
+
+
+def __getattr__(name: str):
+    if name in ("METHODS", "NETWORK_METHODS"):  # the registry's, never cached on the face
+        from strl_pyg.evaluation import run
+
+        return getattr(run, name)
+    return _lazy_getattr(name)

@@ -6,8 +6,8 @@ subset, id) the methods of :class:`~strl_pyg.inference.PoseEstimator`, by the re
 (:data:`METHODS`, the registry: ``regression``, ``opencv``, ``poselib``, ``fused``,
 ``geometric``, ``guided``, ``vp``, ``vp_checked``), estimate ``T_0to1`` (``X1 = R X0 + t``)
 with the estimator's support checks and statuses: a method's pose counts only with status
-``"ok"``. The 0.2 names (``strl``, ``fused_opencv``, ``fused_poselib``) still work, with a
-warning (:data:`LEGACY_METHOD_NAMES`).
+``"ok"``. The 0.2 names (``strl``, ``fused_opencv``, ``fused_poselib``) are refused with their
+registry name (:data:`LEGACY_METHOD_NAMES`).
 
 The job is in three modules: the pairs (:mod:`strl_pyg.evaluation.pairs`: generated, DeMoN,
 KITTI),
@@ -50,7 +50,6 @@ from strl_pyg.evaluation.report import (
 )
 from strl_pyg.geometry import Pose
 from strl_pyg.inference.inputs import network_pose, prepare_matches
-from strl_pyg.inference.recommended import NETWORK_METHODS
 from strl_pyg.metrics.two_view import (  # noqa: F401  (names this module had before the 0.2 split)
     integrate_relative_poses,
     kitti_odometry_errors,
@@ -70,7 +69,7 @@ __all__ = [
     "pair_result",
     "EvalReport",
     "LEGACY_METHOD_NAMES",
-    "NETWORK_METHODS",
+    "NETWORK_METHODS",  # noqa: F822  (module __getattr__: the registry's)
     "available_methods",
     "resolve_methods",
     "prepare_matches",
@@ -92,20 +91,26 @@ def registered_methods() -> tuple[str, ...]:
     return tuple(REGISTRY)
 
 
+def _network_methods() -> tuple[str, ...]:
+    from strl_pyg.inference.estimator import methods_where
+
+    return methods_where(uses_network=True)
+
+
 def __getattr__(name: str) -> Any:
     if name == "METHODS":
         return registered_methods()
+    if name == "NETWORK_METHODS":
+        return _network_methods()
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-#: Names of the 0.2 runner -> registry names (accepted with a FutureWarning, which Python
-#: shows to users by default). The former ``fused_opencv`` / ``fused_poselib`` are the
-#: registry's ``fused``, which fuses with the first ``"ok"`` classical pose (PoseLib when
-#: installed).
+#: Names of the 0.2 runner -> registry names, named in the error that refuses them (0.4
+#: removed them). The former ``fused_opencv`` / ``fused_poselib`` are the registry's
+#: ``fused``, which fuses with the first ``"ok"`` classical pose (PoseLib when installed).
 LEGACY_METHOD_NAMES = {"strl": "regression", "fused_poselib": "fused", "fused_opencv": "fused"}
 
-# NETWORK_METHODS (the methods that need a network) is the estimator's one list, imported above
-# from strl_pyg.inference.recommended and re-exported here.
+# NETWORK_METHODS (the methods that need a network): the registry's, through __getattr__
 
 
 def available_methods() -> tuple[str, ...]:
@@ -116,19 +121,17 @@ def available_methods() -> tuple[str, ...]:
 
 
 def resolve_methods(methods: Iterable[str] | None, model: Any) -> tuple[str, ...]:
-    """Registry names of ``methods`` (comma-separated items allowed; old names with a
-    :class:`FutureWarning`); ``None``: :func:`available_methods`, without the network
+    """Registry names of ``methods`` (comma-separated items allowed; a 0.2 name is refused
+    with its registry name); ``None``: :func:`available_methods`, without the network
     methods when ``model`` is ``None`` and without those that need the geometric head when
     ``model`` has none (asked for by name, they run and say why they fail)."""
-    import warnings
-
     from strl_pyg.inference.estimator import METHODS as REGISTRY
 
     head = bool(getattr(getattr(model, "config", None), "geometric", False))
     if methods is None:
         names = available_methods()
         if model is None:
-            return tuple(m for m in names if m not in NETWORK_METHODS)
+            return tuple(m for m in names if m not in _network_methods())
         # what the model cannot run is left out, not scored "fail 60/60"
         return tuple(m for m in names if head or not REGISTRY[m].needs_geometric_head)
     if isinstance(methods, str):
@@ -137,13 +140,11 @@ def resolve_methods(methods: Iterable[str] | None, model: Any) -> tuple[str, ...
     for item in methods:
         for name in str(item).split(","):
             name = name.strip()
-            if name in LEGACY_METHOD_NAMES:
-                new = LEGACY_METHOD_NAMES[name]
-                warnings.warn(f"method '{name}' is now called '{new}' (the PoseEstimator "
-                              f"registry's name)", FutureWarning, stacklevel=3)
-                name = new
             if name not in registered_methods():
-                raise ValueError(f"Expected methods from {registered_methods()} (got {name!r})")
+                hint = (f": 0.2's '{name}' is '{LEGACY_METHOD_NAMES[name]}'"
+                        if name in LEGACY_METHOD_NAMES else "")
+                raise ValueError(f"Expected methods from {registered_methods()} (got "
+                                 f"{name!r}{hint})")
             if name not in out:
                 out.append(name)
     if not out:
@@ -200,7 +201,7 @@ def evaluate_pairs(
     from strl_pyg.inference.estimator import PoseEstimator
 
     methods = resolve_methods(methods, model)
-    needs_model = any(m in NETWORK_METHODS for m in methods)
+    needs_model = any(m in _network_methods() for m in methods)
     if needs_model and model is None:
         raise ValueError(f"Expected a model for methods {list(methods)} (got None)")
     if model is not None:
@@ -293,8 +294,7 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--methods", nargs="+", default=None,
                    help=f"names of PoseEstimator's registry, space- or comma-separated, from "
                         f"{', '.join(registered_methods())} (default: all available; "
-                        f"PoseLib's only if importable); the 0.2 names strl, fused_opencv, "
-                        f"fused_poselib still work, with a warning")
+                        f"PoseLib's only if importable)")
     p.add_argument("--no-resample", action="store_true",
                    help="feed all matches instead of resampling to 384 points / 192 lines")
     p.add_argument("--resample-seed", type=_NON_NEGATIVE_INT, default=0)

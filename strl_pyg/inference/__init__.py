@@ -47,10 +47,13 @@ __all__ = [
     "DEPENDENCIES",
     "BOOTSTRAPPED",
     "methods_where",
+    "POSELIB_MISSING",
+    "BAD_INTRINSICS",
+    "NO_INTRINSICS",
 ]
 
 # 0.2 code read other names of the module this folder was: they resolve too
-__getattr__, __dir__ = lazy_exports(__name__, {
+_lazy_getattr, __dir__ = lazy_exports(__name__, {
     "STATUSES": "strl_pyg.inference.record",
     "MIN_POINTS": "strl_pyg.inference.estimator",
     "ZERO_PARALLAX_PX": "strl_pyg.inference.inputs",
@@ -76,7 +79,6 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "MIN_INLIER_RATIO": "strl_pyg.inference.support",
     "MIN_SUPPORT_INLIERS": "strl_pyg.inference.support",
     "SUPPORT_BAND": "strl_pyg.inference.support",
-    "SUPPORT_CHECKED": "strl_pyg.inference.estimator",
     "CHEIRALITY_MIN": "strl_pyg.inference.support",
     "check_support": "strl_pyg.inference.support",
     "NORMALISED_K_MAX": "strl_pyg.inference.inputs",
@@ -85,8 +87,20 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "estimate_recommended": "strl_pyg.inference.recommended",
     "estimate_methods": "strl_pyg.inference.recommended",
     "methods_needed": "strl_pyg.inference.recommended",
-    "NETWORK_METHODS": "strl_pyg.inference.estimator",
-    "DEPENDENCIES": "strl_pyg.inference.estimator",
-    "BOOTSTRAPPED": "strl_pyg.inference.estimator",
     "methods_where": "strl_pyg.inference.estimator",
-}, globals(), fallback="strl_pyg.inference.estimator")
+    "POSELIB_MISSING": "strl_pyg.inference.estimator",
+    "BAD_INTRINSICS": "strl_pyg.inference.estimator",
+    "NO_INTRINSICS": "strl_pyg.inference.estimator",
+}, globals())
+
+#: Tables derived from the method registry on every access (never cached on the face): a
+#: method registered later is in them.
+_DERIVED = ("SUPPORT_CHECKED", "BOOTSTRAPPED", "NETWORK_METHODS", "DEPENDENCIES")
+
+
+def __getattr__(name: str):
+    if name in _DERIVED:
+        from strl_pyg.inference import estimator
+
+        return getattr(estimator, name)
+    return _lazy_getattr(name)

@@ -54,4 +54,4 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "coverage_interval": "strl_pyg.metrics.stats",
     "median_ratio_interval": "strl_pyg.metrics.stats",
     "auc_difference_interval": "strl_pyg.metrics.stats",
-}, globals(), fallback="strl_pyg.metrics.two_view")
+}, globals())

@@ -39,4 +39,4 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "gather_inputs": "strl_pyg.model.inputs",
     "upgrade_legacy_keys": "strl_pyg.model.legacy",
     "what_checkpoint": "strl_pyg.model.legacy",
-}, globals(), fallback="strl_pyg.model.strl_pose")
+}, globals())

@@ -84,4 +84,4 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "TRAINING_KEYS": "strl_pyg.training.checkpoints",
     "TrainLogger": "strl_pyg.training.log",
     "read_log": "strl_pyg.training.log",
-}, globals(), fallback="strl_pyg.training.loop")
+}, globals())
