@@ -337,3 +337,18 @@ def test_the_focal_warning_of_a_downscaled_pair_quotes_the_users_numbers(tmp_pat
     out = capsys.readouterr().out
     assert code == 3
     assert "fx=1e+05" in out and "(3200 px)" in out and "1600 px)" not in out
+
+
+def test_methods_that_read_images_are_skipped_without_them(pair):
+    """Before: 'failed' (found no pose) for the network's methods on a match file without
+    images; they did not run at all."""
+    no_images = replace(pair.matches, image0=None, image1=None,
+                        image_size0=pair.image0.shape[:2], image_size1=pair.image1.shape[:2])
+    est = PoseEstimator(methods=("regression", "poselib", "fused"), bootstrap=0).estimate(
+        no_images)
+    reg, fused = est.methods["regression"], est.methods["fused"]
+    assert reg.status == fused.status == "skipped" and reg.T_0to1 is None
+    assert "attach them" in reg.warnings[0] and "visual='pixel'" in reg.warnings[0]
+    assert est.status == "ok" and est.pose.method == "poselib"
+    with_images = PoseEstimator(methods="regression", bootstrap=0).estimate(pair.matches)
+    assert with_images.methods["regression"].status == "ok"

@@ -472,6 +472,9 @@ class PoseEstimator:
         if spec.needs_intrinsics and not matches.has_intrinsics:
             return MethodResult(name, "failed",
                                 warnings=[f"{name} needs intrinsics K0, K1 (got none)"])
+        skip = self._missing_input(name, spec, matches, ctx)
+        if skip is not None:
+            return MethodResult(name, "skipped", warnings=[skip])
         try:
             return spec.fn(matches, ctx)
         except Exception as err:
@@ -480,6 +483,22 @@ class PoseEstimator:
             first = str(err).splitlines()[0] if str(err) else ""
             return MethodResult(name, "failed", info={"raised": type(err).__name__},
                                 warnings=[f"{name} raised {type(err).__name__}: {first}"])
+
+    def _missing_input(self, name: str, spec: MethodSpec, matches: PairMatches,
+                       ctx: MethodContext) -> str | None:
+        """Why ``name`` cannot run on this input (``None`` when it can): the network reads
+        pixels and the matches carry no images, or a method it reads was skipped."""
+        if spec.uses_network and not matches.has_images:
+            visual = getattr(getattr(self.model, "config", None), "visual", None)
+            if visual is not None:
+                return (f"{name} skipped: the model reads the images (visual={visual!r}) and "
+                        "the matches carry none: attach them (PairMatches(..., image0=, "
+                        "image1=) or load_external_matches(..., image0=, image1=))")
+        for dep in spec.depends_on:
+            dep = classical_method() if dep == "classical" else dep
+            if dep in ctx.results and ctx.results[dep].status == "skipped":
+                return f"{name} skipped: it reads {dep}, which was skipped"
+        return None
 
     def _calibrated(self, name: str, res: MethodResult, model: Any) -> MethodResult:
         """``res`` with its covariance scaled by the checkpoint's calibration where it applies

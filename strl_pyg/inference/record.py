@@ -10,7 +10,9 @@ epipolar geometry lie behind a camera; the reasons are in ``warnings`` and
 ``info["unreliable_T_0to1"]``), ``"degenerate"`` (the input does not determine the pose:
 fewer point matches than the solvers need, or zero parallax (identical images): no pose is
 given), ``"failed"`` (the method found no pose, e.g. RANSAC returned no model, or the matches
-do not support it; never replaced by an identity pose). A pose (``T_0to1``, ``covariance``,
+do not support it; never replaced by an identity pose), ``"skipped"`` (a method's record only:
+the input lacks what it reads, e.g. images for a model that reads pixels, or the method it
+starts from was skipped; the recommended pose is never ``"skipped"``). A pose (``T_0to1``, ``covariance``,
 ``sigma``) exists only with ``"ok"``: a script that reads ``T_0to1`` or ``sigma`` without
 the status gets ``None`` for any other.
 
@@ -39,7 +41,7 @@ from strl_pyg.data.matches import PairMatches
 
 __all__ = ["STATUSES", "MethodResult", "PoseEstimate"]
 
-STATUSES = ("ok", "unreliable", "degenerate", "failed")
+STATUSES = ("ok", "unreliable", "degenerate", "failed", "skipped")
 
 
 @dataclass
