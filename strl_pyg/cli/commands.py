@@ -1,7 +1,8 @@
 """The ``strl-pose`` command line.
 
 Subcommands: ``demo`` (the main job on an embedded default: a generated pair goes through
-matching, graph and model), ``match``, ``predict``, ``train``, ``evaluate``, ``bench`` and ``export``.
+matching, graph and model), ``match``, ``predict``, ``train``, ``evaluate``, ``bench`` and
+``export``.
 Every error in the user's input ends with a one-line ``error: Expected ... (got ...)`` on
 stderr and exit code 2 (no traceback): bad flags and values, missing files, folders given as
 files, undecodable images, bad intrinsics, empty or foreign match files, checkpoints that are

@@ -12,8 +12,8 @@ fewer point matches than the solvers need, or zero parallax (identical images): 
 given), ``"failed"`` (the method found no pose, e.g. RANSAC returned no model, or the matches
 do not support it; never replaced by an identity pose), ``"skipped"`` (a method's record only:
 the input lacks what it reads, e.g. images for a model that reads pixels, or the method it
-starts from was skipped; the recommended pose is never ``"skipped"``). A pose (``T_0to1``, ``covariance``,
-``sigma``) exists only with ``"ok"``: a script that reads ``T_0to1`` or ``sigma`` without
+starts from was skipped; the recommended pose is never ``"skipped"``). A pose (``T_0to1``,
+``covariance``, ``sigma``) exists only with ``"ok"``: a script that reads ``T_0to1`` or ``sigma`` without
 the status gets ``None`` for any other.
 
 Uncertainty: ``covariance`` ``[5, 5]`` in the tangent parameters of
