@@ -3,18 +3,17 @@
 and a pair's estimate (:class:`PoseEstimate`: the recommended pose and every method's), both
 JSON-ready through ``to_dict``. All poses are ``T_0to1`` (``X1 = R X0 + t``).
 
-Statuses (:data:`STATUSES`): ``"ok"`` (a pose), ``"unreliable"`` (a pose was computed but
-must not be used: the intrinsics fail the input checks, or many of the matches that fit its
-epipolar geometry lie behind a camera; the reasons are in ``warnings`` and
-``info["unreliable"]``, the computed pose, for inspection only, in
-``info["unreliable_T_0to1"]``), ``"degenerate"`` (the input does not determine the pose:
-fewer point matches than the solvers need, or zero parallax (identical images): no pose is
-given), ``"failed"`` (the method found no pose, e.g. RANSAC returned no model, or the matches
-do not support it; never replaced by an identity pose), ``"skipped"`` (a method's record only:
-the input lacks what it reads, e.g. images for a model that reads pixels, or the method it
-starts from was skipped; the recommended pose is never ``"skipped"``). A pose (``T_0to1``,
-``covariance``, ``sigma``) exists only with ``"ok"``: a script that reads ``T_0to1`` or ``sigma`` without
-the status gets ``None`` for any other.
+Statuses (:data:`STATUSES`): ``"ok"`` (a pose), ``"unreliable"`` (a pose was computed but must
+not be used: the intrinsics fail the input checks, or many of the matches that fit its epipolar
+geometry lie behind a camera; the reasons are in ``warnings`` and ``info["unreliable"]``, the
+computed pose, for inspection only, in ``info["unreliable_T_0to1"]``), ``"degenerate"`` (the
+input does not determine the pose: fewer point matches than the solvers need, or zero parallax
+(identical images): no pose is given), ``"failed"`` (the method found no pose, e.g. RANSAC
+returned no model, or the matches do not support it; never replaced by an identity pose),
+``"skipped"`` (a method's record only: the input lacks what it reads, e.g. images for a model
+that reads pixels, or the method it starts from was skipped; the recommended pose is never
+``"skipped"``). A pose (``T_0to1``, ``covariance``, ``sigma``) exists only with ``"ok"``: a
+script that reads ``T_0to1`` or ``sigma`` without the status gets ``None`` for any other.
 
 Uncertainty: ``covariance`` ``[5, 5]`` in the tangent parameters of
 :mod:`strl_pyg.estimation.fusion` around the method's own pose (rotation increment ``w`` in rad,
