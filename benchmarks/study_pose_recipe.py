@@ -57,6 +57,9 @@ VARIANTS = {
     "flow": (["--set", "inputs=flow", "--loss", "paper"]),
     "balanced": (["--set", "inputs=paper", "--loss", "balanced"]),
     "both": (["--set", "inputs=flow", "--loss", "balanced"]),
+    # follow-ups on "both": the clip (active on 97 % of its steps) and the angular term's weight
+    "both-noclip": (["--set", "inputs=flow", "--loss", "balanced", "--grad-clip", "0"]),
+    "both-a0.2": (["--set", "inputs=flow", "--loss", "balanced", "--angle-weight", "0.2"]),
 }
 COMMON = ["--model", "baseline", "--scene-mix", "lines_small", "--data-seed", "0",
           "--val-pairs", "100", "--val-every", "250", "--batch-size", "16", "--lr", "3e-4",
@@ -146,7 +149,8 @@ def gradient_shares(run: Path, batches: int = 8) -> dict[str, float]:
     model.load_state_dict(state["model"])
     model.train()
     train, _ = build_datasets(cfg)
-    loss_fn = PoseLoss(translation=model.config.translation, form=cfg.loss)
+    loss_fn = PoseLoss(translation=model.config.translation, form=cfg.loss,
+                       angle_weight=cfg.angle_weight)
     shared = [p for n, p in model.named_parameters() if not n.startswith("pose_head.")]
     collate = _collater(model.config)
     data = _Resampled(train, cfg.num_points, cfg.num_lines, 12345, cfg.swap_prob)
@@ -263,6 +267,9 @@ def cmd_report(args: argparse.Namespace) -> int:
                      if s in poselib else "-")
     lines.append("| " + " | ".join(cells + ["-", "-", "-"]) + " |")
     lines += ["", "Validation curves: ![curves](figures/pose_recipe_curves.png)", ""]
+    notes = RESULTS / "notes.md"  # the findings, written by hand from the table above
+    if notes.exists():
+        lines += [notes.read_text().rstrip(), ""]
     out = Path(args.out)
     out.write_text("\n".join(lines) + "\n")
     plot(runs, HERE / "figures" / "pose_recipe_curves.png")

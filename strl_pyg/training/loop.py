@@ -198,7 +198,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     model_cfg = cfg.model_config()
     model = StrLPose(model_cfg).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    loss_fn = PoseLoss(translation=model_cfg.translation, form=cfg.loss)
+    loss_fn = PoseLoss(translation=model_cfg.translation, form=cfg.loss,
+                       angle_weight=cfg.angle_weight)
     geo_fn = GeometricLoss(cfg.geo_threshold_px, cfg.geo_cls_weight,
                            cfg.geo_ess_weight) if model_cfg.geometric else None
     start_step, history = 0, []
@@ -415,6 +416,7 @@ def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> T
         geo_ess_start=args.geo_ess_start, data_seed=args.data_seed,
         checkpoint_every=args.checkpoint_every, checkpoint_minutes=args.checkpoint_minutes,
         loss=args.loss, grad_clip=args.grad_clip if args.grad_clip > 0 else None,
+        angle_weight=args.angle_weight,
     )
 
 
