@@ -72,7 +72,6 @@ from strl_pyg.geometry import (
     sphere_log,
     tangent_basis,
 )
-from strl_pyg.model.strl_pose import PoseOutput
 
 __all__ = [
     "FusedPose",
@@ -307,7 +306,8 @@ class FusedPose:
 
 def _network_inputs(net_pose: Any, net_log_var: Any) -> tuple[torch.Tensor, torch.Tensor,
                                                               torch.Tensor]:
-    if isinstance(net_pose, PoseOutput):
+    # a PoseOutput (strl_pyg.model) by what it holds: estimation does not import the model
+    if all(hasattr(net_pose, k) for k in ("quaternion", "translation", "log_var")):
         if net_pose.quaternion.shape[0] != 1:
             raise ValueError(
                 f"Expected a PoseOutput of one pair (got {net_pose.quaternion.shape[0]})"

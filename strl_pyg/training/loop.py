@@ -198,10 +198,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     model_cfg = cfg.model_config()
     model = StrLPose(model_cfg).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    loss_fn = PoseLoss(translation=model_cfg.translation, form=cfg.loss,
-                       angle_weight=cfg.angle_weight)
-    geo_fn = GeometricLoss(cfg.geo_threshold_px, cfg.geo_cls_weight,
-                           cfg.geo_ess_weight) if model_cfg.geometric else None
+    loss_fn, geo_fn = _losses(cfg, model_cfg)
     start_step, history = 0, []
     trivial_buf: list[Tensor] = []
     if cfg.init_from and not resume:
@@ -365,6 +362,15 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
 
 
 # ----------------------------------------------------------------------------- command line
+def _losses(cfg: TrainConfig, model_cfg: Any) -> tuple[PoseLoss, GeometricLoss | None]:
+    """The run's pose loss and, with the geometric head, its loss."""
+    pose = PoseLoss(translation=model_cfg.translation, form=cfg.loss,
+                    angle_weight=cfg.angle_weight)
+    geo = GeometricLoss(cfg.geo_threshold_px, cfg.geo_cls_weight,
+                        cfg.geo_ess_weight) if model_cfg.geometric else None
+    return pose, geo
+
+
 def fit_input_statistics(model: StrLPose, dataset: Any, symmetric: bool,
                          max_pairs: int = 128) -> None:
     """Sets the flow inputs' standardisation (``model.sce``) from the node coordinates of the
