@@ -53,3 +53,19 @@ def test_derived_tables_follow_the_specs():
     assert all(specs[m].reads_lines for m in face.NETWORK_METHODS)
     with pytest.raises(ValueError, match="Expected MethodSpec fields"):
         est_mod.register_method("x", lambda m, c: None, lable="typo")
+
+
+def test_a_classical_only_estimate_reads_the_calibration_without_building_the_network():
+    """Before: PoseEstimator(methods="poselib") built the shipped network to read its
+    calibration (one pass per pair: the network only when a method needs it)."""
+    from strl_pyg.inference import PoseEstimator
+    from strl_pyg.model import StrLPose
+
+    pair = generate_pair(2_000_017)
+    light = PoseEstimator(methods="poselib")
+    est = light.estimate(pair.matches)
+    assert light._model is None and est.status == "ok"
+    full = PoseEstimator(StrLPose.from_pretrained(), methods="poselib").estimate(pair.matches)
+    assert est.pose.info["calibration_scale"] == full.pose.info["calibration_scale"]
+    np.testing.assert_array_equal(est.pose.covariance, full.pose.covariance)
+    assert est.pose.method == full.pose.method

@@ -316,6 +316,27 @@ def _pair_rules(results: dict[str, MethodResult], matches: PairMatches,
             res.inliers = np.asarray(res.info.pop("inlier_mask"), dtype=bool)[rows]
 
 
+_SHIPPED_METADATA: list = []
+
+
+def _shipped_metadata() -> Any:
+    """The default shipped checkpoint's metadata, as an object with ``metadata`` (what the
+    calibration and order helpers read), read once per process without building the model."""
+    if not _SHIPPED_METADATA:
+        from importlib.resources import as_file, files
+        from types import SimpleNamespace
+
+        from strl_pyg.model.strl_pose import StrLPose
+        from strl_pyg.utils.io import safe_torch_load
+
+        file, fallback = StrLPose.PRETRAINED["geometric"]
+        with as_file(files("strl_pyg") / "weights" / file) as path:
+            payload = safe_torch_load(path, "StrLPose checkpoint", "cpu")
+        md = payload.get("metadata") if isinstance(payload, dict) else None
+        _SHIPPED_METADATA.append(SimpleNamespace(metadata=dict(md or fallback)))
+    return _SHIPPED_METADATA[0]
+
+
 def _spread_px(matches: PairMatches) -> float:
     """The larger extent (pixels) of the point matches in either image; ``inf`` without
     point matches."""
@@ -433,6 +454,16 @@ class PoseEstimator:
                 self._model = self._model.to(self.device)
         return self._model
 
+    def _metadata_source(self) -> Any:
+        """What the calibration and the recommended order are read from: the model when one
+        was given or built, else the shipped checkpoint's metadata alone (read once, without
+        building the network)."""
+        if self._model is not None:
+            return self._model
+        if not any(METHODS[m].uses_network for m in self.method_names):
+            return _shipped_metadata()
+        return self.model
+
     def estimate(self, matches: PairMatches,
                  known: dict[str, MethodResult] | None = None) -> PoseEstimate:
         """Runs the methods on ``matches`` (pixels; ``K0``/``K1`` for the classical ones).
@@ -444,10 +475,10 @@ class PoseEstimator:
         matches, warnings, rows, degenerate = _checked_pair(matches)
         ctx = MethodContext(self.seed, self.threshold_px, self.bootstrap, self.device,
                             self.resample, load_model=lambda: self.model)
-        # the model (the shipped one when None was given) calibrates the classical methods
-        # too, also when no network method runs (the default predict path: PoseLib only);
-        # before, PoseEstimator(methods=["poselib"]) gave uncalibrated sigmas without a word
-        model = self.model
+        # the model's metadata (the shipped one's when None was given) calibrates the classical
+        # methods too, also when no network method runs (the default predict path: PoseLib
+        # only); the network itself is built only when a method needs it
+        model = self._metadata_source()
         for name in self.method_names:
             if known and name in known:
                 ctx.results[name] = known[name]
@@ -564,9 +595,10 @@ class PoseEstimator:
         else ``"degenerate"`` or ``"failed"``.
         The pose's warnings say why the earlier methods were passed over and which methods
         could not run at all (an exception: e.g. the network on a device it cannot use)."""
-        chosen = recommended_order(self._model, matches.num_points)
+        chosen = recommended_order(self._metadata_source(), matches.num_points)
         order = [m for m in chosen if m in results]
-        notes = [POSELIB_MISSING] if _measured_with_missing_poselib(self._model) else []
+        notes = [POSELIB_MISSING] if _measured_with_missing_poselib(
+            self._metadata_source()) else []
         raised = [m for m, r in results.items() if r.info.get("raised")]
         notes += [f"{m} could not run: {'; '.join(results[m].warnings)}" for m in raised]
         # the regression stands in only while some solver's pose is supported or none was
