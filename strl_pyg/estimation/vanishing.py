@@ -199,6 +199,52 @@ def _as_Rt(pose) -> tuple[np.ndarray, np.ndarray]:
     return T[:3, :3], T[:3, 3]
 
 
+def _best_translation(rotations: list, pairs: np.ndarray, h0: np.ndarray, h1: np.ndarray,
+                      x0, x1, thr: float) -> tuple | None:
+    """For each rotation, the translation of a point pair (``t . a_k = 0`` for both) that
+    explains the most matches (MSAC), refit on its inliers, its sign by cheirality; the best
+    ``(in front, -cost, R, t, inliers)`` over the rotations (``None``: no pair gave one)."""
+    best = None
+    for R in rotations:
+        a = np.cross(h1, h0 @ R.T)  # t . a_k = 0 for every match
+        T = np.cross(a[pairs[:, 0]], a[pairs[:, 1]])
+        norm = np.linalg.norm(T, axis=1)
+        keep = norm > 1e-12
+        if not keep.any():
+            continue
+        T = T[keep] / norm[keep, None]
+        r = _sampson(R, T, x0, x1)
+        cost = np.minimum(r, thr) ** 2
+        k = int(cost.sum(axis=1).argmin())
+        t = T[k]
+        inl = r[k] < thr
+        if inl.sum() >= 2:  # least squares on the inliers, then the sign by cheirality
+            t = np.linalg.svd(a[inl], full_matrices=False)[2][-1]
+        front_p, front_m = _in_front(R, t, h0, h1), _in_front(R, -t, h0, h1)
+        if (front_m & inl).sum() > (front_p & inl).sum():
+            t, front_p = -t, front_m
+        score = (int((front_p & inl).sum()), -float(cost[k].sum()))
+        if best is None or score > best[:2]:
+            best = (*score, R, t, inl & front_p)
+    return best
+
+
+def _refine_jointly(matches: PairMatches, cands: list, dirs: list,
+                    line_sigma_px: float) -> list:
+    """The points and the lines of the directions together, from each candidate ``(name, R,
+    t)``; all on one cost (every point, Cauchy-robust; the sign of t does not change it), so
+    the lowest is the pose that explains the points and the lines best. Returns ``[(cost,
+    name, R, t)]`` of the finite refinements."""
+    every = np.ones(matches.num_points, dtype=bool)
+    out = []
+    for name, Rs, ts in cands:
+        Rr, tr, c = refine_with_lines(matches, Rs, ts, dirs, every, line_sigma_px,
+                                      return_cost=True)
+        if np.isfinite(c) and np.isfinite(Rr).all() and np.isfinite(tr).all():
+            out.append((c, name, Rr, tr))
+    return out
+
+
 def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
                          line_threshold_px: float = 2.0, max_pairs: int = 500,
                          max_angle_error_deg: float = 3.0, max_refine_deg: float = 5.0,
@@ -280,28 +326,7 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
     if len(pairs) > max_pairs:
         rng = np.random.default_rng(seed)
         pairs = pairs[rng.choice(len(pairs), max_pairs, replace=False)]
-    best = None  # (in front, -cost, R, t, inliers)
-    for R in rotations:
-        a = np.cross(h1, h0 @ R.T)  # t . a_k = 0 for every match
-        T = np.cross(a[pairs[:, 0]], a[pairs[:, 1]])
-        norm = np.linalg.norm(T, axis=1)
-        keep = norm > 1e-12
-        if not keep.any():
-            continue
-        T = T[keep] / norm[keep, None]
-        r = _sampson(R, T, x0, x1)
-        cost = np.minimum(r, thr) ** 2
-        k = int(cost.sum(axis=1).argmin())
-        t = T[k]
-        inl = r[k] < thr
-        if inl.sum() >= 2:  # least squares on the inliers, then the sign by cheirality
-            t = np.linalg.svd(a[inl], full_matrices=False)[2][-1]
-        front_p, front_m = _in_front(R, t, h0, h1), _in_front(R, -t, h0, h1)
-        if (front_m & inl).sum() > (front_p & inl).sum():
-            t, front_p = -t, front_m
-        score = (int((front_p & inl).sum()), -float(cost[k].sum()))
-        if best is None or score > best[:2]:
-            best = (*score, R, t, inl & front_p)
+    best = _best_translation(rotations, pairs, h0, h1, x0, x1, thr)
     found = best is not None and best[0] >= 2
     if not found and not (given and line_sigma_px is not None):
         return _failed(n, "vp", (time.perf_counter() - start) * 1e3, **info,
@@ -310,19 +335,8 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
     R, t, inl = best[2:] if found else (None, None, None)
     refined = False
     if line_sigma_px is not None:
-        # the points and the lines of the directions together, from the vanishing-point
-        # hypothesis and from every given start; all on one cost (every point, Cauchy-robust;
-        # the sign of t does not change it), so the lowest one is the pose that explains the
-        # points and the lines best; the sign of t then by cheirality
-        every = np.ones(n, dtype=bool)
-        cands = [("vp", R, t)] if found else []
-        cands += [(i, *rt) for i, rt in enumerate(given)]
-        out = []
-        for name, Rs, ts in cands:
-            Rr, tr, c = refine_with_lines(matches, Rs, ts, dirs, every, line_sigma_px,
-                                          return_cost=True)
-            if np.isfinite(c) and np.isfinite(Rr).all() and np.isfinite(tr).all():
-                out.append((c, name, Rr, tr))
+        cands = ([("vp", R, t)] if found else []) + [(i, *rt) for i, rt in enumerate(given)]
+        out = _refine_jointly(matches, cands, dirs, line_sigma_px)
         if not out:
             return _failed(n, "vp", (time.perf_counter() - start) * 1e3, **info,
                            reason="the joint refinement gave no finite pose")
