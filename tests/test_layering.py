@@ -33,11 +33,10 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "strl_pyg"
 MAX_FUNCTION_LINES = 80
-#: Functions longer than the guide when it replaced the module cap, at that length: they are
-#: to be split at their natural seams; until then they may not grow.
-LONG_FUNCTIONS = {
-    "strl_pyg/training/loop.py::train": 181,
-}
+#: Functions allowed over the guide, at their length (they may shrink, not grow). The four
+#: over it when the guide replaced the module cap (train 183, gather_inputs 138,
+#: vanishing_point_pose 110, estimate 97) were split at their natural seams.
+LONG_FUNCTIONS: dict[str, int] = {}
 
 #: Floor of each folder of strl_pyg, lowest first. A folder imports only lower floors.
 FLOORS: dict[str, int] = {

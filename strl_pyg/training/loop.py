@@ -178,87 +178,30 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         A dict with the final validation metrics, the step reached, the validation history,
         the checkpoint path and the trained ``model`` (unwrapped from DDP).
     """
-    world_env = int(os.environ.get("WORLD_SIZE", "1"))
-    own_group = False
-    if world_env > 1 and not torch.distributed.is_initialized():
-        backend = "nccl" if cfg.device.startswith("cuda") else "gloo"
-        torch.distributed.init_process_group(backend)
-        own_group = True
-    rank, world = _dist_info()
-    device = cfg.device
-    if device.startswith("cuda") and world > 1:
-        device = f"cuda:{int(os.environ.get('LOCAL_RANK', 0))}"
-        torch.cuda.set_device(device)
+    rank, world, device, own_group = _distributed_setup(cfg)
     out_dir = Path(cfg.out_dir)
     ckpt_path = out_dir / "last.pt"
 
-    torch.manual_seed(cfg.seed)
-    np.random.seed(cfg.seed % 2**32)  # noqa: NPY002
-    random.seed(cfg.seed)
+    _seed_everything(cfg.seed)
     model_cfg = cfg.model_config()
     model = StrLPose(model_cfg).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     loss_fn, geo_fn = _losses(cfg, model_cfg)
-    start_step, history = 0, []
-    trivial_buf: list[Tensor] = []
+    start_step, history, trivial_buf = 0, [], []  # trivial_buf: training poses, mean pose
     if cfg.init_from and not resume:
         init_weights(model, cfg.init_from)
     if resume:
-        state = load_checkpoint(ckpt_path)
-        saved = TrainConfig.from_dict(state["train_config"])
-        # settings that do not change what is computed may differ (a moved run folder, more
-        # steps, other workers or checkpoint intervals)
-        free = dict.fromkeys(RESUME_FREE_FIELDS)
-        if {**asdict(saved), **free} != {**asdict(cfg), **free}:
-            diff = {k: (v, getattr(cfg, k)) for k, v in asdict(saved).items()
-                    if k not in free and getattr(cfg, k) != v}
-            raise ValueError(f"Expected the checkpoint's config to match this run "
-                             f"(got differences {{key: (checkpoint, now)}} = {diff})")
-        start_step = int(state["step"])
-        if cfg.steps < start_step:
-            raise ValueError(f"Expected --steps of at least the checkpoint's step {start_step} "
-                             f"to resume (got {cfg.steps})")
-        model.load_state_dict(state["model"])
-        optimizer.load_state_dict(model.upgrade_optimizer_state(state["optimizer"], state["model"]))
-        history = state.get("history", [])
-        trivial_buf = [state["trivial_T"]] if "trivial_T" in state else []
-        set_rng_state(state["rng"])
+        start_step, history, trivial_buf = _resume(cfg, ckpt_path, model, optimizer)
     elif rank == 0:
         check_run_folder(out_dir, overwrite)
 
-    ddp_model = model
-    if world > 1:
-        ddp_model = torch.nn.parallel.DistributedDataParallel(model)
+    ddp_model = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
 
-    if datasets is None:
-        datasets = build_datasets(cfg, progress=progress and rank == 0)
-    train_ds, val_ds = (_InMemory(d, cfg.in_memory) for d in datasets)
-    if len(val_ds) == 0:  # refused here, not at the first validation after training steps
-        raise ValueError("Expected a non-empty validation set (got 0 pairs): training "
-                         f"validates every {cfg.val_every} steps and at the end")
-    if len(train_ds):
-        check_graph_channels(model_cfg, cfg.patch_size, train_ds[0])
-    if model_cfg.inputs == "flow" and not resume and not cfg.init_from and len(train_ds):
-        fit_input_statistics(model, train_ds, cfg.swap_prob > 0)
-    collate = _collater(model_cfg)
-    data_seed = cfg.resolved_data_seed
-    sampler = StepBatchSampler(len(train_ds), cfg.batch_size, start_step, cfg.steps, data_seed,
-                               rank, world)
-    loader = DataLoader(_Resampled(train_ds, cfg.num_points, cfg.num_lines, data_seed,
-                                   cfg.swap_prob, cfg.outlier_augment),
-                        batch_sampler=sampler, collate_fn=collate, num_workers=cfg.num_workers)
-    val_keys = [(i, -1, i) for i in range(len(val_ds))]
-    val_loader = DataLoader(_Resampled(val_ds, cfg.num_points, cfg.num_lines, data_seed + 1),
-                            batch_size=cfg.batch_size, collate_fn=collate,
-                            sampler=val_keys, num_workers=cfg.num_workers)
+    train_ds, val_ds = _datasets(cfg, model, datasets, fit=not resume and not cfg.init_from,
+                                 progress=progress and rank == 0)
+    loader, val_loader = _loaders(cfg, model_cfg, train_ds, val_ds, start_step, rank, world)
 
-    if rank == 0:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    logger = TrainLogger(out_dir, rank == 0, cfg.tensorboard, start_step)
-    if rank == 0:
-        # what was used: "tensorboard" is false when it was asked for but is not installed
-        (out_dir / "config.json").write_text(
-            json.dumps({**asdict(cfg), "tensorboard": logger.tensorboard}, indent=2))
+    logger = _logger(cfg, out_dir, rank, start_step)
     result: dict[str, Any] = {"step": start_step, "checkpoint": str(ckpt_path)}
     step = start_step
     t_start, pairs_seen = time.perf_counter(), 0
@@ -266,18 +209,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     def save_last(metrics_done: bool) -> None:
         if rank != 0:
             return
-        trivial = torch.cat(trivial_buf)[:4096] if trivial_buf else None
-        save_checkpoint(ckpt_path, {
-            "version": CHECKPOINT_VERSION,
-            "train_config": asdict(cfg),
-            "model_config": model_cfg.to_dict(),
-            "model": model.state_dict(),
-            "optimizer": optimizer.state_dict(),
-            "step": step,
-            "rng": rng_state(),
-            "history": history,
-            **({"trivial_T": trivial} if trivial is not None else {}),
-        })
+        save_checkpoint(ckpt_path, _checkpoint_payload(cfg, model, optimizer, step, history,
+                                                       trivial_buf))
         if metrics_done:
             model.save(out_dir / "model.pt")  # the weights alone, for StrLPose.load
 
@@ -292,58 +225,27 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         T_gt = batch[keys_.T_0TO1]
         if sum(t.shape[0] for t in trivial_buf) < 4096:
             trivial_buf.append(unaugmented_poses(batch).cpu())
-        out = ddp_model(batch)
-        logs = loss_fn(out, T_gt)
-        if geo_fn is not None:
-            geo_fn.ess_weight = cfg.geo_ess_weight if step >= cfg.geo_ess_start else 0.0
-            geo_logs = geo_fn(out, T_gt)
-            logs = {**logs, **{f"geo_{k}" if not k.startswith("geo_") else k: v
-                               for k, v in geo_logs.items()}}
-            logs["loss"] = logs["loss"] + geo_logs["loss"]
-        optimizer.zero_grad(set_to_none=True)
-        logs["loss"].backward()
-        # the norm is logged so that a clip active on every step shows in the curves
-        grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(),
-                                                   cfg.grad_clip or float("inf"))
-        logs["grad_norm"] = grad_norm.detach()
-        logs["clipped"] = (grad_norm > cfg.grad_clip).float() if cfg.grad_clip else \
-            torch.zeros(())
-        optimizer.step()
+        logs = _train_step(cfg, ddp_model, model, optimizer, (loss_fn, geo_fn), batch, step)
         step += 1
         pairs_seen += T_gt.shape[0] * world
         bar.update(1)
-        bar.set_postfix(loss=f"{float(logs['loss'].detach()):.3f}",
-                        rot=f"{float(logs['rot_err_deg']):.2f}",
-                        trans=f"{float(logs['trans_err_deg']):.1f}")
+        bar.set_postfix({k: f"{float(logs[v].detach()):.3g}" for k, v in _SHOWN.items()})
         logger.log(step, "train", {k: float(v.detach()) for k, v in logs.items()})
         if step % cfg.val_every == 0 or step == cfg.steps:
             metrics = {}
             if rank == 0:
-                trivial = mean_pose(torch.cat(trivial_buf)[:4096], model_cfg.translation)
-                metrics = evaluate_model(model, val_loader, loss_fn, trivial, device)
-                metrics["pairs_per_s"] = pairs_seen / (time.perf_counter() - t_start)
+                metrics = {**evaluate_model(model, val_loader, loss_fn, mean_pose(
+                    torch.cat(trivial_buf)[:4096], model_cfg.translation), device),
+                    "pairs_per_s": pairs_seen / (time.perf_counter() - t_start)}
                 logger.log(step, "val", metrics)
                 history.append({"step": step, **metrics})
                 save_last(metrics_done=True)
                 last_save = time.monotonic()
-                bar.write(f"step {step}: val rot {metrics['rot_err_deg']:.2f} deg "
-                          f"(trivial {metrics['trivial_rot_err_deg']:.2f}), trans "
-                          f"{metrics['trans_err_deg']:.2f} deg "
-                          f"(trivial {metrics['trivial_trans_err_deg']:.2f}), "
-                          f"AUC@10 {metrics['auc10']:.3f}")
-                if "geo_rot_err_med" in metrics:
-                    bar.write(f"step {step}: geometric head median rot "
-                              f"{metrics['geo_rot_err_med']:.2f} deg, trans "
-                              f"{metrics['geo_trans_err_med']:.2f} deg, "
-                              f"AUC@10 {metrics['geo_auc10']:.3f}")
+                _write_validation(bar, step, metrics)
             if world > 1:
                 torch.distributed.barrier()
             result.update(metrics)
-        elif rank == 0 and (
-                (cfg.checkpoint_every and step % cfg.checkpoint_every == 0)
-                or (cfg.checkpoint_minutes
-                    and time.monotonic() - last_save >= 60.0 * cfg.checkpoint_minutes)
-                or stop.received):
+        elif rank == 0 and _checkpoint_due(cfg, step, last_save, stop):
             save_last(metrics_done=False)
             last_save = time.monotonic()
         if stop is not None and stop.received:
@@ -353,15 +255,177 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     if stop is not None:
         stop.restore()
     logger.close()
-    result["step"] = step
-    result["history"] = history
-    result["model"] = model
     if own_group:
         torch.distributed.destroy_process_group()
-    return result
+    return {**result, "step": step, "history": history, "model": model}
 
 
 # ----------------------------------------------------------------------------- command line
+#: What the progress bar shows: its label -> the log key.
+_SHOWN = {"loss": "loss", "rot": "rot_err_deg", "trans": "trans_err_deg"}
+
+
+def _seed_everything(seed: int) -> None:
+    torch.manual_seed(seed)
+    np.random.seed(seed % 2**32)  # noqa: NPY002
+    random.seed(seed)
+
+
+def _checkpoint_due(cfg: TrainConfig, step: int, last_save: float, stop: Any) -> bool:
+    """``last.pt`` is written every ``checkpoint_every`` steps, every ``checkpoint_minutes``
+    and when a signal arrived (besides every validation)."""
+    return bool((cfg.checkpoint_every and step % cfg.checkpoint_every == 0)
+                or (cfg.checkpoint_minutes
+                    and time.monotonic() - last_save >= 60.0 * cfg.checkpoint_minutes)
+                or (stop is not None and stop.received))
+
+
+def _distributed_setup(cfg: TrainConfig) -> tuple[int, int, str, bool]:
+    """Under ``torchrun`` (``WORLD_SIZE`` > 1) the process group (gloo on CPU, nccl on CUDA)
+    and this rank's device; ``(rank, world, device, whether the group is this run's own)``."""
+    own_group = False
+    if int(os.environ.get("WORLD_SIZE", "1")) > 1 and not torch.distributed.is_initialized():
+        backend = "nccl" if cfg.device.startswith("cuda") else "gloo"
+        torch.distributed.init_process_group(backend)
+        own_group = True
+    rank, world = _dist_info()
+    device = cfg.device
+    if device.startswith("cuda") and world > 1:
+        device = f"cuda:{int(os.environ.get('LOCAL_RANK', 0))}"
+        torch.cuda.set_device(device)
+    return rank, world, device, own_group
+
+
+def _resume(cfg: TrainConfig, ckpt_path: Path, model: StrLPose,
+            optimizer: torch.optim.Optimizer) -> tuple[int, list, list]:
+    """Loads ``last.pt`` into the model, the optimiser and the RNGs after checking that it was
+    written with this config (apart from :data:`RESUME_FREE_FIELDS`); returns ``(step,
+    history, mean-pose buffer)``."""
+    state = load_checkpoint(ckpt_path)
+    saved = TrainConfig.from_dict(state["train_config"])
+    # settings that do not change what is computed may differ (a moved run folder, more
+    # steps, other workers or checkpoint intervals)
+    free = dict.fromkeys(RESUME_FREE_FIELDS)
+    if {**asdict(saved), **free} != {**asdict(cfg), **free}:
+        diff = {k: (v, getattr(cfg, k)) for k, v in asdict(saved).items()
+                if k not in free and getattr(cfg, k) != v}
+        raise ValueError(f"Expected the checkpoint's config to match this run "
+                         f"(got differences {{key: (checkpoint, now)}} = {diff})")
+    start_step = int(state["step"])
+    if cfg.steps < start_step:
+        raise ValueError(f"Expected --steps of at least the checkpoint's step {start_step} "
+                         f"to resume (got {cfg.steps})")
+    model.load_state_dict(state["model"])
+    optimizer.load_state_dict(model.upgrade_optimizer_state(state["optimizer"], state["model"]))
+    trivial_buf = [state["trivial_T"]] if "trivial_T" in state else []
+    set_rng_state(state["rng"])
+    return start_step, state.get("history", []), trivial_buf
+
+
+def _loaders(cfg: TrainConfig, model_cfg: Any, train_ds: Any, val_ds: Any, start_step: int,
+             rank: int, world: int) -> tuple[DataLoader, DataLoader]:
+    """The training loader (resampled, swapped, from ``start_step`` on, this rank's share)
+    and the validation loader (the same resampling for every validation)."""
+    collate = _collater(model_cfg)
+    data_seed = cfg.resolved_data_seed
+    sampler = StepBatchSampler(len(train_ds), cfg.batch_size, start_step, cfg.steps, data_seed,
+                               rank, world)
+    loader = DataLoader(_Resampled(train_ds, cfg.num_points, cfg.num_lines, data_seed,
+                                   cfg.swap_prob, cfg.outlier_augment),
+                        batch_sampler=sampler, collate_fn=collate, num_workers=cfg.num_workers)
+    val_keys = [(i, -1, i) for i in range(len(val_ds))]
+    val_loader = DataLoader(_Resampled(val_ds, cfg.num_points, cfg.num_lines, data_seed + 1),
+                            batch_size=cfg.batch_size, collate_fn=collate,
+                            sampler=val_keys, num_workers=cfg.num_workers)
+    return loader, val_loader
+
+
+def _datasets(cfg: TrainConfig, model: StrLPose, datasets: Sequence[Any] | None, fit: bool,
+              progress: bool) -> tuple[Any, Any]:
+    """The training and validation sets (built unless given), checked against the model;
+    with ``fit``, the flow inputs' standardisation fitted on the training set."""
+    if datasets is None:
+        datasets = build_datasets(cfg, progress=progress)
+    train_ds, val_ds = (_InMemory(d, cfg.in_memory) for d in datasets)
+    if len(val_ds) == 0:  # refused here, not at the first validation after training steps
+        raise ValueError("Expected a non-empty validation set (got 0 pairs): training "
+                         f"validates every {cfg.val_every} steps and at the end")
+    if len(train_ds):
+        check_graph_channels(model.config, cfg.patch_size, train_ds[0])
+    if model.config.inputs == "flow" and fit and len(train_ds):
+        fit_input_statistics(model, train_ds, cfg.swap_prob > 0)
+    return train_ds, val_ds
+
+
+def _logger(cfg: TrainConfig, out_dir: Path, rank: int, start_step: int) -> TrainLogger:
+    """The run's logger (rank 0 writes) and its ``config.json``: what was used ("tensorboard"
+    is false when it was asked for but is not installed)."""
+    if rank == 0:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    logger = TrainLogger(out_dir, rank == 0, cfg.tensorboard, start_step)
+    if rank == 0:
+        (out_dir / "config.json").write_text(
+            json.dumps({**asdict(cfg), "tensorboard": logger.tensorboard}, indent=2))
+    return logger
+
+
+def _checkpoint_payload(cfg: TrainConfig, model: StrLPose, optimizer: torch.optim.Optimizer,
+                        step: int, history: list, trivial_buf: list) -> dict[str, Any]:
+    """What ``last.pt`` holds: configs, model, optimiser, step, RNG states, validation
+    history and up to 4096 training poses (the mean-pose baseline)."""
+    trivial = torch.cat(trivial_buf)[:4096] if trivial_buf else None
+    return {
+        "version": CHECKPOINT_VERSION,
+        "train_config": asdict(cfg),
+        "model_config": model.config.to_dict(),
+        "model": model.state_dict(),
+        "optimizer": optimizer.state_dict(),
+        "step": step,
+        "rng": rng_state(),
+        "history": history,
+        **({"trivial_T": trivial} if trivial is not None else {}),
+    }
+
+
+def _write_validation(bar: Any, step: int, metrics: dict[str, float]) -> None:
+    """The validation's line (and the geometric head's) under the progress bar."""
+    bar.write(f"step {step}: val rot {metrics['rot_err_deg']:.2f} deg "
+              f"(trivial {metrics['trivial_rot_err_deg']:.2f}), trans "
+              f"{metrics['trans_err_deg']:.2f} deg "
+              f"(trivial {metrics['trivial_trans_err_deg']:.2f}), "
+              f"AUC@10 {metrics['auc10']:.3f}")
+    if "geo_rot_err_med" in metrics:
+        bar.write(f"step {step}: geometric head median rot "
+                  f"{metrics['geo_rot_err_med']:.2f} deg, trans "
+                  f"{metrics['geo_trans_err_med']:.2f} deg, "
+                  f"AUC@10 {metrics['geo_auc10']:.3f}")
+
+
+def _train_step(cfg: TrainConfig, ddp_model: torch.nn.Module, model: StrLPose,
+                optimizer: torch.optim.Optimizer, losses: tuple, batch: Any,
+                step: int) -> dict[str, Tensor]:
+    """One optimiser step on ``batch``; the logs of its losses, the gradient norm and whether
+    the clip was active (logged, so that a clip active on every step shows in the curves)."""
+    loss_fn, geo_fn = losses
+    T_gt = batch[keys_.T_0TO1]
+    out = ddp_model(batch)
+    logs = loss_fn(out, T_gt)
+    if geo_fn is not None:
+        geo_fn.ess_weight = cfg.geo_ess_weight if step >= cfg.geo_ess_start else 0.0
+        geo_logs = geo_fn(out, T_gt)
+        logs = {**logs, **{f"geo_{k}" if not k.startswith("geo_") else k: v
+                           for k, v in geo_logs.items()}}
+        logs["loss"] = logs["loss"] + geo_logs["loss"]
+    optimizer.zero_grad(set_to_none=True)
+    logs["loss"].backward()
+    grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(),
+                                               cfg.grad_clip or float("inf"))
+    logs["grad_norm"] = grad_norm.detach()
+    logs["clipped"] = (grad_norm > cfg.grad_clip).float() if cfg.grad_clip else torch.zeros(())
+    optimizer.step()
+    return logs
+
+
 def _losses(cfg: TrainConfig, model_cfg: Any) -> tuple[PoseLoss, GeometricLoss | None]:
     """The run's pose loss and, with the geometric head, its loss."""
     pose = PoseLoss(translation=model_cfg.translation, form=cfg.loss,
