@@ -69,3 +69,21 @@ def test_a_classical_only_estimate_reads_the_calibration_without_building_the_ne
     assert est.pose.info["calibration_scale"] == full.pose.info["calibration_scale"]
     np.testing.assert_array_equal(est.pose.covariance, full.pose.covariance)
     assert est.pose.method == full.pose.method
+
+
+def test_one_name_per_regime_and_per_bound():
+    """POINT_POOR_MAX_POINTS and VP_CHECK_MAX_POINTS were one regime under two names; the
+    bootstrap minimum was written in three places."""
+    import argparse
+
+    from strl_pyg.cli.inputs import bootstrap_count
+    from strl_pyg.estimation.uncertainty import MIN_BOOTSTRAP
+    from strl_pyg.inference import estimator, methods
+
+    assert estimator.POINT_POOR_MAX_POINTS is methods.POINT_POOR_MAX_POINTS
+    assert not hasattr(methods, "VP_CHECK_MAX_POINTS")
+    assert bootstrap_count(str(MIN_BOOTSTRAP)) == MIN_BOOTSTRAP
+    with pytest.raises(argparse.ArgumentTypeError):
+        bootstrap_count(str(MIN_BOOTSTRAP - 1))
+    with pytest.raises(ValueError, match=f"integer >= {MIN_BOOTSTRAP}"):
+        estimator.PoseEstimator(bootstrap=MIN_BOOTSTRAP - 1)

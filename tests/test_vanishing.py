@@ -505,10 +505,10 @@ def test_vp_checked_keeps_a_classical_pose_that_fits_clearly_more_points():
 
 
 def test_vp_checked_is_the_classical_pose_where_points_are_many_or_lines_absent():
-    from strl_pyg.inference.methods import VP_CHECK_MAX_POINTS
+    from strl_pyg.inference.methods import POINT_POOR_MAX_POINTS
 
     base = _base()
-    m, _, _ = manhattan_pair(0, n_points=VP_CHECK_MAX_POINTS + 10, noise=0.3)
+    m, _, _ = manhattan_pair(0, n_points=POINT_POOR_MAX_POINTS + 10, noise=0.3)
     est = PoseEstimator(methods=(base, "vp_checked"), bootstrap=0).estimate(m)
     vc, cv = est.methods["vp_checked"], est.methods[base]
     assert vc.status == cv.status == "ok" and vc.info["source"] == base

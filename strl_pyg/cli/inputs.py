@@ -256,7 +256,9 @@ def non_negative_int(text: str) -> int:
 
 
 def bootstrap_count(text: str) -> int:
-    """argparse type of ``--bootstrap``: 0 (off) or an integer >= 3."""
+    """argparse type of ``--bootstrap``: 0 (off) or an integer >= 3 (``MIN_BOOTSTRAP`` of
+    :mod:`strl_pyg.estimation.uncertainty`, written out here so that parsing stays torch-free;
+    a test keeps the two equal)."""
     value = non_negative_int(text)
     if value in (1, 2):
         raise argparse.ArgumentTypeError(f"Expected 0 or an integer >= 3 (got {text!r})")

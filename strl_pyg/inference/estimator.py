@@ -50,7 +50,7 @@ from strl_pyg.estimation.classical import (
     MIN_POINTS,
     estimate_relative_pose,  # noqa: F401  (0.1.x name here)
 )
-from strl_pyg.estimation.uncertainty import MAX_SIGMA_DEG, cap_covariance
+from strl_pyg.estimation.uncertainty import MAX_SIGMA_DEG, MIN_BOOTSTRAP, cap_covariance
 from strl_pyg.inference.inputs import (
     FOCAL_RANGE,
     NORMALISED_K_MAX,  # noqa: F401  (importable from here like the module's other names)
@@ -65,7 +65,8 @@ from strl_pyg.inference.inputs import (
     prepare_matches,
     zero_parallax,
 )
-from strl_pyg.inference.methods import (
+from strl_pyg.inference.methods import (  # noqa: I001
+    POINT_POOR_MAX_POINTS,  # one regime, defined where vp_checked reads it (re-exported)
     MethodContext,
     MethodFn,
     _calibration,
@@ -103,7 +104,6 @@ RECOMMENDED_ORDER: tuple[str, ...] = ("poselib", "opencv", "regression")
 #: definition, not a fit): the recommended pose with ``vp`` first beats PoseLib beyond the
 #: paired-bootstrap noise, without it it does not (``benchmarks/results_vanishing.md``).
 POINT_POOR_ORDER: tuple[str, ...] = ("vp",)
-POINT_POOR_MAX_POINTS = 30
 
 
 # ----------------------------------------------------------------------------- registry
@@ -427,9 +427,9 @@ class PoseEstimator:
         if not threshold_px > 0:
             raise ValueError(f"Expected threshold_px > 0 (got {threshold_px!r})")
         if isinstance(bootstrap, bool) or not isinstance(bootstrap, int) or not (
-                bootstrap == 0 or bootstrap >= 3):
-            raise ValueError(f"Expected bootstrap = 0 (off) or an integer >= 3 (got "
-                             f"{bootstrap!r})")
+                bootstrap == 0 or bootstrap >= MIN_BOOTSTRAP):
+            raise ValueError(f"Expected bootstrap = 0 (off) or an integer >= {MIN_BOOTSTRAP} "
+                             f"(got {bootstrap!r})")
         self.method_names = names
         self.bootstrap = bootstrap
         self._model = model

@@ -179,9 +179,11 @@ def _vanishing_directions(matches: PairMatches, ctx: MethodContext) -> list:
     return ctx.cache["vanishing_directions"]
 
 
-#: Point matches at or below which ``vp_checked`` consults the lines (the point-poor regime of
-#: the evaluation set ``point_poor``); above it ``vp_checked`` is the classical pose.
-VP_CHECK_MAX_POINTS = 30
+#: The point-poor regime, one bound for everything that depends on it: at or below this many
+#: point matches the recommended order puts the line solver first (``POINT_POOR_ORDER``) and
+#: ``vp_checked`` consults the lines (above it, it is the classical pose). It is the definition
+#: of the evaluation set ``point_poor`` and its calibration split, not a fit.
+POINT_POOR_MAX_POINTS = 30
 #: How far (deg) the classical rotation may carry the strongest vanishing direction shared by
 #: both images' lines (``d1 = +-R d0``) from where the second image sees it before
 #: ``vp_checked`` turns to ``vp``'s pose; fitted with :data:`VP_CHECK_SUPPORT_SLACK` on a
@@ -208,7 +210,7 @@ def _result_of(name: str, matches: PairMatches, ctx: MethodContext) -> MethodRes
 
 def _vp_checked(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     """The classical pose, checked against the lines where the points are few: with at most
-    :data:`VP_CHECK_MAX_POINTS` point matches, when the classical rotation contradicts the
+    :data:`POINT_POOR_MAX_POINTS` point matches, when the classical rotation contradicts the
     strongest vanishing direction of the matched lines by more than :data:`VP_CHECK_ANGLE_DEG`
     and ``vp``'s pose (whose rotation comes from those directions) is supported by about as
     many point matches (:data:`VP_CHECK_SUPPORT_SLACK`), ``vp``'s pose; ``vp``'s also where the
@@ -233,8 +235,8 @@ def _vp_checked(matches: PairMatches, ctx: MethodContext) -> MethodResult:
                                   "calibration_scale": rec.info.get("calibration_scale")},
                             raw=rec.raw)
 
-    if matches.num_points > VP_CHECK_MAX_POINTS:
-        return take(cls, f"{matches.num_points} point matches (> {VP_CHECK_MAX_POINTS}): the "
+    if matches.num_points > POINT_POOR_MAX_POINTS:
+        return take(cls, f"{matches.num_points} point matches (> {POINT_POOR_MAX_POINTS}): the "
                          f"{base} pose as it is")
     if matches.num_lines == 0:
         return take(cls, "no line matches to check the pose against")
