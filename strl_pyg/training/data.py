@@ -135,15 +135,20 @@ def build_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
         keep = cfg.model_config().visual == "cnn"
         kinds = cfg.scene_kinds or [SceneConfig().kind]
 
+        # --matches frontend was ignored here (the generator's matches were used silently)
+        kw = dict(matches="frontend", cache_dir=cfg.cache_dir) if cfg.matches == "frontend" \
+            else {}
+
         def part(total: int, base: int) -> ConcatDataset:
             # kind j gets seeds base + j * 100_000 + i; sizes split as evenly as possible
             sizes = [total // len(kinds) + (j < total % len(kinds)) for j in range(len(kinds))]
-            return ConcatDataset([
-                D.SyntheticPairs(n, seed=base + j * 100_000,
-                                 scene_config=SceneConfig(**{**cfg.scene, "kind": kind}),
-                                 patch_size=cfg.patch_size, keep_images=keep)
-                for j, (kind, n) in enumerate(zip(kinds, sizes, strict=True)) if n > 0
-            ])
+            parts = [D.SyntheticPairs(n, seed=base + j * 100_000,
+                                      scene_config=SceneConfig(**{**cfg.scene, "kind": kind}),
+                                      patch_size=cfg.patch_size, keep_images=keep, **kw)
+                     for j, (kind, n) in enumerate(zip(kinds, sizes, strict=True)) if n > 0]
+            for ds in parts if kw else ():
+                ds.build_cache(num_workers=cfg.num_workers, progress=progress)
+            return ConcatDataset(parts)
 
         return part(cfg.train_pairs, cfg.resolved_data_seed * 10_000_000), part(
             cfg.val_pairs, 1_000_000 + cfg.resolved_data_seed * 10_000_000)
