@@ -233,3 +233,21 @@ def test_parallel_build_matches_serial_build(tmp_path):
     report = _build(par, 8, num_workers=2)  # spawned worker processes
     assert (report.computed, report.failed) == (7, 1)
     _assert_same(_snapshot(serial), _snapshot(par))
+
+
+def test_entries_of_the_format_before_dedupe_are_not_read(tmp_path, monkeypatch):
+    """Review finding: the front end started dropping repeated point matches without a new
+    fingerprint, so a cache built before served the repeats to the new code. Entries written
+    under format 1 live in another folder and are not read now."""
+    import strl_pyg.datasets.cache as cache_mod
+
+    fp = {"kind": "fake", "frontend": {"max_keypoints": 512}}
+    monkeypatch.setattr(cache_mod, "CACHE_FORMAT_VERSION", 1)
+    old = MatchCache(tmp_path, fp)
+    _build(old, 3)
+    assert old.status(_keys(3)[0]) == "done"
+    monkeypatch.undo()
+    assert cache_mod.CACHE_FORMAT_VERSION >= 2
+    new = MatchCache(tmp_path, fp)
+    assert new.dir != old.dir
+    assert [new.status(k) for k in _keys(3)] == ["missing"] * 3

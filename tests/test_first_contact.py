@@ -371,3 +371,115 @@ def test_no_progress_reaches_the_match_cache_bar(monkeypatch):
         except Exception:  # the patched cache builds nothing; what matters is what it was told
             pass
         assert seen and not any(seen), (mix, seen)
+
+
+# ----------------------------------------------------------------------------- rows (review)
+def test_the_fundamental_inlier_mask_follows_the_input_rows(pair):
+    """Before: with repeated matches the mask had one entry per distinct match, not per input
+    row as every other mask of the record."""
+    m = pair.matches
+    twice = PairMatches(np.tile(m.points0, (2, 1)), np.tile(m.points1, (2, 1)),
+                        image_size0=m.image_size0, image_size1=m.image_size1)
+    est = PoseEstimator(methods="poselib").estimate(twice)
+    mask = est.pose.info["fundamental_inlier_mask"]
+    assert mask.shape == (2 * m.num_points,) and mask.dtype == bool
+    np.testing.assert_array_equal(mask[:m.num_points], mask[m.num_points:])
+    assert est.pose.info["fundamental_inliers"] == int(mask[:m.num_points].sum())
+
+
+def test_inliers_of_matches_index_the_matches_the_methods_ran_on(pair):
+    m = pair.matches
+    idx = np.r_[np.arange(m.num_points), np.arange(10)]
+    est = PoseEstimator(methods="poselib").estimate(_pm(pair, m.points0[idx], m.points1[idx]))
+    assert est.status == "ok" and est.matches.num_points == m.num_points
+    np.testing.assert_array_equal(est.point_rows, np.r_[np.arange(m.num_points),
+                                                        np.arange(10)])
+    on_matches = est.inliers_of_matches()
+    assert on_matches.shape == (m.num_points,)
+    np.testing.assert_array_equal(on_matches[est.point_rows], est.pose.inliers)
+
+
+def test_select_keeps_the_front_ends_inlier_rows_in_step(pair):
+    """Before: select() copied info['fundamental_inliers'] unchanged, so add_lines read other
+    rows (or past the end) as the fundamental matrix's inliers."""
+    m = pair.matches
+    pm = replace(_pm(pair, m.points0[:6], m.points1[:6]),
+                 info={"fundamental_inliers": [0, 2, 3, 5]})
+    assert pm.select([5, 1, 2]).info["fundamental_inliers"] == [0, 2]
+    assert pm.select([3, 3]).info["fundamental_inliers"] == [0, 1]
+    assert pm.select(line_index=[]).info["fundamental_inliers"] == [0, 2, 3, 5]
+    stale = replace(pm, info={"fundamental_inliers": [0, 9]})
+    assert "fundamental_inliers" not in stale.select([0, 1]).info
+
+
+def test_add_lines_refuses_inlier_rows_past_the_points(pair):
+    from strl_pyg.frontend.pipeline import add_lines
+
+    m = pair.matches
+    pm = _pm(pair, m.points0[:6], m.points1[:6], image0=pair.image0, image1=pair.image1,
+             info={"fundamental": None, "fundamental_inliers": [0, 9]})
+    with pytest.raises(ValueError, match=r"rows of the 6 point matches \(got indices 0\.\.9\)"):
+        add_lines(pm)
+
+
+def test_the_point_poor_regime_counts_distinct_matches(pair, monkeypatch):
+    """Before: the recommended order read num_points (rows, one-to-many included) while the
+    methods' minimum counts read the distinct ones."""
+    import strl_pyg.inference.estimator as est_mod
+
+    m = pair.matches
+    # 25 distinct correspondences, then 15 rows reusing keypoints of image 1 (one-to-many)
+    p0 = np.r_[m.points0[:25], m.points0[25:40]]
+    p1 = np.r_[m.points1[:25], m.points1[:15]]
+    pm = _pm(pair, p0, p1)
+    assert pm.num_points == 40 and pm.num_distinct_points == 25
+    seen = []
+    real = est_mod.recommended_order
+    monkeypatch.setattr(est_mod, "recommended_order",
+                        lambda model, n=None: seen.append(n) or real(model, n))
+    PoseEstimator(methods="poselib").estimate(pm)
+    assert seen == [25]
+
+
+def test_check_support_leaves_a_regression_record_as_it_is_by_default(pair):
+    """Before: check_support's default checked=True failed the regression's record, which the
+    estimator never checks."""
+    from strl_pyg.inference.record import MethodResult
+    from strl_pyg.inference.support import check_support
+
+    m = pair.matches
+    wrong = np.eye(4)
+    wrong[:3, 3] = [0.0, 1.0, 0.0]
+    reg = check_support(MethodResult("regression", "ok", wrong), m)
+    assert reg.status == "ok" and "support_inliers" not in reg.info
+    assert check_support(MethodResult("regression", "ok", wrong), m, checked=True).status \
+        == "failed"
+    assert check_support(MethodResult("poselib", "ok", wrong), m).status == "failed"
+
+
+def test_complete_edges_of_unsorted_graph_ids_join_only_one_graphs_nodes():
+    """Before: complete_edge_index assumed sorted ids, so AttentionConv's attention weights
+    on a user's unsorted batch came with edges between graphs."""
+    bs, bd = torch.tensor([1, 0, 1, 0, 2, 1]), torch.tensor([2, 0, 1, 1, 0])
+    ei = _complete(bs, bd)
+    want = {(j, i) for j in range(6) for i in range(5) if bs[j] == bd[i]}
+    assert {tuple(e) for e in ei.t().tolist()} == want and ei.shape[1] == len(want)
+    torch.manual_seed(0)
+    conv = AttentionConv(8, heads=2)
+    xs, xd = torch.randn(6, 8), torch.randn(5, 8)
+    dense = conv((xs, xd), complete=True, batch=(bs, bd))
+    out, (ei2, alpha) = conv((xs, xd), complete=True, batch=(bs, bd),
+                             return_attention_weights=True)
+    torch.testing.assert_close(out, dense, atol=1e-5, rtol=1e-5)
+    assert {tuple(e) for e in ei2.t().tolist()} == want
+    torch.testing.assert_close(torch.zeros(5, 2).index_add_(0, ei2[1], alpha),
+                               torch.ones(5, 2))
+
+
+def test_shipped_metadata_is_read_with_the_checkpoint_checks(tmp_path, monkeypatch):
+    from strl_pyg.model import StrLPose
+
+    assert StrLPose.pretrained_metadata() == StrLPose.from_pretrained().metadata
+    monkeypatch.setitem(StrLPose.PRETRAINED, "geometric", ("missing.pt", {}))
+    with pytest.raises(FileNotFoundError, match="Expected the shipped checkpoint 'missing.pt'"):
+        StrLPose.pretrained_metadata()

@@ -297,7 +297,9 @@ class PairMatches:
         return f"PairMatches({', '.join(parts)})"
 
     def select(self, point_index: Any = None, line_index: Any = None) -> PairMatches:
-        """Returns a copy keeping the points and lines at the given indices (repeats allowed)."""
+        """Returns a copy keeping the points and lines at the given indices (repeats allowed).
+        Point row indices stored in ``info`` (the front end's ``"fundamental_inliers"``) are
+        re-indexed to the kept rows."""
         pi = slice(None) if point_index is None else np.asarray(point_index, dtype=np.int64)
         li = slice(None) if line_index is None else np.asarray(line_index, dtype=np.int64)
         kwargs = {f.name: getattr(self, f.name) for f in fields(self)}
@@ -308,7 +310,7 @@ class PairMatches:
             lines1=self.lines1[li],
             point_scores=None if self.point_scores is None else self.point_scores[pi],
             line_scores=None if self.line_scores is None else self.line_scores[li],
-            info=dict(self.info),
+            info=_reindexed_info(self.info, pi, self.num_points),
         )
         return PairMatches(**kwargs)
 
@@ -404,10 +406,34 @@ class PairMatches:
         return cls(**kwargs, info=info)
 
 
+#: ``info`` entries that hold point row indices (re-indexed by :meth:`PairMatches.select`).
+_POINT_ROW_KEYS = ("fundamental_inliers",)
+
+
+def _reindexed_info(info: dict, point_index: Any, num_points: int) -> dict:
+    """A copy of ``info`` whose point row lists follow ``select(point_index)``; a list that
+    does not index the ``num_points`` rows is dropped rather than carried over wrong."""
+    out = dict(info)
+    if isinstance(point_index, slice):
+        return out
+    for key in _POINT_ROW_KEYS:
+        if key not in out:
+            continue
+        rows = np.asarray(out[key], dtype=np.int64).reshape(-1)
+        if rows.size and (rows.min() < 0 or rows.max() >= num_points):
+            del out[key]
+            continue
+        kept = np.zeros(num_points, dtype=bool)
+        kept[rows] = True
+        out[key] = np.flatnonzero(kept[point_index]).tolist()
+    return out
+
+
 def first_unique_rows(rows: np.ndarray, tol: float = DUPLICATE_TOLERANCE_PX,
                       return_inverse: bool = False):
     """Sorted indices of the first occurrence of each distinct row of ``rows`` ``[N, ...]``
-    (rows equal within ``tol`` in every value are one); with ``return_inverse``, also for
+    (rows are one when every value rounds to the same multiple of ``tol``: equal on a grid of
+    step ``tol``, so two values closer than ``tol`` across a cell boundary stay apart); with ``return_inverse``, also for
     every row the position of its distinct row among those indices."""
     if len(rows) == 0:
         empty = np.zeros(0, dtype=np.int64)

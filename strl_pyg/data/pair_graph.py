@@ -95,8 +95,8 @@ def complete_edge_index(
 ) -> Tensor:
     """All ``(j, i)`` pairs whose source ``j`` and target ``i`` belong to the same graph.
 
-    Both batch vectors must be sorted (as PyG's collation makes them). Self-loops are included
-    when source and target are the same node set.
+    The graph ids need not be sorted (PyG's collation sorts them; a user's ``batch`` may
+    not). Self-loops are included when source and target are the same node set.
 
     Args:
         batch_src: Graph id of each source node ``[N_src]``.
@@ -124,7 +124,9 @@ def complete_edge_index(
     per_dst = count_src[batch_dst]  # sources of each target node
     dst = torch.repeat_interleave(torch.arange(batch_dst.numel(), device=dev), per_dst)
     start = torch.repeat_interleave(per_dst.cumsum(0) - per_dst, per_dst)
-    src = ptr_src[batch_dst][dst] + torch.arange(dst.numel(), device=dev) - start
+    rank = ptr_src[batch_dst][dst] + torch.arange(dst.numel(), device=dev) - start
+    # rank: the source's position among the sources sorted by graph; the identity when sorted
+    src = torch.argsort(batch_src, stable=True)[rank]
     return torch.stack([src, dst])
 
 

@@ -40,7 +40,9 @@ __all__ = [
 ]
 
 #: Bumped when the meaning of cache entries changes; part of every fingerprint.
-CACHE_FORMAT_VERSION = 1
+#: 2 (0.4.0): the front end drops repeated point matches (one SIFT keypoint matched once per
+#: orientation); entries of version 1 may hold them and are not read.
+CACHE_FORMAT_VERSION = 2
 
 #: Temporary files older than this (seconds) are leftovers of killed builds and are removed.
 _STALE_TMP_S = 3600.0

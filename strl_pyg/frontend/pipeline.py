@@ -161,7 +161,11 @@ def add_lines(matches: PairMatches, config: FrontendConfig | None = None) -> Pai
         raise ValueError(f"Expected the points' detector {info['config']['detector']!r} "
                          f"(got {cfg.detector!r})")
     F = None if info["fundamental"] is None else np.asarray(info["fundamental"])
-    inl = np.asarray(info["fundamental_inliers"], dtype=np.int64)
+    inl = np.asarray(info["fundamental_inliers"], dtype=np.int64).reshape(-1)
+    if inl.size and (inl.min() < 0 or inl.max() >= matches.num_points):
+        raise ValueError(f"Expected info['fundamental_inliers'] as rows of the "
+                         f"{matches.num_points} point matches (got indices "
+                         f"{inl.min()}..{inl.max()}): matches edited after match_images?")
     timings = dict(info.get("timings_ms", {}))
     t0 = time.perf_counter()
     l0, l1, l_scores, seg0, seg1, status = _lines(

@@ -257,9 +257,10 @@ NO_INTRINSICS = ("no metric pose without intrinsics K0, K1 (the network's pose f
 
 
 def _attach_fundamental(estimate: PoseEstimate, matches: PairMatches, threshold_px: float,
-                        seed: int) -> None:
-    """The route without intrinsics: the fundamental matrix of the point matches (OpenCV
-    MAGSAC, pixels) in the recommended record's ``info``, with its inlier mask."""
+                        seed: int, rows: np.ndarray) -> None:
+    """The route without intrinsics: the fundamental matrix of the (checked) point matches
+    (OpenCV MAGSAC, pixels) in the recommended record's ``info``, with the number of distinct
+    inliers and the inlier mask over the input's rows (``rows``: the checked row of each)."""
     from strl_pyg.estimation.classical import fundamental_matrix
 
     found = fundamental_matrix(matches, threshold_px, seed)
@@ -267,7 +268,7 @@ def _attach_fundamental(estimate: PoseEstimate, matches: PairMatches, threshold_
     info["fundamental_matrix"] = None if found is None else found[0]
     if found is not None:
         info["fundamental_inliers"] = int(found[1].sum())
-        info["fundamental_inlier_mask"] = found[1]
+        info["fundamental_inlier_mask"] = np.asarray(found[1], dtype=bool)[rows]
     estimate.pose.info = info
 
 
@@ -323,17 +324,11 @@ def _shipped_metadata() -> Any:
     """The default shipped checkpoint's metadata, as an object with ``metadata`` (what the
     calibration and order helpers read), read once per process without building the model."""
     if not _SHIPPED_METADATA:
-        from importlib.resources import as_file, files
         from types import SimpleNamespace
 
         from strl_pyg.model.strl_pose import StrLPose
-        from strl_pyg.utils.io import safe_torch_load
 
-        file, fallback = StrLPose.PRETRAINED["geometric"]
-        with as_file(files("strl_pyg") / "weights" / file) as path:
-            payload = safe_torch_load(path, "StrLPose checkpoint", "cpu")
-        md = payload.get("metadata") if isinstance(payload, dict) else None
-        _SHIPPED_METADATA.append(SimpleNamespace(metadata=dict(md or fallback)))
+        _SHIPPED_METADATA.append(SimpleNamespace(metadata=StrLPose.pretrained_metadata()))
     return _SHIPPED_METADATA[0]
 
 
@@ -487,8 +482,9 @@ class PoseEstimator:
             ctx.results[name] = self._calibrated(name, res, model)
         _pair_rules(ctx.results, matches, rows)
         estimate = self._recommend(ctx.results, warnings, matches)
+        estimate.point_rows = rows
         if not matches.has_intrinsics:
-            _attach_fundamental(estimate, matches, self.threshold_px, self.seed)
+            _attach_fundamental(estimate, matches, self.threshold_px, self.seed, rows)
         return estimate
 
     def _run(self, name: str, matches: PairMatches, ctx: MethodContext,
@@ -595,7 +591,7 @@ class PoseEstimator:
         else ``"degenerate"`` or ``"failed"``.
         The pose's warnings say why the earlier methods were passed over and which methods
         could not run at all (an exception: e.g. the network on a device it cannot use)."""
-        chosen = recommended_order(self._metadata_source(), matches.num_points)
+        chosen = recommended_order(self._metadata_source(), matches.num_distinct_points)
         order = [m for m in chosen if m in results]
         notes = [POSELIB_MISSING] if _measured_with_missing_poselib(
             self._metadata_source()) else []

@@ -235,9 +235,9 @@ def _vp_checked(matches: PairMatches, ctx: MethodContext) -> MethodResult:
                                   "calibration_scale": rec.info.get("calibration_scale")},
                             raw=rec.raw)
 
-    if matches.num_points > POINT_POOR_MAX_POINTS:
-        return take(cls, f"{matches.num_points} point matches (> {POINT_POOR_MAX_POINTS}): the "
-                         f"{base} pose as it is")
+    if matches.num_distinct_points > POINT_POOR_MAX_POINTS:
+        return take(cls, f"{matches.num_distinct_points} distinct point matches (> "
+                    f"{POINT_POOR_MAX_POINTS}): the {base} pose as it is")
     if matches.num_lines == 0:
         return take(cls, "no line matches to check the pose against")
     vp = _result_of("vp", matches, ctx)

@@ -115,7 +115,7 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
         lines, degenerate = match(methods_needed(order[:1]))
         if degenerate is not None:
             return degenerate
-        order = installed(recommended_order(model, matches[lines].num_points))
+        order = installed(recommended_order(model, matches[lines].num_distinct_points))
     for name in order:
         run = methods_needed((*run, name))
         lines, degenerate = match(run)

@@ -126,7 +126,25 @@ class PoseEstimate:
     methods: dict[str, MethodResult]
     num_points: int
     num_lines: int
+    #: The matches the methods ran on: the input's with each repeated match once
+    #: (:meth:`PairMatches.deduplicated`); :attr:`point_rows` maps the input's rows to them.
     matches: PairMatches | None = field(default=None, repr=False)
+    #: For every input point row, its row in :attr:`matches` (``None`` when unknown).
+    point_rows: np.ndarray | None = field(default=None, repr=False)
+
+    def inliers_of_matches(self, record: MethodResult | None = None) -> np.ndarray | None:
+        """The inlier mask of ``record`` (default: the recommended pose), whose
+        :attr:`MethodResult.inliers` follow the input's rows, over the rows of
+        :attr:`matches` instead: what ``draw_matches(est.matches, point_inliers=...)``
+        takes. ``None`` without a mask."""
+        rec = self.pose if record is None else record
+        if rec.inliers is None or self.matches is None:
+            return None
+        if self.point_rows is None:
+            return np.asarray(rec.inliers, dtype=bool)
+        out = np.zeros(self.matches.num_points, dtype=bool)
+        out[self.point_rows] = rec.inliers
+        return out
 
     @property
     def status(self) -> str:

@@ -37,15 +37,22 @@ CHEIRALITY_MIN = 0.9
 def check_support(res: MethodResult, matches: PairMatches, threshold_px: float = 1.0,
                   min_inlier_ratio: float = MIN_INLIER_RATIO,
                   min_inliers: int = MIN_SUPPORT_INLIERS,
-                  min_in_front: float = CHEIRALITY_MIN, checked: bool = True) -> MethodResult:
+                  min_in_front: float = CHEIRALITY_MIN,
+                  checked: bool | None = None) -> MethodResult:
     """``res`` as ``"failed"`` when the point matches within :data:`SUPPORT_BAND` x
     ``threshold_px`` of its pose (Sampson distance, every solver counted alike: OpenCV's
     own count is ``recoverPose``'s cheirality mask, which drops distant points) and in
     front of both cameras are fewer than ``min(min_inliers, n)`` or ``min_inlier_ratio``
     of the ``n`` point matches; as ``"unreliable"`` when fewer than
     ``min_in_front`` of the matches within the band lie in front of both cameras. With
-    ``checked=False`` (a method whose ``MethodSpec.support_checked`` is false: the
-    regression) ``res`` is returned unchanged."""
+    ``checked=False`` ``res`` is returned unchanged; the default (``None``) is the method's
+    own ``MethodSpec.support_checked`` (false for the regression; true for a method the
+    registry does not know)."""
+    if checked is None:
+        from strl_pyg.inference.estimator import METHODS  # the registry imports this module
+
+        spec = METHODS.get(res.method)
+        checked = spec is None or spec.support_checked
     n = matches.num_points
     if (res.status != "ok" or not checked or res.T_0to1 is None
             or n <= 0 or not matches.has_intrinsics):

@@ -114,11 +114,8 @@ class CheckpointIO:
         return path
 
     @classmethod
-    def load(cls, path: str | os.PathLike, map_location: Any = "cpu") -> Any:
-        """Rebuilds a model saved with :meth:`save`; raises ``ValueError`` on a corrupt,
-        foreign or mismatched checkpoint. Checkpoints of the version-1 module layout load
-        unchanged (:func:`upgrade_key`, applied by every ``load_state_dict`` of the model)."""
-        path = Path(path)
+    def _read_payload(cls, path: Path, map_location: Any = "cpu") -> dict[str, Any]:
+        """The checked contents of a checkpoint file (format and version)."""
         # weights_only=True: a file that would run code is refused (io.UnsafeFileError)
         payload = safe_torch_load(path, "StrLPose checkpoint", map_location)
         if not isinstance(payload, dict) or payload.get("format") != cls._FORMAT:
@@ -127,6 +124,15 @@ class CheckpointIO:
         if payload.get("version") not in cls._READABLE_VERSIONS:
             raise ValueError(f"Expected checkpoint version in {cls._READABLE_VERSIONS} "
                              f"(got {payload.get('version')!r})")
+        return payload
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, map_location: Any = "cpu") -> Any:
+        """Rebuilds a model saved with :meth:`save`; raises ``ValueError`` on a corrupt,
+        foreign or mismatched checkpoint. Checkpoints of the version-1 module layout load
+        unchanged (:func:`upgrade_key`, applied by every ``load_state_dict`` of the model)."""
+        path = Path(path)
+        payload = cls._read_payload(path, map_location)
         model = cls(StrLPoseConfig.from_dict(payload["config"]))
         try:
             model.load_state_dict(payload["state_dict"], strict=True)
@@ -189,11 +195,32 @@ class CheckpointIO:
 
         file, fallback = cls.PRETRAINED[name]
         with as_file(files("strl_pyg") / "weights" / file) as path:
-            if not Path(path).is_file():
-                raise FileNotFoundError(f"Expected the shipped checkpoint '{file}' in the "
-                                        f"strl_pyg package at {path} (got none)")
+            cls._check_shipped(path, file)
             model = cls.load(path, map_location)
         if "_metadata" not in model.__dict__:
             model.metadata = fallback
         return model.eval()
+
+    @staticmethod
+    def _check_shipped(path: Any, file: str) -> None:
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"Expected the shipped checkpoint '{file}' in the "
+                                    f"strl_pyg package at {path} (got none)")
+
+    @classmethod
+    def pretrained_metadata(cls, name: str = "geometric") -> dict[str, Any]:
+        """The training metadata of a shipped checkpoint (calibration, recommended order, ...),
+        checked as :meth:`from_pretrained` checks the file, without building the network."""
+        if name not in cls.PRETRAINED:
+            raise ValueError(f"Expected a pretrained name in {tuple(cls.PRETRAINED)} "
+                             f"(got {name!r})")
+        from importlib.resources import as_file, files
+
+        file, fallback = cls.PRETRAINED[name]
+        with as_file(files("strl_pyg") / "weights" / file) as path:
+            cls._check_shipped(path, file)
+            payload = cls._read_payload(Path(path))
+        config = StrLPoseConfig.from_dict(payload["config"])
+        md = payload.get("metadata")
+        return cls._check_metadata(fallback if md is None else md, config)
 
