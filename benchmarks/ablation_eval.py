@@ -130,7 +130,7 @@ def model_errors(model: Any, sets: dict[str, list]) -> dict[str, list]:
     """The regression head on every pair (``None`` where the pair has no matches)."""
     import torch
 
-    from strl_pyg.inference.inputs import forward_pose, prepare_graph
+    from strl_pyg.inference.network import forward_pose, prepare_graph
 
     out = {}
     with torch.inference_mode():

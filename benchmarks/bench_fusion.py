@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import banner  # noqa: E402
 
 from strl_pyg.estimation.classical import estimate_relative_pose  # noqa: E402
-from strl_pyg.estimation.fusion import (  # noqa: E402
+from strl_pyg.estimation.pose_fusion import (  # noqa: E402
     classical_covariance,
     fuse_poses,
     pose_to_tangent,

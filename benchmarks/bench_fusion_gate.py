@@ -67,7 +67,7 @@ def _sets(cache: Path, calib_pairs: int, per_set: int = 30) -> dict:
 
 def _raw(model, sets: dict) -> dict:
     from strl_pyg.estimation.classical import estimate_relative_pose
-    from strl_pyg.inference.inputs import forward_pose, prepare_graph
+    from strl_pyg.inference.network import forward_pose, prepare_graph
 
     out = {}
     for name, pairs in sets.items():
@@ -84,7 +84,7 @@ def _raw(model, sets: dict) -> dict:
 
 def _variant(raw: dict, scale: float, inflation: float, tau: float | None) -> dict:
     from strl_pyg.estimation.classical import normalised_matches
-    from strl_pyg.estimation.fusion import fuse_poses
+    from strl_pyg.estimation.pose_fusion import fuse_poses
     from strl_pyg.estimation.guided import msac_cost
 
     res = {}

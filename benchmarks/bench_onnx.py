@@ -2,7 +2,7 @@
 
     python benchmarks/bench_onnx.py --out benchmarks/results_onnx.md
 
-On generated pairs through :func:`~strl_pyg.inference.inputs.prepare_graph` at the shipped
+On generated pairs through :func:`~strl_pyg.inference.network.prepare_graph` at the shipped
 model's resampled size (768 nodes), one thread each:
 
 - ``PyTorch forward_pose``: the package's batch-1 forward (a shallow copy of the graph,
@@ -40,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     from common import banner
 
     from strl_pyg.inference.export import INPUT_NAMES, DensePoseModule, export_onnx, onnx_inputs
-    from strl_pyg.inference.inputs import forward_pose, prepare_graph
+    from strl_pyg.inference.network import forward_pose, prepare_graph
     from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.synthetic import generate_pair
 

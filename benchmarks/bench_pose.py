@@ -217,7 +217,7 @@ def demon_pairs(cache: Path, config=None):
 def tangent_error(T_est: np.ndarray, T_gt: np.ndarray) -> np.ndarray:
     """5-dof error (rotation vector, translation direction on the sphere) of ``T_est`` in the
     chart of :mod:`strl_pyg.fusion` around the estimate."""
-    from strl_pyg.estimation.fusion import pose_to_tangent
+    from strl_pyg.estimation.pose_fusion import pose_to_tangent
     from strl_pyg.geometry import Pose, tangent_basis
 
     est = Pose.from_matrix(torch.as_tensor(T_est, dtype=torch.float64))
@@ -395,7 +395,7 @@ def fit_fusion_inflation(estimator, pairs, s_reg: float) -> tuple[float, dict]:
     on the bootstrap covariance, so the pairs are solved once without it.
     Returns ``(k, {k: [rot ratio, low, high, trans ratio, low, high]})``."""
     from strl_pyg.estimation.classical import have_poselib
-    from strl_pyg.estimation.fusion import fuse_poses
+    from strl_pyg.estimation.pose_fusion import fuse_poses
 
     classical = ("poselib", "opencv") if have_poselib() else ("opencv",)
     model = estimator.model

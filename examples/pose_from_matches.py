@@ -58,7 +58,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def _read_file_matches(args, ap):
     """The matches of ``--npz`` with the sizes, images and K of the flags."""
-    from strl_pyg.cli.inputs import read_image_file, read_intrinsics
+    from strl_pyg.cli.readers import read_image_file, read_intrinsics
     from strl_pyg.data import load_external_matches
 
     if (args.image0 is None) != (args.image1 is None):

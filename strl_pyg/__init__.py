@@ -29,7 +29,7 @@ __all__ = [
 
 __getattr__, __dir__ = lazy_exports(__name__, {
     "PairMatches": "strl_pyg.data.matches",
-    "build_pair_graph": "strl_pyg.data.graph",
+    "build_pair_graph": "strl_pyg.data.build",
     "Pose": "strl_pyg.geometry",
     "StrLPose": "strl_pyg.model",
     "StrLPoseConfig": "strl_pyg.model",
@@ -38,7 +38,7 @@ __getattr__, __dir__ = lazy_exports(__name__, {
 }, globals())
 
 if TYPE_CHECKING:  # for type checkers and IDEs; never executed
-    from strl_pyg.data.graph import build_pair_graph
+    from strl_pyg.data.build import build_pair_graph
     from strl_pyg.data.matches import PairMatches
     from strl_pyg.geometry import Pose
     from strl_pyg.model.strl_pose import ABLATIONS, PoseOutput, StrLPose, StrLPoseConfig

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from strl_pyg.datasets import synthetic as synthetic_ds
-from strl_pyg.inference.inputs import network_pose
+from strl_pyg.inference.network import network_pose
 from strl_pyg.model import ABLATIONS
 from strl_pyg.synthetic import generate_pair
 from strl_pyg.synthetic.distributions import scene_distribution

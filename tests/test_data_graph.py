@@ -15,7 +15,7 @@ from strl_pyg.data import (
     save_graph,
 )
 from strl_pyg.data import keys as K
-from strl_pyg.data.graph import normalize_coords, sample_patches
+from strl_pyg.data.build import normalize_coords, sample_patches
 
 H, W = 48, 64
 

@@ -9,7 +9,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from strl_pyg.data.graph import sample_patches
+from strl_pyg.data.build import sample_patches
 from strl_pyg.data.sampling import sample_bilinear
 from strl_pyg.nn import sample_at_pixels
 

@@ -14,7 +14,7 @@ from strl_pyg.inference.export import (
     export_onnx,
     onnx_inputs,
 )
-from strl_pyg.inference.inputs import forward_pose, prepare_graph
+from strl_pyg.inference.network import forward_pose, prepare_graph
 from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.synthetic import generate_pair
 

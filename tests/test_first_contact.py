@@ -12,7 +12,7 @@ from torch_geometric.data import HeteroData
 
 from strl_pyg import PairMatches
 from strl_pyg.cli import main as cli_main
-from strl_pyg.cli.inputs import UsageError, read_intrinsics
+from strl_pyg.cli.readers import UsageError, read_intrinsics
 from strl_pyg.data import materialize_complete_edges
 from strl_pyg.data.external import load_external_matches
 from strl_pyg.estimation.uncertainty import MAX_SIGMA_DEG, cap_covariance
@@ -205,7 +205,7 @@ def test_attention_conv_edge_features():
 
 def test_onnx_inputs_of_a_pair_without_lines_fail_before_the_runtime(pair):
     from strl_pyg.inference.export import onnx_inputs
-    from strl_pyg.inference.inputs import prepare_graph
+    from strl_pyg.inference.network import prepare_graph
     from strl_pyg.model import StrLPose
 
     model = StrLPose.from_pretrained()

@@ -1,4 +1,4 @@
-"""Tests of strl_pyg.estimation.fusion on generated pairs with known poses."""
+"""Tests of strl_pyg.estimation.pose_fusion on generated pairs with known poses."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from strl_pyg.estimation.classical import BaselineResult, estimate_relative_pose
-from strl_pyg.estimation.fusion import (
+from strl_pyg.estimation.pose_fusion import (
     GATE_CHI2,
     MIN_INLIERS,
     FusedPose,
@@ -242,7 +242,7 @@ def test_estimator_fusion_uses_the_checkpoints_inflation():
     regression's calibrated variance in the fused record; absent, it is 1."""
     import copy
 
-    from strl_pyg.estimation.fusion import fuse_poses
+    from strl_pyg.estimation.pose_fusion import fuse_poses
     from strl_pyg.inference.estimator import PoseEstimator
     from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.synthetic import SceneConfig, generate_pair

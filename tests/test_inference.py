@@ -300,7 +300,8 @@ def test_a_new_method_is_one_registration(pair, monkeypatch):
 
 def test_the_split_modules_stay_importable_from_inference():
     import strl_pyg.inference as face
-    from strl_pyg.inference import inputs as pose_input
+    from strl_pyg.inference import checks as pose_checks
+    from strl_pyg.inference import network as pose_network
     from strl_pyg.inference import record as pose_record
 
     for name in inference.__all__:  # the folder's face gives every name of its modules
@@ -310,7 +311,7 @@ def test_the_split_modules_stay_importable_from_inference():
         "ZERO_PARALLAX_FRACTION", "FOCAL_RANGE", "METHODS", "MethodSpec", "MethodResult",
         "MethodContext", "PoseEstimate", "PoseEstimator", "register_method", "prepare_matches",
         "prepare_graph", "forward_pose", "input_warnings", "zero_parallax"}
-    for mod in (pose_record, pose_input, pose_methods):
+    for mod in (pose_record, pose_checks, pose_network, pose_methods):
         for name in mod.__all__:  # one object, two import paths
             assert getattr(inference, name) is getattr(mod, name), name
     assert list(inference.METHODS) == ["regression", "opencv", "poselib", "fused", "geometric",

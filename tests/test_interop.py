@@ -14,7 +14,7 @@ from torch_geometric.data import Batch
 from torch_geometric.nn import to_hetero
 
 from strl_pyg.data import keys as K
-from strl_pyg.data.graph import (
+from strl_pyg.data.build import (
     ImplicitEdgesError,
     PairGraph,
     build_pair_graph,

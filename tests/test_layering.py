@@ -339,7 +339,7 @@ def test_blocker_blocks():
 
 
 @pytest.mark.parametrize("module", ["strl_pyg.geometry", "strl_pyg.data", "strl_pyg.nn",
-                                    "strl_pyg.data.graph", "strl_pyg.model"])
+                                    "strl_pyg.data.build", "strl_pyg.model"])
 @pytest.mark.slow
 def test_lower_layers_import_without_opencv_and_kornia(module):
     res = _run(f"import {module}\nprint('ok')\n")
@@ -381,3 +381,25 @@ def test_the_command_line_parser_imports_without_torch():
             "print('torch' in sys.modules)\n")
     res = _run(code)
     assert res.returncode == 0 and res.stdout.strip() == "False", res.stderr[-2000:]
+
+
+#: 0.3 module -> 0.4 module (docs/changelog.md): one concept per name.
+RENAMED = {
+    "strl_pyg.data.graph": "strl_pyg.data.build",
+    "strl_pyg.model.inputs": "strl_pyg.model.gather",
+    "strl_pyg.inference.inputs": "strl_pyg.inference.network",
+    "strl_pyg.cli.inputs": "strl_pyg.cli.readers",
+    "strl_pyg.estimation.fusion": "strl_pyg.estimation.pose_fusion",
+    "strl_pyg.nn.fusion": "strl_pyg.nn.feature_fusion",
+}
+
+
+@pytest.mark.parametrize("old, new", sorted(RENAMED.items()))
+def test_renamed_modules_are_in_the_changelog_and_the_old_names_are_gone(old, new):
+    import importlib
+
+    importlib.import_module(new)
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module(old)
+    changelog = (Path(__file__).resolve().parents[1] / "docs" / "changelog.md").read_text()
+    assert f"| `{old}` | `{new}`" in changelog

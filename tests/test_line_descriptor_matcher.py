@@ -186,7 +186,7 @@ def test_graph_and_datasets_refuse_descriptor_lines(tmp_path):
     # evaluation, the CLI) and the training datasets
     from strl_pyg.datasets.synthetic import SyntheticPairs
     from strl_pyg.frontend import match_images
-    from strl_pyg.inference.inputs import prepare_graph
+    from strl_pyg.inference.network import prepare_graph
     from strl_pyg.model.strl_pose import StrLPose
 
     pair = generate_pair(6)

@@ -40,7 +40,7 @@ def test_bootstrap_is_seeded_psd_and_grows_with_the_noise(pair):
 
 def _serial_bootstrap(m, pose, method, n, thr, seed):
     """The bootstrap as one loop (the code before the resamples were threaded)."""
-    from strl_pyg.estimation.fusion import pose_to_tangent, tangent_basis
+    from strl_pyg.estimation.pose_fusion import pose_to_tangent, tangent_basis
 
     R0, t0 = pose.R.double(), pose.t.double() / pose.t.double().norm()
     basis, rng, xs = tangent_basis(t0), np.random.default_rng(seed), []
@@ -215,7 +215,7 @@ def test_fused_covariance_adds_the_classical_bootstrap(pair):
 def test_pose_to_tangent_batched_equals_one_by_one():
     import torch
 
-    from strl_pyg.estimation.fusion import pose_to_tangent, sphere_log, tangent_basis
+    from strl_pyg.estimation.pose_fusion import pose_to_tangent, sphere_log, tangent_basis
     from strl_pyg.geometry import Pose
     from strl_pyg.geometry.manifold import so3_exp
 

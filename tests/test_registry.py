@@ -76,7 +76,7 @@ def test_one_name_per_regime_and_per_bound():
     bootstrap minimum was written in three places."""
     import argparse
 
-    from strl_pyg.cli.inputs import bootstrap_count
+    from strl_pyg.cli.readers import bootstrap_count
     from strl_pyg.estimation.uncertainty import MIN_BOOTSTRAP
     from strl_pyg.inference import estimator, methods
 

@@ -7,7 +7,7 @@ import os
 import time
 
 from strl_pyg.cli.commands import DEMO_SEED, load_model
-from strl_pyg.cli.inputs import UsageError
+from strl_pyg.cli.readers import UsageError
 
 __all__ = ["cmd_bench"]
 

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from strl_pyg.cli.guard import run_guarded
-from strl_pyg.cli.inputs import (  # noqa: F401  (re-exported: the readers' public home)
+from strl_pyg.cli.readers import (  # noqa: F401  (re-exported: the readers' public home)
     MAX_SIDE,
     PairInputs,
     UsageError,
@@ -83,7 +83,7 @@ def predict_pair(model, matches, resample_seed: int | None = 0,
     """
     import torch
 
-    from strl_pyg.inference.inputs import network_pose
+    from strl_pyg.inference.network import network_pose
 
     def run():
         return network_pose(model, matches, resample_seed or 0,
@@ -336,7 +336,7 @@ def _intrinsics_in_original_frame(est, inputs) -> None:
     """The intrinsics warnings of a pair matched downscaled (``--max-side``) quote the sizes
     and K the user gave, not the downscaled ones (a 6000 px image's fx=4615 was quoted as
     fx=153.8 at 1600 px)."""
-    from strl_pyg.inference.inputs import intrinsics_problems
+    from strl_pyg.inference.checks import intrinsics_problems
 
     (s0, s1, sK0, sK1), (o0, o1, oK0, oK1) = tuple(inputs), inputs.original
     small = intrinsics_problems(s0.shape[:2], s1.shape[:2], sK0, sK1)
@@ -382,7 +382,7 @@ def _read_match_file(args):
     """``predict --matches``: a match file of this package (``strl-pose match``) or of another
     tool (:func:`~strl_pyg.data.load_external_matches`), with ``--K`` / ``--K0`` / ``--K1``
     and, for files without image sizes, the sizes of ``--image-size``."""
-    from strl_pyg.cli.inputs import _check_input_file
+    from strl_pyg.cli.readers import _check_input_file
 
     _check_input_file(args.matches, "match file (.npz) for --matches")
     K0, K1 = _intrinsics(args)

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from strl_pyg.cli.commands import load_model
-from strl_pyg.cli.inputs import UsageError
+from strl_pyg.cli.readers import UsageError
 
 __all__ = ["cmd_export"]
 

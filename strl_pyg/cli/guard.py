@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 import sys
 
-from strl_pyg.cli.inputs import UsageError
+from strl_pyg.cli.readers import UsageError
 
 __all__ = ["run_guarded"]
 

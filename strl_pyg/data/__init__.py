@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 from strl_pyg.utils.lazy import lazy_exports
 
-_GRAPH = "strl_pyg.data.graph"
+_GRAPH = "strl_pyg.data.build"
 _TRANSFORMS = "strl_pyg.data.transforms"
 
 __all__ = [
@@ -70,7 +70,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
         load_external_matches,
     )
     from strl_pyg.data.external.hloc import load_hloc_matches
-    from strl_pyg.data.graph import (
+    from strl_pyg.data.build import (
         ImplicitEdgesError,
         PairGraph,
         build_pair_graph,

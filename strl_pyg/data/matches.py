@@ -433,8 +433,9 @@ def first_unique_rows(rows: np.ndarray, tol: float = DUPLICATE_TOLERANCE_PX,
                       return_inverse: bool = False):
     """Sorted indices of the first occurrence of each distinct row of ``rows`` ``[N, ...]``
     (rows are one when every value rounds to the same multiple of ``tol``: equal on a grid of
-    step ``tol``, so two values closer than ``tol`` across a cell boundary stay apart); with ``return_inverse``, also for
-    every row the position of its distinct row among those indices."""
+    step ``tol``, so two values closer than ``tol`` across a cell boundary stay apart); with
+    ``return_inverse``, also for every row the position of its distinct row among those
+    indices."""
     if len(rows) == 0:
         empty = np.zeros(0, dtype=np.int64)
         return (empty, empty) if return_inverse else empty

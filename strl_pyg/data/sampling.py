@@ -6,7 +6,7 @@ the image is ``(0, 0)``, so pixel ``(i, j)`` (row, column) covers ``[j - 0.5, j 
 
 :func:`sample_bilinear` samples maps that cover the field of view of an ``H x W`` image at
 image pixel coordinates. A map at the image's own resolution (the image itself: the pixel
-patches of :func:`~strl_pyg.data.graph.sample_patches`, the line descriptors of the front end)
+patches of :func:`~strl_pyg.data.build.sample_patches`, the line descriptors of the front end)
 is sampled at pixel centres ``x``; a map of another resolution ``h x w`` (the strided feature
 maps of :func:`~strl_pyg.nn.sample_at_pixels`) at ``(x + 0.5) w / W - 0.5`` of its own pixels.
 The two are one convention: at ``w = W`` the second is the first. They reach ``grid_sample`` by

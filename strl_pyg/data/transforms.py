@@ -10,7 +10,7 @@ from torch_geometric.data import Batch, HeteroData
 from torch_geometric.transforms import BaseTransform
 
 from strl_pyg.data import keys as keys_
-from strl_pyg.data.graph import (
+from strl_pyg.data.build import (
     has_implicit_complete_edges,
     line_edge_index,
     materialize_complete_edges,
@@ -104,7 +104,7 @@ class FixedSizeResample(BaseTransform):
 
 
 class MaterializeCompleteEdges(BaseTransform):
-    """Transform form of :func:`~strl_pyg.data.graph.materialize_complete_edges`."""
+    """Transform form of :func:`~strl_pyg.data.build.materialize_complete_edges`."""
 
     def forward(self, data: HeteroData) -> HeteroData:
         return materialize_complete_edges(data)

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 from torch_geometric.data import Dataset, HeteroData
 
-from strl_pyg.data.graph import build_pair_graph
+from strl_pyg.data.build import build_pair_graph
 from strl_pyg.data.keys import PAIR_ID, SUBSET
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.datasets.cache import (

@@ -25,7 +25,7 @@ import numpy as np
 from torch.utils.data import IterableDataset, get_worker_info
 from torch_geometric.data import HeteroData
 
-from strl_pyg.data.graph import build_pair_graph
+from strl_pyg.data.build import build_pair_graph
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.datasets.base import (
     PAIR_ID,

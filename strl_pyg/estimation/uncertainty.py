@@ -1,7 +1,7 @@
 """Bootstrap covariance of a classical robust pose: the part of the uncertainty that the
 first-order (Jacobian) covariance cannot see.
 
-The first-order covariance of :func:`strl_pyg.estimation.fusion.classical_covariance` describes the
+The first-order covariance of :func:`strl_pyg.estimation.pose_fusion.classical_covariance` describes the
 noise of a *correct* solution around it. A robust solver also fails in ways that have nothing to
 do with that noise: a wrong RANSAC solution, a near-degenerate configuration (an object filling
 little of the image, low texture) where several poses explain the inliers about as well. Then
@@ -94,7 +94,7 @@ def bootstrap_resamples(matches: PairMatches, pose: Pose, method: str = "poselib
                         workers: int | None = None) -> Bootstrap | None:
     """Covariance ``[5, 5]`` (float64) of the robust estimate ``pose`` of ``matches``, from
     ``n`` bootstrap resamples of its point matches, in the tangent parameters of
-    :func:`strl_pyg.estimation.fusion.pose_to_tangent` (rotation increment ``w``, rad; translation
+    :func:`strl_pyg.estimation.pose_fusion.pose_to_tangent` (rotation increment ``w``, rad; translation
     direction on the sphere, rad) around ``pose``.
 
     Each resample draws ``num_points`` point matches with replacement (seeded: the same inputs
@@ -108,7 +108,7 @@ def bootstrap_resamples(matches: PairMatches, pose: Pose, method: str = "poselib
     ``n``; PoseLib and OpenCV release the GIL): every resample's draw and solver seed are fixed
     before any is solved, so the covariance is the same for any ``workers`` (tested).
     """
-    from strl_pyg.estimation.fusion import pose_to_tangent, tangent_basis
+    from strl_pyg.estimation.pose_fusion import pose_to_tangent, tangent_basis
 
     if not isinstance(matches, PairMatches):
         raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")

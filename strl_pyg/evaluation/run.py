@@ -49,7 +49,7 @@ from strl_pyg.evaluation.report import (
     pair_result,
 )
 from strl_pyg.geometry import Pose
-from strl_pyg.inference.inputs import network_pose, prepare_matches
+from strl_pyg.inference.network import network_pose, prepare_matches
 from strl_pyg.metrics.two_view import (  # noqa: F401  (names this module had before the 0.2 split)
     integrate_relative_poses,
     kitti_odometry_errors,

@@ -2,7 +2,7 @@
 bases of translation directions and the sphere's exponential and logarithm.
 
 These give the minimal 5-parameter charts of a relative pose up to scale used by the pose
-fusion (:mod:`strl_pyg.estimation.fusion`) and the weighted refinement
+fusion (:mod:`strl_pyg.estimation.pose_fusion`) and the weighted refinement
 (:func:`strl_pyg.geometry.essential.refine_pose`): a left rotation increment
 ``R(w) = exp([w]_x) R_ref`` and a translation direction ``t(d) = exp_{t_ref}(B d)`` with the
 basis ``B = [b1, b2]`` of :func:`tangent_basis`.

@@ -24,8 +24,10 @@ The work is split by concern, and every name below is importable from here:
 
 * :mod:`strl_pyg.inference.record`: the records (:class:`MethodResult`, :class:`PoseEstimate`,
   ``to_dict``) and the covariance / ``sigma`` convention.
-* :mod:`strl_pyg.inference.inputs`: the network's input graph and forward (:func:`prepare_graph`,
-  :func:`forward_pose`) and the input checks (:func:`input_warnings`, :func:`zero_parallax`).
+* :mod:`strl_pyg.inference.network`: the network's input graph and forward
+  (:func:`prepare_graph`, :func:`forward_pose`).
+* :mod:`strl_pyg.inference.checks`: the input checks (:func:`input_warnings`,
+  :func:`zero_parallax`, :func:`intrinsics_problems`, :func:`check_device`).
 * :mod:`strl_pyg.inference.methods`: the methods themselves (regression, classical, fused,
   geometric, guided) and the :class:`MethodContext` they see.
 * this module: the registry (:data:`METHODS`, :func:`register_method`), the recommended
@@ -51,18 +53,14 @@ from strl_pyg.estimation.classical import (
     estimate_relative_pose,  # noqa: F401  (0.1.x name here)
 )
 from strl_pyg.estimation.uncertainty import MAX_SIGMA_DEG, MIN_BOOTSTRAP, cap_covariance
-from strl_pyg.inference.inputs import (
+from strl_pyg.inference.checks import (
     FOCAL_RANGE,
     NORMALISED_K_MAX,  # noqa: F401  (importable from here like the module's other names)
     ZERO_PARALLAX_FRACTION,
     ZERO_PARALLAX_PX,
     check_device,
-    forward_pose,
     input_warnings,
     intrinsics_problems,
-    network_pose,  # noqa: F401  (importable from here like the module's other names)
-    prepare_graph,
-    prepare_matches,
     zero_parallax,
 )
 from strl_pyg.inference.methods import (  # noqa: I001
@@ -78,6 +76,12 @@ from strl_pyg.inference.methods import (  # noqa: I001
     _vp,
     _vp_checked,
     have_poselib,
+)
+from strl_pyg.inference.network import (
+    forward_pose,
+    network_pose,  # noqa: F401  (importable from here like the module's other names)
+    prepare_graph,
+    prepare_matches,
 )
 from strl_pyg.inference.record import STATUSES, MethodResult, PoseEstimate
 from strl_pyg.inference.support import (

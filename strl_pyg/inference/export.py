@@ -15,7 +15,7 @@ replacement up to them, so every pair with at least one point and one line match
 the batch of one; nothing is dynamic, so a runtime can plan the whole graph once. A pair without
 line matches has other sizes and cannot run on the exported graph.
 
-Not exported: graph building (:func:`~strl_pyg.inference.inputs.prepare_graph`, numpy and
+Not exported: graph building (:func:`~strl_pyg.inference.network.prepare_graph`, numpy and
 Python), the geometric head (its weighted eight-point solve needs an
 SVD and a robust loop, which ONNX does not offer) and the CNN visual encoder (``visual="cnn"``
 rows). :func:`onnx_inputs` gives the inputs of a pair in the exported order, and the test
@@ -75,10 +75,10 @@ class DensePoseModule(nn.Module):
 
 def onnx_inputs(model: nn.Module, data: Any) -> tuple[Tensor, ...]:
     """The exported inputs (:data:`INPUT_NAMES`) of one pair graph (a ``HeteroData`` of
-    :func:`~strl_pyg.inference.inputs.prepare_graph`), float32 / int64 on the CPU."""
+    :func:`~strl_pyg.inference.network.prepare_graph`), float32 / int64 on the CPU."""
     from torch_geometric.data import Batch
 
-    from strl_pyg.model.inputs import gather_inputs
+    from strl_pyg.model.gather import gather_inputs
 
     batch = data if isinstance(data, Batch) else Batch.from_data_list([data])
     inp = gather_inputs(model.config, batch)
@@ -127,7 +127,7 @@ def export_onnx(model: nn.Module, path: str | os.PathLike, example: Any = None,
         path: the ``.onnx`` file; written to a temporary file first, then moved, so a failed
             export leaves no half-written file.
         example: a pair graph at the checkpoint's resampled size (default: a generated pair
-            through :func:`~strl_pyg.inference.inputs.prepare_graph`); its sizes are the ones
+            through :func:`~strl_pyg.inference.network.prepare_graph`); its sizes are the ones
             the export fixes.
         opset: the ONNX opset.
     """
@@ -164,7 +164,7 @@ def export_onnx(model: nn.Module, path: str | os.PathLike, example: Any = None,
 
 def example_graph(model: nn.Module):
     """A generated pair's graph at the checkpoint's resampled size (the export's example)."""
-    from strl_pyg.inference.inputs import prepare_graph
+    from strl_pyg.inference.network import prepare_graph
     from strl_pyg.synthetic import generate_pair
 
     return prepare_graph(generate_pair(0).matches, model)

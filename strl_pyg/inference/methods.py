@@ -6,7 +6,7 @@ the context they share; :mod:`strl_pyg.inference.estimator` registers them in :d
 * ``opencv``, ``poselib``: the classical essential-matrix solvers
   (:mod:`strl_pyg.estimation.classical`).
 * ``fused`` (:func:`_fused`): the network and the first ``"ok"`` classical pose combined in
-  information form (:func:`~strl_pyg.estimation.fusion.fuse_poses`).
+  information form (:func:`~strl_pyg.estimation.pose_fusion.fuse_poses`).
 * ``geometric``: the weighted eight-point solve of the geometric head, refined.
 * ``guided``: the classical solver guided by the geometric head's inlier weights
   (:func:`~strl_pyg.estimation.guided.guided_estimate`).
@@ -40,7 +40,7 @@ from strl_pyg.estimation.uncertainty import (
     FAR_TRANSLATION_DEG,
     bootstrap_resamples,
 )
-from strl_pyg.inference.inputs import network_pose
+from strl_pyg.inference.network import network_pose
 from strl_pyg.inference.record import MethodResult
 
 __all__ = ["MethodContext", "MethodFn"]
@@ -76,7 +76,7 @@ MethodFn = Callable[[PairMatches, MethodContext], MethodResult]
 
 # ----------------------------------------------------------------------------- methods
 def _regression(matches: PairMatches, ctx: MethodContext) -> MethodResult:
-    from strl_pyg.estimation.fusion import network_covariance, tangent_basis
+    from strl_pyg.estimation.pose_fusion import network_covariance, tangent_basis
     from strl_pyg.geometry import Pose
 
     model = ctx.model
@@ -98,7 +98,7 @@ def _regression(matches: PairMatches, ctx: MethodContext) -> MethodResult:
 
 def _classical(name: str) -> MethodFn:
     def fn(matches: PairMatches, ctx: MethodContext) -> MethodResult:
-        from strl_pyg.estimation.fusion import classical_covariance
+        from strl_pyg.estimation.pose_fusion import classical_covariance
 
         thr = ctx.threshold_px
         res = estimate_relative_pose(matches, name, thr, seed=ctx.seed)
@@ -290,7 +290,7 @@ def _no_head(name: str, ctx: MethodContext) -> MethodResult | None:
 def _with_covariance(name: str, pose_T: np.ndarray, matches: PairMatches, thr: float,
                      **kw: Any) -> MethodResult:
     from strl_pyg.estimation.classical import normalised_matches
-    from strl_pyg.estimation.fusion import classical_covariance
+    from strl_pyg.estimation.pose_fusion import classical_covariance
     from strl_pyg.geometry import Pose, pose_sampson
 
     pose = Pose.from_matrix(torch.as_tensor(pose_T, dtype=torch.float64))
@@ -397,7 +397,7 @@ def _add_bootstrap(rec: MethodResult, boot: np.ndarray | None, n_boot: int, kind
 
 
 def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:
-    from strl_pyg.estimation.fusion import fuse_poses
+    from strl_pyg.estimation.pose_fusion import fuse_poses
 
     net = ctx.results.get("regression")
     cls = next((ctx.results[c] for c in ("poselib", "opencv")

@@ -71,13 +71,13 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
     """
     from strl_pyg.frontend import FrontendConfig, NoMatchesError, match_images
     from strl_pyg.frontend.pipeline import add_lines
+    from strl_pyg.inference.checks import intrinsics_problems
     from strl_pyg.inference.estimator import (
         METHODS,
         POINT_POOR_ORDER,
         PoseEstimator,
         recommended_order,
     )
-    from strl_pyg.inference.inputs import intrinsics_problems
 
     cfg = frontend_config if frontend_config is not None else FrontendConfig()
     if not isinstance(cfg, FrontendConfig):

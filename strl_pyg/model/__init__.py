@@ -35,8 +35,8 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "TRANSLATION_MODES": "strl_pyg.model.strl_pose",
     "upgrade_key": "strl_pyg.model.legacy",
     "StrLPose": "strl_pyg.model.strl_pose",
-    "ModelInputs": "strl_pyg.model.inputs",
-    "gather_inputs": "strl_pyg.model.inputs",
+    "ModelInputs": "strl_pyg.model.gather",
+    "gather_inputs": "strl_pyg.model.gather",
     "upgrade_legacy_keys": "strl_pyg.model.legacy",
     "what_checkpoint": "strl_pyg.model.legacy",
 }, globals())

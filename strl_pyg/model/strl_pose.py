@@ -3,7 +3,7 @@
 Reads top to bottom: the model, its modules in the order of Figure 1 of the paper. Its file
 I/O (save, load, metadata, the shipped weights) is the mixin of :mod:`strl_pyg.model.checkpoint`;
 the configuration and output containers live in :mod:`strl_pyg.model.config`, input gathering
-(validation, node ordering, edges, the dense block layout) in :mod:`strl_pyg.model.inputs`;
+(validation, node ordering, edges, the dense block layout) in :mod:`strl_pyg.model.gather`;
 both are importable from here.
 """
 
@@ -24,7 +24,7 @@ from strl_pyg.model.config import (
     PoseOutput,
     StrLPoseConfig,
 )
-from strl_pyg.model.inputs import ModelInputs, gather_inputs
+from strl_pyg.model.gather import ModelInputs, gather_inputs
 from strl_pyg.model.legacy import upgrade_key, upgrade_legacy_keys
 from strl_pyg.nn import (
     CompleteEdges,
@@ -134,7 +134,7 @@ class StrLPose(CheckpointIO, nn.Module):
                 m.reset_parameters()
 
     def forward(self, data: HeteroData) -> PoseOutput:
-        """Validates and gathers the graph (:func:`~strl_pyg.model.inputs.gather_inputs`), reads
+        """Validates and gathers the graph (:func:`~strl_pyg.model.gather.gather_inputs`), reads
         the padded block size of complete attention from the host (the one synchronisation;
         none for a single graph, or for explicit edges without the geometric head and the
         image encoder), then runs without touching the host."""

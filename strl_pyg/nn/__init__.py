@@ -13,7 +13,7 @@ from strl_pyg.nn.encoders import (
     flow_features,
     sample_at_pixels,
 )
-from strl_pyg.nn.fusion import WeightedFusion
+from strl_pyg.nn.feature_fusion import WeightedFusion
 from strl_pyg.nn.heads import InlierHead, PoseHead
 from strl_pyg.nn.layout import DenseLayout
 from strl_pyg.nn.line import LineEndpointConv

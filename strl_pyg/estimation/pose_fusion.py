@@ -1,8 +1,8 @@
 """Uncertainty-aware fusion of the learned pose with the classical robust estimate.
 
-(Formerly ``strl_pyg.fusion``, which still imports with a deprecation warning; not to be
-confused with :mod:`strl_pyg.nn.fusion`, the paper's feature-weighted fusion layer. The SO(3)
-and sphere maps of the chart live in :mod:`strl_pyg.geometry.manifold` and are re-exported.)
+(Not to be confused with :mod:`strl_pyg.nn.feature_fusion`, the paper's feature-weighted
+fusion layer. The SO(3) and sphere maps of the chart live in
+:mod:`strl_pyg.geometry.manifold` and are re-exported.)
 
 Beyond the paper, in the spirit of UA-Fusion (Zhuang & Chandraker, CVPR 2021): both estimates
 of ``T_0to1`` (``X1 = R X0 + t``) get a covariance in one minimal, 5-parameter tangent space

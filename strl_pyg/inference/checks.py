@@ -1,0 +1,116 @@
+"""The checks of a pair's matches, intrinsics and device that turn into warnings,
+``"unreliable"`` or ``"degenerate"`` (:mod:`strl_pyg.inference.estimator`), or a one-line
+``ValueError``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+
+from strl_pyg.data.matches import PairMatches
+
+__all__ = [
+    "ZERO_PARALLAX_PX", "ZERO_PARALLAX_FRACTION", "FOCAL_RANGE", "NORMALISED_K_MAX",
+    "input_warnings", "intrinsics_problems", "zero_parallax", "check_device"]
+
+#: pixels (image 1 re-expressed in image 0's camera when both K are known).
+ZERO_PARALLAX_PX = 0.5
+ZERO_PARALLAX_FRACTION = 0.8
+#: Plausible focal lengths, as multiples of the image width.
+FOCAL_RANGE = (0.1, 10.0)
+
+#: A K whose focal lengths are at most this and whose principal point lies within this of
+#: the origin looks normalised (by the image width or size) rather than in pixels.
+NORMALISED_K_MAX = 10.0
+
+
+def intrinsics_problems(size0: Any, size1: Any, K0: Any, K1: Any) -> list[str]:
+    """Why the intrinsics do not fit the images (``[]`` when they do, or when there are
+    none): one K for images of different sizes; a principal point outside the image (with a
+    hint when ``cx`` and ``cy`` look swapped); a normalised K (focal lengths and principal
+    point of at most :data:`NORMALISED_K_MAX`) with pixel coordinates; a focal length outside
+    :data:`FOCAL_RANGE` times the width. Sizes are ``(H, W)``; every pose computed with such
+    intrinsics is ``"unreliable"`` (:class:`~strl_pyg.inference.estimator.PoseEstimator`)."""
+    if K0 is None or K1 is None:
+        return []
+    out = []
+    (h0, w0), (h1, w1) = (tuple(int(v) for v in s) for s in (size0, size1))
+    if (h0, w0) != (h1, w1) and np.allclose(K0, K1):
+        out.append(f"the images have different sizes ({h0}x{w0} and {h1}x{w1} px, H x W) but "
+                   "one K: pass each image's own intrinsics (K0, K1); the pose is likely wrong")
+    lo, hi = FOCAL_RANGE
+    same = (h0, w0) == (h1, w1) and np.allclose(K0, K1)
+    for name, K, (h, w) in ((("K" if same else "K0"), K0, (h0, w0)), ("K1", K1, (h1, w1))):
+        if name == "K1" and same:
+            break
+        K = np.asarray(K, dtype=np.float64)
+        cx, cy, fx, fy = K[0, 2], K[1, 2], K[0, 0], K[1, 1]
+        size = f"{h}x{w} px (H x W)"
+        if max(abs(fx), abs(fy), abs(cx), abs(cy)) <= NORMALISED_K_MAX and w > 4 * \
+                NORMALISED_K_MAX:
+            out.append(f"{name} looks normalised (fx={fx:.4g}, fy={fy:.4g}, cx={cx:.4g}, "
+                       f"cy={cy:.4g}) but the points are pixels of a {size} image: pass K in "
+                       "pixels (a K normalised by the image size: multiply row 0 by W and row 1 "
+                       "by H)")
+            continue
+        if not (-0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5):
+            swapped = -0.5 <= cy <= w - 0.5 and -0.5 <= cx <= h - 0.5
+            hint = (f": cx and cy look swapped (cx is the column, at most {w - 0.5:g} here)"
+                    if swapped else ": is K for this image, in pixels?")
+            out.append(f"{name}: principal point (cx={cx:.1f}, cy={cy:.1f}) lies outside the "
+                       f"{size} image{hint}")
+        if not (lo * w <= fx <= hi * w and lo * w <= fy <= hi * w):
+            out.append(f"{name}: focal length (fx={fx:.4g}, fy={fy:.4g} px) is outside "
+                       f"{lo:g}-{hi:g}x the image width ({w} px): is K for this image, in "
+                       "pixels?")
+    return out
+
+
+def input_warnings(size0: Any, size1: Any, K0: Any, K1: Any) -> list[str]:
+    """Warnings about the intrinsics: none at all (the classical solvers cannot run), or
+    :func:`intrinsics_problems`."""
+    if K0 is None or K1 is None:
+        return ["no intrinsics (K0, K1): the network's coordinates are normalised by the image "
+                "size and the classical solvers cannot run"]
+    return intrinsics_problems(size0, size1, K0, K1)
+
+
+def zero_parallax(matches: PairMatches) -> bool:
+    """Whether at least :data:`ZERO_PARALLAX_FRACTION` of the point matches moved less than
+    :data:`ZERO_PARALLAX_PX` pixels (identical or near-identical images)."""
+    if matches.num_points == 0:
+        return False
+    p0, p1 = matches.points0, matches.points1
+    if matches.has_intrinsics:
+        K0, K1 = matches.K0, matches.K1
+        x1 = np.c_[p1, np.ones(len(p1))] @ np.linalg.inv(K1).T
+        p1 = (x1 @ K0.T)[:, :2] / (x1 @ K0.T)[:, 2:]
+    moved = np.linalg.norm(p1 - p0, axis=1)
+    return float(np.mean(moved < ZERO_PARALLAX_PX)) >= ZERO_PARALLAX_FRACTION
+
+
+def check_device(device: Any) -> torch.device | None:
+    """``device`` as a ``torch.device`` (``None`` stays ``None``); ``ValueError`` for a name
+    torch does not know or a device this machine does not have."""
+    if device is None:
+        return None
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError):
+        raise ValueError(f"Expected a torch device such as 'cpu' or 'cuda' (got {device!r})"
+                         ) from None
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            raise ValueError(f"Expected a device this machine has (got {device!r}: CUDA is not "
+                             "available here); use device='cpu', or None for the model's own")
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise ValueError(f"Expected a CUDA device index below {torch.cuda.device_count()} "
+                             f"(got {device!r})")
+    elif dev.type == "mps" and not torch.backends.mps.is_available():
+        raise ValueError(f"Expected a device this machine has (got {device!r}: MPS is not "
+                         "available here); use device='cpu', or None for the model's own")
+    elif dev.type == "meta":
+        raise ValueError(f"Expected a device that holds data (got {device!r})")
+    return dev
