@@ -311,9 +311,11 @@ def test_the_split_modules_stay_importable_from_inference():
         "ZERO_PARALLAX_FRACTION", "FOCAL_RANGE", "METHODS", "MethodSpec", "MethodResult",
         "MethodContext", "PoseEstimate", "PoseEstimator", "register_method", "prepare_matches",
         "prepare_graph", "forward_pose", "input_warnings", "zero_parallax"}
-    for mod in (pose_record, pose_checks, pose_network, pose_methods):
+    from strl_pyg.inference import config as pose_config
+
+    for mod in (pose_record, pose_checks, pose_network, pose_methods, pose_config):
         for name in mod.__all__:  # one object, two import paths
-            assert getattr(inference, name) is getattr(mod, name), name
+            assert getattr(face, name) is getattr(mod, name), name
     assert list(inference.METHODS) == ["regression", "opencv", "poselib", "fused", "geometric",
                                        "guided", "vp", "vp_checked"]
     assert inference.METHODS["fused"].fn is pose_methods._fused

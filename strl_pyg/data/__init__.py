@@ -64,12 +64,6 @@ __getattr__, __dir__ = lazy_exports(__name__, {
 
 if TYPE_CHECKING:  # for type checkers and IDEs; never executed
     from strl_pyg.data import keys
-    from strl_pyg.data.external.formats import (
-        MatchFormatError,
-        from_lightglue,
-        load_external_matches,
-    )
-    from strl_pyg.data.external.hloc import load_hloc_matches
     from strl_pyg.data.build import (
         ImplicitEdgesError,
         PairGraph,
@@ -81,6 +75,12 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
         materialize_complete_edges,
         save_graph,
     )
+    from strl_pyg.data.external.formats import (
+        MatchFormatError,
+        from_lightglue,
+        load_external_matches,
+    )
+    from strl_pyg.data.external.hloc import load_hloc_matches
     from strl_pyg.data.matches import PairMatches
     from strl_pyg.data.pair_graph import CompleteEdges, drop_legacy_cross_edges
     from strl_pyg.data.transforms import (

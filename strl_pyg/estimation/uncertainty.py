@@ -1,19 +1,17 @@
 """Bootstrap covariance of a classical robust pose: the part of the uncertainty that the
 first-order (Jacobian) covariance cannot see.
 
-The first-order covariance of :func:`strl_pyg.estimation.pose_fusion.classical_covariance` describes the
-noise of a *correct* solution around it. A robust solver also fails in ways that have nothing to
-do with that noise: a wrong RANSAC solution, a near-degenerate configuration (an object filling
-little of the image, low texture) where several poses explain the inliers about as well. Then
-the estimate moves far when the matches change a little. The bootstrap measures exactly that:
-the solver is re-run on ``n`` resamples (with replacement) of the point matches and the
-covariance of the resampled poses, in the tangent chart of the estimate, is returned. The
-estimators' ``poselib`` / ``opencv`` / ``guided`` records carry first-order + bootstrap
+The first-order covariance of :func:`strl_pyg.estimation.pose_fusion.classical_covariance`
+describes the noise of a *correct* solution around it. A robust solver also fails in ways that
+have nothing to do with that noise: a wrong RANSAC solution, a near-degenerate configuration (an
+object filling little of the image, low texture) where several poses explain the inliers about
+as well. Then the estimate moves far when the matches change a little. The bootstrap measures
+exactly that: the solver is re-run on ``n`` resamples (with replacement) of the point matches
+and the covariance of the resampled poses, in the tangent chart of the estimate, is returned.
+The estimators' ``poselib`` / ``opencv`` / ``guided`` records carry first-order + bootstrap
 covariances, the ``fused`` one information form + the classical bootstrap
 (:class:`strl_pyg.inference.PoseEstimator`, ``bootstrap=8``, ``MethodSpec.bootstrapped``),
-calibrated
-with one scale per method (``benchmarks/bench_pose.py --calibrate``).
-"""
+calibrated with one scale per method (``benchmarks/bench_pose.py --calibrate``). """
 
 from __future__ import annotations
 
@@ -94,8 +92,8 @@ def bootstrap_resamples(matches: PairMatches, pose: Pose, method: str = "poselib
                         workers: int | None = None) -> Bootstrap | None:
     """Covariance ``[5, 5]`` (float64) of the robust estimate ``pose`` of ``matches``, from
     ``n`` bootstrap resamples of its point matches, in the tangent parameters of
-    :func:`strl_pyg.estimation.pose_fusion.pose_to_tangent` (rotation increment ``w``, rad; translation
-    direction on the sphere, rad) around ``pose``.
+    :func:`strl_pyg.estimation.pose_fusion.pose_to_tangent` (rotation increment ``w``, rad;
+    translation direction on the sphere, rad) around ``pose``.
 
     Each resample draws ``num_points`` point matches with replacement (seeded: the same inputs
     give the same covariance) and runs :func:`~strl_pyg.estimation.estimate_relative_pose` with

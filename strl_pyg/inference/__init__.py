@@ -50,6 +50,9 @@ __all__ = [
     "POSELIB_MISSING",
     "BAD_INTRINSICS",
     "NO_INTRINSICS",
+    "EstimatorConfig",
+    "CheckpointSettings",
+    "check_device",
 ]
 
 # 0.2 code read other names of the module this folder was: they resolve too
@@ -91,6 +94,9 @@ _lazy_getattr, __dir__ = lazy_exports(__name__, {
     "POSELIB_MISSING": "strl_pyg.inference.estimator",
     "BAD_INTRINSICS": "strl_pyg.inference.estimator",
     "NO_INTRINSICS": "strl_pyg.inference.estimator",
+    "EstimatorConfig": "strl_pyg.inference.config",
+    "CheckpointSettings": "strl_pyg.inference.config",
+    "check_device": "strl_pyg.inference.checks",
 }, globals())
 
 #: Tables derived from the method registry on every access (never cached on the face): a

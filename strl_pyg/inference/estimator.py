@@ -52,22 +52,21 @@ from strl_pyg.estimation.classical import (
     MIN_POINTS,
     estimate_relative_pose,  # noqa: F401  (0.1.x name here)
 )
-from strl_pyg.estimation.uncertainty import MAX_SIGMA_DEG, MIN_BOOTSTRAP, cap_covariance
+from strl_pyg.estimation.uncertainty import MAX_SIGMA_DEG, cap_covariance
 from strl_pyg.inference.checks import (
     FOCAL_RANGE,
     NORMALISED_K_MAX,  # noqa: F401  (importable from here like the module's other names)
     ZERO_PARALLAX_FRACTION,
     ZERO_PARALLAX_PX,
-    check_device,
     input_warnings,
     intrinsics_problems,
     zero_parallax,
 )
+from strl_pyg.inference.config import CheckpointSettings, EstimatorConfig
 from strl_pyg.inference.methods import (  # noqa: I001
     POINT_POOR_MAX_POINTS,  # one regime, defined where vp_checked reads it (re-exported)
     MethodContext,
     MethodFn,
-    _calibration,
     _classical,
     _fused,
     _geometric,
@@ -85,9 +84,6 @@ from strl_pyg.inference.network import (
 )
 from strl_pyg.inference.record import STATUSES, MethodResult, PoseEstimate
 from strl_pyg.inference.support import (
-    CHEIRALITY_MIN,
-    MIN_INLIER_RATIO,
-    MIN_SUPPORT_INLIERS,
     check_support,
 )
 
@@ -192,9 +188,9 @@ def classical_method() -> str:
     return "poselib" if METHODS["poselib"].available() else "opencv"
 
 
-def recommended_order(model: torch.nn.Module | None,
-                      num_points: int | None = None) -> tuple[str, ...]:
-    """The order in which methods fill the recommended pose: the checkpoint's
+def recommended_order(model: Any, num_points: int | None = None) -> tuple[str, ...]:
+    """The order in which methods fill the recommended pose (``model``: a model, its
+    :class:`CheckpointSettings` or ``None``): the checkpoint's
     ``metadata["recommended_order"]`` (measured on held-out data when the checkpoint was
     calibrated, see ``benchmarks/bench_pose.py --calibrate``), else :data:`RECOMMENDED_ORDER`;
     with ``num_points`` at most :data:`POINT_POOR_MAX_POINTS`, :data:`POINT_POOR_ORDER` first.
@@ -222,15 +218,14 @@ POSELIB_MISSING = ("PoseLib is not installed: the recommended order was measured
                    "default)")
 
 
-def _stored_order(model: torch.nn.Module | None) -> tuple[str, ...]:
-    """The checkpoint's measured ``metadata["recommended_order"]`` (``()`` when absent)."""
-    md = getattr(model, "metadata", None) if model is not None else None
-    order = md.get("recommended_order") if isinstance(md, dict) else None
-    ok = isinstance(order, (list, tuple)) and all(isinstance(m, str) for m in order)
-    return tuple(order) if ok else ()
+def _stored_order(model: Any) -> tuple[str, ...]:
+    """The checkpoint's measured ``metadata["recommended_order"]`` (``()`` when absent);
+    ``model`` may also be its :class:`CheckpointSettings`."""
+    settings = model if isinstance(model, CheckpointSettings) else CheckpointSettings.of(model)
+    return settings.recommended_order
 
 
-def _measured_with_missing_poselib(model: torch.nn.Module | None) -> bool:
+def _measured_with_missing_poselib(model: Any) -> bool:
     return "poselib" in _stored_order(model) and not METHODS["poselib"].available()
 
 
@@ -348,6 +343,21 @@ def _unique(items: list[str]) -> list[str]:
     return list(dict.fromkeys(items))
 
 
+def _checked_names(methods: Any) -> tuple[str, ...]:
+    """Method names to run (``None``: every installed one; one ``str``: one method)."""
+    if isinstance(methods, str):
+        methods = (methods,)
+    names = tuple(methods) if methods is not None else tuple(
+        n for n, s in METHODS.items() if s.available())
+    unknown = [n for n in names if n not in METHODS]
+    if unknown or not names:
+        raise ValueError(f"Expected methods from {tuple(METHODS)} (got {list(names)})")
+    missing = [n for n in names if not METHODS[n].available()]
+    if missing:
+        raise ValueError(f"Expected installed methods (got {missing}: not importable here)")
+    return names
+
+
 class PoseEstimator:
     """Pose of one image pair by every registered method, with a recommended one.
 
@@ -390,12 +400,8 @@ class PoseEstimator:
             ``None`` (every match).
     """
 
-    def __init__(self, model: Any = None, methods: Any = None,
-                 seed: int = 0, threshold_px: float = 1.0, device: Any = None,
-                 raise_errors: bool = False, bootstrap: int = 8,
-                 min_inlier_ratio: float = MIN_INLIER_RATIO,
-                 min_inliers: int = MIN_SUPPORT_INLIERS,
-                 min_in_front: float = CHEIRALITY_MIN, resample: Any = "model") -> None:
+    def __init__(self, model: Any = None, methods: Any = None, *,
+                 config: EstimatorConfig | None = None, **options: Any) -> None:
         if isinstance(model, (str, os.PathLike)):  # a checkpoint path, as --checkpoint takes
             from strl_pyg.model.strl_pose import StrLPose
 
@@ -403,45 +409,40 @@ class PoseEstimator:
         elif model is not None and not isinstance(model, torch.nn.Module):
             raise TypeError(f"Expected a StrLPose, a checkpoint path or None (got "
                             f"{type(model).__name__})")
-        if not (isinstance(min_inlier_ratio, (int, float)) and 0 <= min_inlier_ratio < 1):
-            raise ValueError(f"Expected min_inlier_ratio in [0, 1) (got {min_inlier_ratio!r})")
-        if isinstance(min_inliers, bool) or not isinstance(min_inliers, int) or min_inliers < 0:
-            raise ValueError(f"Expected min_inliers as an integer >= 0 (got {min_inliers!r})")
-        if not (isinstance(min_in_front, (int, float)) and not isinstance(min_in_front, bool)
-                and 0 <= min_in_front <= 1):
-            raise ValueError(f"Expected min_in_front in [0, 1] (got {min_in_front!r})")
-        self.min_in_front = float(min_in_front)
-        self.min_inlier_ratio = float(min_inlier_ratio)
-        self.min_inliers = min_inliers
-        if isinstance(methods, str):  # one method by name (tuple("poselib") spelt letters)
-            methods = (methods,)
-        names = tuple(methods) if methods is not None else tuple(
-            n for n, s in METHODS.items() if s.available())
-        unknown = [n for n in names if n not in METHODS]
-        if unknown or not names:
-            raise ValueError(f"Expected methods from {tuple(METHODS)} (got {list(names)})")
-        missing = [n for n in names if not METHODS[n].available()]
-        if missing:
-            raise ValueError(f"Expected installed methods (got {missing}: not importable here)")
-        if not threshold_px > 0:
-            raise ValueError(f"Expected threshold_px > 0 (got {threshold_px!r})")
-        if isinstance(bootstrap, bool) or not isinstance(bootstrap, int) or not (
-                bootstrap == 0 or bootstrap >= MIN_BOOTSTRAP):
-            raise ValueError(f"Expected bootstrap = 0 (off) or an integer >= {MIN_BOOTSTRAP} "
-                             f"(got {bootstrap!r})")
-        self.method_names = names
-        self.bootstrap = bootstrap
+        if config is not None and not isinstance(config, EstimatorConfig):
+            raise TypeError(f"Expected config as an EstimatorConfig (got "
+                            f"{type(config).__name__})")
+        if methods is not None:
+            options["methods"] = methods
+        cfg = (config or EstimatorConfig()).replace(**options) if options else (
+            config or EstimatorConfig())
+        self.config = cfg
+        self.method_names = _checked_names(cfg.methods)
         self._model = model
-        self.seed, self.threshold_px = int(seed), float(threshold_px)
-        if not (isinstance(resample, str) and resample == "model") and resample is not None and (
-                len(resample) != 2 or min(resample) < 0):
-            raise ValueError(f"Expected resample 'model', None or (points, lines) >= 0 "
-                             f"(got {resample!r})")
-        self.resample = resample
-        self.device = check_device(device)
-        if self.device is not None and self._model is not None:
-            self._model = self._model.to(self.device)
-        self.raise_errors = raise_errors
+        self._settings: CheckpointSettings | None = None
+        if cfg.device is not None and self._model is not None:
+            self._model = self._model.to(cfg.device)
+
+    # the options, read from the one config
+    seed = property(lambda self: self.config.seed)
+    threshold_px = property(lambda self: self.config.threshold_px)
+    bootstrap = property(lambda self: self.config.bootstrap)
+    min_inlier_ratio = property(lambda self: self.config.min_inlier_ratio)
+    min_inliers = property(lambda self: self.config.min_inliers)
+    min_in_front = property(lambda self: self.config.min_in_front)
+    resample = property(lambda self: self.config.resample)
+    device = property(lambda self: self.config.device)
+    raise_errors = property(lambda self: self.config.raise_errors)
+
+    @property
+    def settings(self) -> CheckpointSettings:
+        """What the checkpoint's metadata says about estimation (calibration, recommended
+        order, ...), read once: from the model when one was given or built, else from the
+        shipped checkpoint's metadata alone (without building the network) when no method
+        needs it."""
+        if self._settings is None:
+            self._settings = CheckpointSettings.of(self._metadata_source())
+        return self._settings
 
     @property
     def model(self) -> torch.nn.Module:
@@ -451,39 +452,40 @@ class PoseEstimator:
             self._model = StrLPose.from_pretrained()
             if self.device is not None:
                 self._model = self._model.to(self.device)
+            self._settings = None  # now read from the model itself
         return self._model
 
     def _metadata_source(self) -> Any:
         """What the calibration and the recommended order are read from: the model when one
         was given or built, else the shipped checkpoint's metadata alone (read once, without
         building the network)."""
-        if self._model is not None:
-            return self._model
-        if not any(METHODS[m].uses_network for m in self.method_names):
-            return _shipped_metadata()
-        return self.model
+        # without a model the one built later is the shipped one: its metadata is the same
+        return self._model if self._model is not None else _shipped_metadata()
 
-    def estimate(self, matches: PairMatches,
-                 known: dict[str, MethodResult] | None = None) -> PoseEstimate:
+    def estimate(self, matches: PairMatches, known: dict[str, MethodResult] | None = None,
+                 methods: Any = None) -> PoseEstimate:
         """Runs the methods on ``matches`` (pixels; ``K0``/``K1`` for the classical ones).
 
         ``known``: results of methods already run on these same matches (e.g. by an earlier
-        call, :attr:`PoseEstimate.methods`); they are taken as they are, not run again."""
+        call, :attr:`PoseEstimate.methods`); they are taken as they are, not run again.
+        ``methods``: the names to run this time (default: the estimator's own), with the
+        same configuration and checkpoint settings."""
         if not isinstance(matches, PairMatches):
             raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")
+        names = self.method_names if methods is None else _checked_names(methods)
         matches, warnings, rows, degenerate = _checked_pair(matches)
-        ctx = MethodContext(self.seed, self.threshold_px, self.bootstrap, self.device,
-                            self.resample, load_model=lambda: self.model)
         # the model's metadata (the shipped one's when None was given) calibrates the classical
         # methods too, also when no network method runs (the default predict path: PoseLib
         # only); the network itself is built only when a method needs it
-        model = self._metadata_source()
-        for name in self.method_names:
+        settings = self.settings
+        ctx = MethodContext(self.seed, self.threshold_px, self.bootstrap, self.device,
+                            self.resample, load_model=lambda: self.model, settings=settings)
+        for name in names:
             if known and name in known:
                 ctx.results[name] = known[name]
                 continue
             res = self._support(self._run(name, matches, ctx, degenerate), matches)
-            ctx.results[name] = self._calibrated(name, res, model)
+            ctx.results[name] = self._calibrated(name, res, settings)
         _pair_rules(ctx.results, matches, rows)
         estimate = self._recommend(ctx.results, warnings, matches)
         estimate.point_rows = rows
@@ -531,12 +533,12 @@ class PoseEstimator:
                 return f"{name} skipped: it reads {dep}, which was skipped"
         return None
 
-    def _calibrated(self, name: str, res: MethodResult, model: Any) -> MethodResult:
+    def _calibrated(self, name: str, res: MethodResult,
+                    settings: CheckpointSettings) -> MethodResult:
         """``res`` with its covariance scaled by the checkpoint's calibration where it applies
         (or a warning why not), then capped at :data:`MAX_SIGMA_DEG` per block."""
-        scale = _calibration(model).get(name)
-        md = getattr(model, "metadata", None) if model is not None else None
-        fitted_boot = int(md.get("calibration_bootstrap", 0)) if isinstance(md, dict) else 0
+        scale = settings.calibration.get(name)
+        fitted_boot = settings.calibration_bootstrap
         spec = METHODS[name]
         if (scale is not None and spec.bootstrapped and res.covariance is not None
                 and fitted_boot != self.bootstrap):
@@ -545,7 +547,7 @@ class PoseEstimator:
                 f"bootstrap={fitted_boot}, this estimate used bootstrap={self.bootstrap})")
             scale = None
         if (scale is not None and spec.classical_base and res.covariance is not None
-                and _measured_with_missing_poselib(model)):
+                and _measured_with_missing_poselib(settings)):
             res.warnings.append(
                 f"{name}: covariance not calibrated (the checkpoint's scale was fitted with "
                 "PoseLib as its classical base, which is not installed here)")
@@ -562,10 +564,12 @@ class PoseEstimator:
         return res
 
     def estimate_images(self, image0: np.ndarray, image1: np.ndarray, K0: Any = None,
-                        K1: Any = None, frontend_config: Any = None) -> PoseEstimate:
+                        K1: Any = None, frontend_config: Any = None,
+                        methods: Any = None) -> PoseEstimate:
         """Matches two images with :func:`~strl_pyg.frontend.match_images`, then
-        :meth:`estimate`. ``K1`` defaults to ``K0`` (one camera). No matches at all gives
-        status ``"degenerate"``."""
+        :meth:`estimate` (``methods`` as there). ``K1`` defaults to ``K0`` (one camera). No
+        matches at all gives status ``"degenerate"``."""
+        names = self.method_names if methods is None else _checked_names(methods)
         from strl_pyg.frontend import NoMatchesError, match_images
 
         if K0 is None and K1 is not None:
@@ -576,11 +580,10 @@ class PoseEstimator:
         except NoMatchesError as err:
             warnings = input_warnings(np.shape(image0)[:2], np.shape(image1)[:2], K0, K1)
             why = f"no matches: {str(err).splitlines()[0]}"
-            methods = {m: MethodResult(m, "degenerate", warnings=[why])
-                       for m in self.method_names}
+            records = {m: MethodResult(m, "degenerate", warnings=[why]) for m in names}
             return PoseEstimate(MethodResult(None, "degenerate", warnings=warnings + [why]),
-                                methods, 0, 0, None)
-        return self.estimate(matches)
+                                records, 0, 0, None)
+        return self.estimate(matches, methods=names)
 
     def _support(self, res: MethodResult, matches: PairMatches) -> MethodResult:
         spec = METHODS.get(res.method)
@@ -595,10 +598,9 @@ class PoseEstimator:
         else ``"degenerate"`` or ``"failed"``.
         The pose's warnings say why the earlier methods were passed over and which methods
         could not run at all (an exception: e.g. the network on a device it cannot use)."""
-        chosen = recommended_order(self._metadata_source(), matches.num_distinct_points)
+        chosen = recommended_order(self.settings, matches.num_distinct_points)
         order = [m for m in chosen if m in results]
-        notes = [POSELIB_MISSING] if _measured_with_missing_poselib(
-            self._metadata_source()) else []
+        notes = [POSELIB_MISSING] if _measured_with_missing_poselib(self.settings) else []
         raised = [m for m, r in results.items() if r.info.get("raised")]
         notes += [f"{m} could not run: {'; '.join(results[m].warnings)}" for m in raised]
         # the regression stands in only while some solver's pose is supported or none was

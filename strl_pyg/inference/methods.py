@@ -40,6 +40,7 @@ from strl_pyg.estimation.uncertainty import (
     FAR_TRANSLATION_DEG,
     bootstrap_resamples,
 )
+from strl_pyg.inference.config import CheckpointSettings
 from strl_pyg.inference.network import network_pose
 from strl_pyg.inference.record import MethodResult
 
@@ -61,6 +62,8 @@ class MethodContext:
     load_model: Callable[[], torch.nn.Module] | None = field(default=None, repr=False)
     results: dict[str, MethodResult] = field(default_factory=dict)
     cache: dict[str, Any] = field(default_factory=dict)
+    #: what the checkpoint says (calibration, fusion inflation); None: read from ``model``
+    settings: CheckpointSettings | None = None
 
     @property
     def model(self) -> torch.nn.Module:
@@ -409,7 +412,8 @@ def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     # the regression's calibrated variance, times the fusion's own inflation (fitted on the
     # held-out calibration pairs by benchmarks/bench_pose.py --calibrate: the smallest that
     # keeps the 95 % upper bound of the median change against the classical pose <= +5 %)
-    scale = _calibration(ctx.model).get("regression", 1.0) * fusion_inflation(ctx.model)
+    settings = ctx.settings if ctx.settings is not None else CheckpointSettings.of(ctx.model)
+    scale = settings.calibration.get("regression", 1.0) * settings.fusion_inflation
     f = fuse_poses(net.raw, None, cls.raw, matches, threshold_px=ctx.threshold_px,
                    network_scale=scale)
     ms = (time.perf_counter() - start) * 1e3 + net.time_ms + cls.time_ms
@@ -433,22 +437,7 @@ def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     return rec
 
 
-def fusion_inflation(model: torch.nn.Module | None) -> float:
+def fusion_inflation(model: Any) -> float:
     """Multiplier of the network's calibrated variance in the fusion
     (``metadata["fusion_inflation"]``, 1 when absent)."""
-    md = getattr(model, "metadata", None) if model is not None else None
-    k = md.get("fusion_inflation", 1.0) if isinstance(md, dict) else 1.0
-    return float(k) if isinstance(k, (int, float)) and k > 0 else 1.0
-
-
-def _calibration(model: torch.nn.Module | None) -> dict[str, float]:
-    """Per-method covariance scales fitted on held-out data (checkpoint metadata
-    ``"calibration"``; ``{}`` when the checkpoint has none)."""
-    if model is None:
-        return {}
-    md = getattr(model, "metadata", None)
-    cal = md.get("calibration", {}) if isinstance(md, dict) else {}
-    return {str(k): float(v) for k, v in cal.items()} if isinstance(cal, dict) else {}
-
-
-
+    return CheckpointSettings.of(model).fusion_inflation

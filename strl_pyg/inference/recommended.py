@@ -60,14 +60,16 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
     docstring), running only the methods it needs.
 
     Args:
-        model: a :class:`~strl_pyg.model.StrLPose`; its metadata gives the recommended order.
+        model: a :class:`~strl_pyg.model.StrLPose`, a checkpoint path or ``None`` (the shipped
+            one, built only if a method needs it); its metadata gives the recommended order.
         image0, image1, K0, K1: as :meth:`PoseEstimator.estimate_images
             <strl_pyg.inference.PoseEstimator.estimate_images>` (``K1`` defaults to ``K0``).
         frontend_config: :class:`~strl_pyg.frontend.FrontendConfig` (default: its defaults);
             its ``lines`` is switched on only when a method that reads lines runs (the
             network's, ``vp``).
-        estimator_kw: passed to :class:`~strl_pyg.inference.estimator.PoseEstimator` (``seed``,
-            ``threshold_px``, ``device``).
+        estimator_kw: options of :class:`~strl_pyg.inference.estimator.PoseEstimator`
+            (:class:`~strl_pyg.inference.config.EstimatorConfig` fields, or ``config=``); the
+            methods run are the recommended ones.
     """
     from strl_pyg.frontend import FrontendConfig, NoMatchesError, match_images
     from strl_pyg.frontend.pipeline import add_lines
@@ -101,13 +103,15 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
                 matches[lines] = match_images(image0, image1, K0, K1,
                                               dataclasses.replace(cfg, lines=lines))
             except NoMatchesError:
-                return lines, PoseEstimator(model, methods=run, **estimator_kw).estimate_images(
-                    image0, image1, K0, K1, dataclasses.replace(cfg, lines=lines))
+                return lines, estimator.estimate_images(
+                    image0, image1, K0, K1, dataclasses.replace(cfg, lines=lines), methods=run)
         return lines, None
 
-    order = installed(recommended_order(model))
+    # one estimator: one configuration, the checkpoint's settings read once
+    estimator = PoseEstimator(model, **estimator_kw)
+    order = installed(recommended_order(estimator.settings))
     if not order:  # nothing recommended is installed: the estimator reports it
-        return PoseEstimator(model, **estimator_kw).estimate_images(image0, image1, K0, K1, cfg)
+        return estimator.estimate_images(image0, image1, K0, K1, cfg)
     matches, est, run = {}, None, ()
     done: dict[bool, dict] = {}  # results per match set: each method runs at most once
     if installed(POINT_POOR_ORDER):  # the order depends on the number of point matches:
@@ -115,15 +119,15 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
         lines, degenerate = match(methods_needed(order[:1]))
         if degenerate is not None:
             return degenerate
-        order = installed(recommended_order(model, matches[lines].num_distinct_points))
+        order = installed(recommended_order(estimator.settings,
+                                            matches[lines].num_distinct_points))
     for name in order:
         run = methods_needed((*run, name))
         lines, degenerate = match(run)
         if degenerate is not None:
             return degenerate
         m = matches[lines]
-        est = PoseEstimator(model, methods=run, **estimator_kw).estimate(
-            m, known=done.setdefault(lines, {}))
+        est = estimator.estimate(m, known=done.setdefault(lines, {}), methods=run)
         done[lines].update(est.methods)
         if est.methods[name].status == "ok":
             break

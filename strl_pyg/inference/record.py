@@ -16,8 +16,8 @@ that reads pixels, or the method it starts from was skipped; the recommended pos
 script that reads ``T_0to1`` or ``sigma`` without the status gets ``None`` for any other.
 
 Uncertainty: ``covariance`` ``[5, 5]`` in the tangent parameters of
-:mod:`strl_pyg.estimation.pose_fusion` around the method's own pose (rotation increment ``w`` in rad,
-``R = exp([w]_x) R_hat``; translation direction ``d`` in rad on the unit sphere, basis
+:mod:`strl_pyg.estimation.pose_fusion` around the method's own pose (rotation increment ``w`` in
+rad, ``R = exp([w]_x) R_hat``; translation direction ``d`` in rad on the unit sphere, basis
 :func:`~strl_pyg.geometry.tangent_basis` of ``t_hat``), and ``sigma``: its summary
 ``{"rotation_deg": sqrt(tr Cov_w), "translation_deg": sqrt(tr Cov_d)}`` (RMS angles, degrees).
 PoseLib's, OpenCV's and the guided one are first order plus a bootstrap of the classical solve

@@ -1,0 +1,72 @@
+"""The estimator's one configuration (issue 'One record per method'): the user's options
+checked once in :class:`EstimatorConfig`, the checkpoint's metadata read once into
+:class:`CheckpointSettings`, and the recommended path run by one estimator."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from strl_pyg.inference import CheckpointSettings, EstimatorConfig, PoseEstimator
+from strl_pyg.synthetic import generate_pair
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"bootstrap": 2}, r"Expected bootstrap = 0 \(off\) or an integer >= 3 \(got 2\)"),
+    ({"threshold_px": 0}, r"Expected threshold_px > 0 \(got 0\)"),
+    ({"min_inlier_ratio": 1.0}, r"Expected min_inlier_ratio in \[0, 1\) \(got 1.0\)"),
+    ({"min_inliers": True}, r"Expected min_inliers as an integer >= 0 \(got True\)"),
+    ({"resample": (384,)}, r"Expected resample 'model', None or \(points, lines\)"),
+    ({"seed": 1.5}, r"Expected seed as an integer \(got 1.5\)"),
+])
+def test_bad_options_are_one_line_errors_from_the_config_and_the_estimator(options, message):
+    with pytest.raises(ValueError, match=message):
+        EstimatorConfig(**options)
+    with pytest.raises(ValueError, match=message):
+        PoseEstimator(methods="poselib", **options)
+
+
+def test_an_unknown_option_names_the_known_ones():
+    with pytest.raises(TypeError, match=r"Expected options from \[.*'threshold_px'.*\] "
+                                        r"\(got \['treshold_px'\]\)"):
+        PoseEstimator(methods="poselib", treshold_px=2.0)
+
+
+def test_options_override_a_given_config_and_are_read_from_it():
+    base = EstimatorConfig(seed=7, bootstrap=0, resample=[100, 50])
+    est = PoseEstimator(methods="opencv", config=base, threshold_px=2.0)
+    assert est.config == EstimatorConfig(methods=("opencv",), seed=7, bootstrap=0,
+                                         resample=(100, 50), threshold_px=2.0)
+    assert (est.seed, est.bootstrap, est.threshold_px, est.resample) == (7, 0, 2.0, (100, 50))
+    assert base.methods is None  # the given config is not changed
+
+
+def test_checkpoint_settings_read_what_the_metadata_says_and_default_the_rest():
+    md = {"calibration": {"poselib": 2.0, "bad": "x"}, "calibration_bootstrap": 8,
+          "recommended_order": ["guided", "poselib"], "fusion_inflation": -1}
+    s = CheckpointSettings.from_metadata(md)
+    assert s == CheckpointSettings({"poselib": 2.0}, 8, ("guided", "poselib"), 1.0)
+    assert CheckpointSettings.from_metadata(None) == CheckpointSettings()
+
+
+def test_the_settings_are_read_once_per_estimator(monkeypatch):
+    calls = []
+    real = CheckpointSettings.of.__func__
+    monkeypatch.setattr(CheckpointSettings, "of",
+                        classmethod(lambda cls, m: calls.append(1) or real(cls, m)))
+    est = PoseEstimator(methods=("opencv", "poselib"))
+    for seed in (2_000_001, 2_000_002):
+        assert est.estimate(generate_pair(seed).matches).status == "ok"
+    assert len(calls) == 1
+
+
+def test_a_subset_of_methods_runs_with_the_estimators_configuration():
+    m = generate_pair(2_000_003).matches
+    est = PoseEstimator(methods=("opencv", "poselib"), bootstrap=0, seed=3)
+    sub = est.estimate(m, methods="poselib")
+    assert list(sub.methods) == ["poselib"]
+    alone = PoseEstimator(methods="poselib", bootstrap=0, seed=3).estimate(m)
+    np.testing.assert_array_equal(sub.pose.T_0to1, alone.pose.T_0to1)
+    np.testing.assert_array_equal(sub.pose.covariance, alone.pose.covariance)
+    with pytest.raises(ValueError, match="Expected methods from"):
+        est.estimate(m, methods="poselibb")
