@@ -70,3 +70,37 @@ def test_a_subset_of_methods_runs_with_the_estimators_configuration():
     np.testing.assert_array_equal(sub.pose.covariance, alone.pose.covariance)
     with pytest.raises(ValueError, match="Expected methods from"):
         est.estimate(m, methods="poselibb")
+
+
+def test_swapped_matches_exchange_the_images_and_twice_is_the_pair():
+    m = generate_pair(2_000_004).matches
+    m = type(m)(**{**m.__dict__, "info": {**m.info, "fundamental": [[0.0] * 3] * 3,
+                                          "fundamental_inliers": [0, 1], "source": "x"}})
+    s = m.swapped()
+    np.testing.assert_array_equal(s.points0, m.points1)
+    np.testing.assert_array_equal(s.lines1, m.lines0)
+    assert s.image_size0 == m.image_size1 and s.image1 is m.image0
+    assert s.info == {k: v for k, v in m.info.items()
+                      if k not in ("fundamental", "fundamental_inliers")}
+    back = s.swapped()
+    np.testing.assert_array_equal(back.points0, m.points0)
+    np.testing.assert_array_equal(back.K1, m.K1)
+
+
+def test_the_swap_check_widens_the_regression_covariance_by_the_disagreement():
+    from strl_pyg.inference.methods import swap_covariance
+
+    m = generate_pair(2_000_005).matches
+    on = PoseEstimator(methods="regression").estimate(m).methods["regression"]
+    off = PoseEstimator(methods="regression", swap_check=False).estimate(m).methods["regression"]
+    np.testing.assert_array_equal(on.T_0to1, off.T_0to1)  # the pose is the forward pass's
+    d = on.info["swap_disagreement_deg"]
+    assert "swap_disagreement_deg" not in off.info
+    assert 0.0 <= d["rotation"] < 180.0 and 0.0 <= d["translation"] <= 180.0
+    scale = on.info.get("calibration_scale", 1.0)
+    np.testing.assert_allclose(
+        on.covariance - off.covariance,
+        scale * swap_covariance(np.radians(d["rotation"]), np.radians(d["translation"])),
+        atol=1e-12)
+    np.testing.assert_allclose(swap_covariance(0.6, 0.4),
+                               np.diag([0.06, 0.06, 0.06, 0.04, 0.04]))

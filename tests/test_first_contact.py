@@ -483,3 +483,28 @@ def test_shipped_metadata_is_read_with_the_checkpoint_checks(tmp_path, monkeypat
     monkeypatch.setitem(StrLPose.PRETRAINED, "geometric", ("missing.pt", {}))
     with pytest.raises(FileNotFoundError, match="Expected the shipped checkpoint 'missing.pt'"):
         StrLPose.pretrained_metadata()
+
+
+def test_the_default_predict_does_not_build_the_network(tmp_path, pair, capsys, monkeypatch):
+    """Before: predict loaded the model (~80 ms a process) for the default recommended pose,
+    which on a pair with enough points is PoseLib's."""
+    import json
+
+    import cv2
+
+    from strl_pyg.model import StrLPose
+
+    def refuse(*a, **k):
+        raise AssertionError("the network was built")
+
+    monkeypatch.delenv("STRL_POSE_WEIGHTS", raising=False)
+    monkeypatch.setattr(StrLPose, "from_pretrained", classmethod(refuse))
+    monkeypatch.setattr(StrLPose, "load", classmethod(refuse))
+    for i, img in enumerate((pair.image0, pair.image1)):
+        cv2.imwrite(str(tmp_path / f"{i}.png"), img)
+    K = pair.K
+    code = cli_main(["predict", str(tmp_path / "0.png"), str(tmp_path / "1.png"), "--K",
+                     f"{K[0, 0]},{K[1, 1]},{K[0, 2]},{K[1, 2]}", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["pose"]["status"] == "ok" and out["pose"]["method"] == "poselib"
+    assert out["translation_kind"] == StrLPose.pretrained_header()[0].translation

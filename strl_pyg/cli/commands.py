@@ -70,6 +70,22 @@ def load_model(path: str | os.PathLike | None):
     return StrLPose.load(path).eval()
 
 
+def _predict_model(args):
+    """``predict``'s model: the ``--checkpoint`` (or ``STRL_POSE_WEIGHTS``) file, loaded now
+    so that a bad file is one line before any work; ``None`` for the shipped weights, which
+    the estimator builds only when a method needs the network (the default recommended pose
+    of a pair with enough points does not)."""
+    if args.checkpoint or os.environ.get("STRL_POSE_WEIGHTS"):
+        return load_model(args.checkpoint)
+    return None
+
+
+def _shipped_config():
+    from strl_pyg.inference.estimator import shipped_header
+
+    return shipped_header().config
+
+
 # ----------------------------------------------------------------------------- the pipeline
 def predict_pair(model, matches, resample_seed: int | None = 0,
                  warmup: bool = False) -> dict[str, Any]:
@@ -301,17 +317,19 @@ def cmd_predict(args) -> int:
                              f"{args.image0} and --matches {args.matches})")
         matches = _read_match_file(args)
         K0 = matches.K0
-        model = load_model(args.checkpoint)
+        model = _predict_model(args)
         from strl_pyg.inference.estimator import PoseEstimator
 
         names = None if methods in ("recommended", "all") else _method_names(methods)
-        est = PoseEstimator(model, methods=names, bootstrap=args.bootstrap).estimate(matches)
+        estimator = PoseEstimator(model, methods=names, bootstrap=args.bootstrap)
+        est = estimator.estimate(matches)
+        kind = estimator.model_config.translation
     else:
         if not (args.image0 and args.image1):
             raise UsageError("Expected two images, or --matches FILE (got "
                              f"{'one image' if args.image0 else 'neither'})")
         inputs = read_pair(args)  # fail on bad files before any heavy work
-        model = load_model(args.checkpoint)
+        model = _predict_model(args)
         from strl_pyg.frontend import FrontendConfig
 
         img0, img1, K0, K1 = inputs
@@ -320,11 +338,12 @@ def cmd_predict(args) -> int:
         est = estimate_methods(model, img0, img1, K0, K1,
                                FrontendConfig(detector=args.detector), methods,
                                bootstrap=args.bootstrap)
+        kind = (model.config if model is not None else _shipped_config()).translation
         if inputs.downscaled:
             _intrinsics_in_original_frame(est, inputs)
     code = STATUS_EXIT[est.status]
     if args.json:
-        print(json.dumps({**est.to_dict(), "translation_kind": model.config.translation,
+        print(json.dumps({**est.to_dict(), "translation_kind": kind,
                           "intrinsics": K0 is not None}))
         return code
     print(f"matches: {est.num_points} points, {est.num_lines} lines")

@@ -314,6 +314,17 @@ class PairMatches:
         )
         return PairMatches(**kwargs)
 
+    def swapped(self) -> PairMatches:
+        """The same pair seen from image 1: every ``0`` field exchanged with its ``1`` field
+        (row order kept). ``info`` entries that hold image-ordered geometry (the front end's
+        fundamental matrix and its inliers) are left out; the rest is copied."""
+        info = {k: v for k, v in self.info.items()
+                if k not in ("fundamental", *_POINT_ROW_KEYS)}
+        return PairMatches(
+            self.points1, self.points0, self.lines1, self.lines0, self.image_size1,
+            self.image_size0, self.point_scores, self.line_scores, self.K1, self.K0,
+            self.image1, self.image0, info)
+
     @classmethod
     def from_normalized(cls, x0: Any, x1: Any, K0: Any, K1: Any, image_size0: Any,
                         image_size1: Any, lines0: Any = None, lines1: Any = None,

@@ -42,6 +42,7 @@ class EstimatorConfig:
     resample: Any = "model"
     device: Any = None
     raise_errors: bool = False
+    swap_check: bool = True
 
     def __post_init__(self) -> None:
         if isinstance(self.methods, str):  # one method by name (tuple("poselib") spelt letters)
@@ -71,8 +72,9 @@ class EstimatorConfig:
                 raise ValueError(f"Expected resample 'model', None or (points, lines) >= 0 "
                                  f"(got {r!r})")
             object.__setattr__(self, "resample", (int(r[0]), int(r[1])))
-        if not isinstance(self.raise_errors, bool):
-            raise ValueError(f"Expected raise_errors as a bool (got {self.raise_errors!r})")
+        for name in ("raise_errors", "swap_check"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"Expected {name} as a bool (got {getattr(self, name)!r})")
         object.__setattr__(self, "threshold_px", float(self.threshold_px))
         object.__setattr__(self, "min_inlier_ratio", float(self.min_inlier_ratio))
         object.__setattr__(self, "min_in_front", float(self.min_in_front))

@@ -319,15 +319,17 @@ def _pair_rules(results: dict[str, MethodResult], matches: PairMatches,
 _SHIPPED_METADATA: list = []
 
 
-def _shipped_metadata() -> Any:
-    """The default shipped checkpoint's metadata, as an object with ``metadata`` (what the
-    calibration and order helpers read), read once per process without building the model."""
+def shipped_header() -> Any:
+    """The default shipped checkpoint's metadata and config, as an object with ``metadata``
+    (what the calibration and order helpers read) and ``config``, read once per process
+    without building the model."""
     if not _SHIPPED_METADATA:
         from types import SimpleNamespace
 
         from strl_pyg.model.strl_pose import StrLPose
 
-        _SHIPPED_METADATA.append(SimpleNamespace(metadata=StrLPose.pretrained_metadata()))
+        config, metadata = StrLPose.pretrained_header()
+        _SHIPPED_METADATA.append(SimpleNamespace(metadata=metadata, config=config))
     return _SHIPPED_METADATA[0]
 
 
@@ -398,6 +400,11 @@ class PoseEstimator:
         resample: the regression's input graph: ``"model"`` (default: the point / line counts
             the checkpoint was trained with, seeded by ``seed``), ``(points, lines)`` or
             ``None`` (every match).
+        swap_check: the regression also runs on the swapped pair (image 1 first) and its
+            covariance grows by the disagreement of the two passes
+            (:func:`~strl_pyg.inference.methods.swap_covariance`; default ``True``): the
+            network's own variances are fitted on its training distribution and stay small
+            away from it.
     """
 
     def __init__(self, model: Any = None, methods: Any = None, *,
@@ -435,6 +442,12 @@ class PoseEstimator:
     raise_errors = property(lambda self: self.config.raise_errors)
 
     @property
+    def model_config(self) -> Any:
+        """The model's :class:`~strl_pyg.model.StrLPoseConfig`, without building the shipped
+        network when none was given."""
+        return self._metadata_source().config
+
+    @property
     def settings(self) -> CheckpointSettings:
         """What the checkpoint's metadata says about estimation (calibration, recommended
         order, ...), read once: from the model when one was given or built, else from the
@@ -460,7 +473,7 @@ class PoseEstimator:
         was given or built, else the shipped checkpoint's metadata alone (read once, without
         building the network)."""
         # without a model the one built later is the shipped one: its metadata is the same
-        return self._model if self._model is not None else _shipped_metadata()
+        return self._model if self._model is not None else shipped_header()
 
     def estimate(self, matches: PairMatches, known: dict[str, MethodResult] | None = None,
                  methods: Any = None) -> PoseEstimate:
@@ -479,7 +492,8 @@ class PoseEstimator:
         # only); the network itself is built only when a method needs it
         settings = self.settings
         ctx = MethodContext(self.seed, self.threshold_px, self.bootstrap, self.device,
-                            self.resample, load_model=lambda: self.model, settings=settings)
+                            self.resample, load_model=lambda: self.model, settings=settings,
+                            swap_check=self.config.swap_check)
         for name in names:
             if known and name in known:
                 ctx.results[name] = known[name]

@@ -25,6 +25,7 @@ optimistic for RANSAC estimates), the fused one from the information-form fusion
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -64,6 +65,9 @@ class MethodContext:
     cache: dict[str, Any] = field(default_factory=dict)
     #: what the checkpoint says (calibration, fusion inflation); None: read from ``model``
     settings: CheckpointSettings | None = None
+    #: the regression also runs on the swapped pair and widens its covariance by the two
+    #: passes' disagreement (:func:`swap_covariance`)
+    swap_check: bool = True
 
     @property
     def model(self) -> torch.nn.Module:
@@ -95,8 +99,50 @@ def _regression(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     info = {"quaternion": q, "translation": t, "log_var": lv,
             "sigma_components": torch.exp(0.5 * lv),
             "translation_kind": model.config.translation}
-    return MethodResult("regression", "ok", Pose.from_quaternion(q, t).matrix().numpy(), cov,
-                        time_ms=ms, info=info, raw=out)
+    pose = Pose.from_quaternion(q, t)
+    warnings = []
+    if ctx.swap_check:
+        start = time.perf_counter()
+        found = _swap_disagreement(model, matches, ctx, pose)
+        ms += (time.perf_counter() - start) * 1e3
+        if found is None:
+            warnings.append("regression: no swap check (the swapped pair's forward pass gave "
+                            "a non-finite or zero pose)")
+        else:
+            rot, trans = found
+            cov = cov + swap_covariance(rot, trans)
+            info["swap_disagreement_deg"] = {"rotation": math.degrees(rot),
+                                             "translation": math.degrees(trans)}
+    return MethodResult("regression", "ok", pose.matrix().numpy(), cov, warnings, time_ms=ms,
+                        info=info, raw=out)
+
+
+def swap_covariance(rotation_rad: float, translation_rad: float) -> np.ndarray:
+    """The ``[5, 5]`` tangent covariance that a disagreement between the network's pose and
+    the inverse of its pose of the swapped pair adds (:data:`MethodContext.swap_check`): were
+    the two errors independent and alike, their difference would hold twice the variance of
+    each, spread over the 3 rotation and the 2 direction axes, so ``d_R^2 / 6`` and
+    ``d_t^2 / 4`` per axis. The network's own log-variances are fitted on the training
+    distribution and stay small away from it; the two passes disagree there."""
+    return np.diag([rotation_rad ** 2 / 6] * 3 + [translation_rad ** 2 / 4] * 2)
+
+
+def _swap_disagreement(model: torch.nn.Module, matches: PairMatches, ctx: MethodContext,
+                       pose: Any) -> tuple[float, float] | None:
+    """Angles (rad) between ``pose`` and the inverse of the network's pose of the swapped
+    pair: rotation, translation direction; ``None`` when that pose is not finite."""
+    from strl_pyg.geometry import Pose
+
+    back = network_pose(model, matches.swapped(), ctx.seed, ctx.resample, ctx.device)
+    qb, tb = (x[0].detach().cpu().double() for x in (back.quaternion, back.translation))
+    if not (bool(torch.isfinite(qb).all()) and bool(torch.isfinite(tb).all())
+            and float(tb.norm()) > 1e-12):
+        return None
+    b = Pose.from_quaternion(qb, tb)
+    R_inv, t_inv = b.R.T, -(b.R.T @ b.t)
+    cos_r = ((torch.trace(pose.R.T @ R_inv) - 1) / 2).clamp(-1, 1)
+    cos_t = (pose.t @ t_inv / (pose.t.norm() * t_inv.norm())).clamp(-1, 1)
+    return float(torch.arccos(cos_r)), float(torch.arccos(cos_t))
 
 
 def _classical(name: str) -> MethodFn:

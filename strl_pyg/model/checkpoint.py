@@ -208,9 +208,10 @@ class CheckpointIO:
                                     f"strl_pyg package at {path} (got none)")
 
     @classmethod
-    def pretrained_metadata(cls, name: str = "geometric") -> dict[str, Any]:
-        """The training metadata of a shipped checkpoint (calibration, recommended order, ...),
-        checked as :meth:`from_pretrained` checks the file, without building the network."""
+    def pretrained_header(cls, name: str = "geometric") -> tuple[StrLPoseConfig, dict[str, Any]]:
+        """The config and the training metadata (calibration, recommended order, ...) of a
+        shipped checkpoint, checked as :meth:`from_pretrained` checks the file, without
+        building the network."""
         if name not in cls.PRETRAINED:
             raise ValueError(f"Expected a pretrained name in {tuple(cls.PRETRAINED)} "
                              f"(got {name!r})")
@@ -222,5 +223,10 @@ class CheckpointIO:
             payload = cls._read_payload(Path(path))
         config = StrLPoseConfig.from_dict(payload["config"])
         md = payload.get("metadata")
-        return cls._check_metadata(fallback if md is None else md, config)
+        return config, cls._check_metadata(fallback if md is None else md, config)
+
+    @classmethod
+    def pretrained_metadata(cls, name: str = "geometric") -> dict[str, Any]:
+        """The training metadata of a shipped checkpoint (:meth:`pretrained_header`)."""
+        return cls.pretrained_header(name)[1]
 
