@@ -84,8 +84,8 @@ def _raw(model, sets: dict) -> dict:
 
 def _variant(raw: dict, scale: float, inflation: float, tau: float | None) -> dict:
     from strl_pyg.estimation.classical import normalised_matches
-    from strl_pyg.estimation.pose_fusion import fuse_poses
     from strl_pyg.estimation.guided import msac_cost
+    from strl_pyg.estimation.pose_fusion import fuse_poses
 
     res = {}
     for name, rows in raw.items():
