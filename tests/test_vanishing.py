@@ -571,3 +571,23 @@ def test_vp_and_vp_checked_find_the_directions_once_and_vp_is_unchanged(monkeypa
     assert vp.status == "ok"
     np.testing.assert_array_equal(vp.T_0to1, ref.T_0to1.matrix().numpy())
     assert "line_angle_deg" in est.methods["vp_checked"].info
+
+
+def test_the_closed_form_vp_residuals_agree_with_the_cross_product_reference():
+    """The consensus's fast path (three [H, 3] @ [3, M] products) against the [H, M, 3] cross
+    products of the refinement, vanishing points at infinity included."""
+    import torch
+
+    from strl_pyg.estimation.line_refine import _vp_residual_px, _vp_residuals
+
+    rng = np.random.default_rng(0)
+    ends = np.concatenate([rng.uniform(0, 640, (40, 2, 2)), np.ones((40, 2, 1))], axis=-1)
+    mids = ends.mean(axis=1)
+    K = np.array([[500.0, 0, 320], [0, 480, 240], [0, 0, 1]])
+    d = rng.normal(size=(300, 3))
+    d[:10, 2] = 0.0
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    ref = _vp_residuals(*(torch.from_numpy(a) for a in (d, K, ends, mids))).abs().numpy()
+    fast = _vp_residual_px(d, K, ends, mids)
+    assert fast.shape == (300, 40)
+    np.testing.assert_allclose(fast, ref, rtol=1e-9, atol=1e-9)

@@ -242,7 +242,7 @@ register_method("geometric", _geometric, uses_network=True, reads_lines=True,
 register_method("guided", _guided, uses_network=True, reads_lines=True, bootstrapped=True,
                 classical_base=True, depends_on=("classical",), needs_geometric_head=True,
                 label="network-guided classical solve")
-register_method("vp", _vp, reads_lines=True,
+register_method("vp", _vp, reads_lines=True, depends_on=("classical",),
                 label="vanishing-point rotation + 2-point translation")
 register_method("vp_checked", _vp_checked, reads_lines=True, depends_on=("classical", "vp"),
                 label="PoseLib checked by the lines' vanishing direction")
@@ -494,12 +494,16 @@ class PoseEstimator:
         ctx = MethodContext(self.seed, self.threshold_px, self.bootstrap, self.device,
                             self.resample, load_model=lambda: self.model, settings=settings,
                             swap_check=self.config.swap_check)
-        for name in names:
+        registry = list(METHODS)
+        # the registry's order: a method that reads another's result (fused, vp's start,
+        # vp_checked) runs after it, whatever order the caller named them in
+        for name in sorted(names, key=registry.index):
             if known and name in known:
                 ctx.results[name] = known[name]
                 continue
             res = self._support(self._run(name, matches, ctx, degenerate), matches)
             ctx.results[name] = self._calibrated(name, res, settings)
+        ctx.results = {name: ctx.results[name] for name in names}  # the caller's order
         _pair_rules(ctx.results, matches, rows)
         estimate = self._recommend(ctx.results, warnings, matches)
         estimate.point_rows = rows

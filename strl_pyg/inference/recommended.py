@@ -96,8 +96,11 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
         ``(lines, None)``, or the estimator's own "degenerate" estimate when nothing matches."""
         lines = cfg.lines and any(METHODS[m].reads_lines for m in run if m in METHODS)
         if lines and lines not in matches and False in matches:
-            # one pass per pair: the lines join the points already matched (no second SIFT)
+            # one pass per pair: the lines join the points already matched (no second SIFT);
+            # the same points, so what the methods that read no lines found on them holds
             matches[lines] = add_lines(matches[False], dataclasses.replace(cfg, lines=True))
+            done[lines] = {m: r for m, r in done.get(False, {}).items()
+                           if not METHODS[m].reads_lines}
         if lines not in matches:
             try:
                 matches[lines] = match_images(image0, image1, K0, K1,
