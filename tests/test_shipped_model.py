@@ -64,3 +64,21 @@ def test_trained_model_beats_the_zero_rotation_predictor_on_held_out_pairs(model
         errs.append(float(rotation_error_deg(est.R, gt.R)[0]))
         trivial.append(float(rotation_error_deg(torch.eye(3), gt.R)))
     assert np.median(errs) < np.median(trivial), (errs, trivial)
+
+
+@pytest.mark.parametrize("name", ["geometric", "synthetic"])
+def test_the_shipped_files_are_in_the_current_layout(name):
+    """The legacy key map (strl_pyg.model.legacy) is for users' older checkpoints; the files
+    we ship are saved in today's layout (0.3 shipped the synthetic weights with version-1 key
+    names) and carry their metadata."""
+    from importlib.resources import as_file, files
+
+    from strl_pyg.model.legacy import upgrade_key
+    from strl_pyg.utils.io import safe_torch_load
+
+    file = StrLPose.PRETRAINED[name][0]
+    with as_file(files("strl_pyg") / "weights" / file) as path:
+        payload = safe_torch_load(path, "StrLPose checkpoint", "cpu")
+    assert payload["version"] == StrLPose._VERSION
+    assert [k for k in payload["state_dict"] if upgrade_key(k) != k] == []
+    assert payload["metadata"]["training_data"]
