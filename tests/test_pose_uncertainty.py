@@ -39,7 +39,8 @@ def test_bootstrap_is_seeded_psd_and_grows_with_the_noise(pair):
 
 
 def _serial_bootstrap(m, pose, method, n, thr, seed):
-    """The bootstrap as one loop (the code before the resamples were threaded)."""
+    """The bootstrap as one loop of PairMatches resamples (the code before the resamples were
+    threaded and, for PoseLib, cut from the pair normalised once): the reference path."""
     from strl_pyg.estimation.pose_fusion import pose_to_tangent, tangent_basis
 
     R0, t0 = pose.R.double(), pose.t.double() / pose.t.double().norm()

@@ -230,12 +230,23 @@ def _opencv(matches, threshold_px, confidence, max_iterations, seed,
 
 
 def _poselib(matches, poselib, threshold_px, confidence, max_iterations, seed) -> BaselineResult:
-    n = matches.num_points
     start = time.perf_counter()
     x0, x1, thr = _normalised(matches, threshold_px)
+    return poselib_normalised(x0, x1, thr, poselib, confidence, max_iterations, seed, start)
+
+
+def poselib_normalised(x0: np.ndarray, x1: np.ndarray, threshold: float, poselib: Any,
+                       confidence: float = 0.9999, max_iterations: int = 10000,
+                       seed: int = 0, start: float | None = None) -> BaselineResult:
+    """PoseLib's relative pose of matches already in normalised camera coordinates
+    (``x0``, ``x1`` contiguous float64 ``[N, 2]``, ``threshold`` in normalised units): the
+    solve of :func:`estimate_relative_pose` after its normalisation, for callers that solve
+    many subsets of one pair (the bootstrap) and normalise it once."""
+    n = len(x0)
+    start = time.perf_counter() if start is None else start
     cam = {"model": "PINHOLE", "width": 2, "height": 2, "params": [1.0, 1.0, 0.0, 0.0]}
     ransac = {
-        "max_epipolar_error": float(thr),
+        "max_epipolar_error": float(threshold),
         "success_prob": float(confidence),
         "max_iterations": int(max_iterations),
         "min_iterations": min(100, int(max_iterations)),

@@ -141,7 +141,22 @@ def bootstrap_resamples(matches: PairMatches, pose: Pose, method: str = "poselib
                        else matches.point_scores[draws[0]],
                        lines0=None, lines1=None, line_scores=None, image0=None, image1=None)
 
+    fast = None
+    if method == "poselib" and matches.has_intrinsics:
+        # the pair normalised once, the resamples' rows taken from it (normalising is per
+        # point, so this is the same input as normalising each resample)
+        import poselib
+
+        from strl_pyg.estimation.classical import _normalised, poselib_normalised
+
+        fast = _normalised(matches, threshold_px)
+
     def solve(b: int):
+        if fast is not None:
+            idx = draws[b]
+            return poselib_normalised(np.ascontiguousarray(fast[0][idx]),
+                                      np.ascontiguousarray(fast[1][idx]), fast[2], poselib,
+                                      seed=seed + b + 1)
         sample = template
         if b:
             idx = draws[b]
