@@ -18,7 +18,8 @@ What does belong there, and is all that a later session needs when the machine (
 its per-pair errors on every evaluation set (``runs/<run>.json``) and its validation history
 (``history/<run>.json``), plus PoseLib's errors and the pair ids of every set. A finished run
 is scored as soon as it ends (``train --eval``), so the study accumulates across sessions on
-machines that do not keep ``--root``; ``report`` and ``curves`` read only :data:`RESULTS`.
+machines that do not keep ``--root``; ``report`` and ``curves`` read only :data:`RESULTS`
+(and ``notes.md`` there, what the runs say in words, placed above the report's tables).
 
 Two workers (one per core) share the plan: each run is claimed by a ``claim`` file (with the
 worker's pid) before it starts, so ``train`` may be started twice::
@@ -443,6 +444,9 @@ def cmd_report(args: argparse.Namespace) -> int:
                     r, lo, hi, k = ae.paired_ratio(ea[n], eb[n], which)
                     cells.append(f"{r:.2f} [{lo:.2f}-{hi:.2f}]" if k else "-")
                 lines.append(f"| {a} vs {b} | {label} | " + " | ".join(cells) + " |")
+    notes = ev / "notes.md"  # what the runs say, written by hand: kept above the tables
+    if notes.is_file():
+        lines[1:1] = ["", notes.read_text().rstrip()]
     out = Path(args.out)
     out.write_text("\n".join(lines) + "\n")
     print(f"wrote {out}")
