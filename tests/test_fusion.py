@@ -244,6 +244,7 @@ def test_estimator_fusion_uses_the_checkpoints_inflation():
 
     from strl_pyg.estimation.pose_fusion import fuse_poses
     from strl_pyg.inference.estimator import PoseEstimator
+    from strl_pyg.inference.methods import swap_covariance
     from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.synthetic import SceneConfig, generate_pair
 
@@ -258,7 +259,34 @@ def test_estimator_fusion_uses_the_checkpoints_inflation():
         recs = est.estimate(pair.matches).methods
         scale = s_reg * (1.0 if k is None else k)
         assert recs["fused"].info["network_variance_scale"] == pytest.approx(scale)
+        swap = recs["regression"].info["swap_disagreement_deg"]
+        extra = swap_covariance(math.radians(swap["rotation"]),
+                                math.radians(swap["translation"]))
         ref = fuse_poses(recs["regression"].raw, None, recs["opencv"].raw, pair.matches,
-                         network_scale=scale)
+                         network_scale=scale, network_extra=extra)
         np.testing.assert_allclose(recs["fused"].T_0to1, ref.pose.matrix().numpy(),
                                    rtol=0, atol=1e-12)
+
+
+def test_the_swap_checks_extra_covariance_moves_the_fusion_towards_the_classical_pose(
+        noisy_pair):
+    pair, classical = noisy_pair
+    Rc, tc = classical.pose.R, classical.pose.t
+    B = tangent_basis(tc)
+    x_net = torch.tensor([0.0, 0.0, 0.0, 0.05, 0.0], dtype=torch.float64)
+    net = tangent_to_pose(x_net, Rc, tc, B)
+    _, cov_c, _ = classical_covariance(classical.pose, pair.matches, classical.inliers)
+    lv = torch.full((7,), math.log(float(cov_c[3, 3])))
+    plain = fuse_poses(net, lv, classical, pair.matches)
+    zero = fuse_poses(net, lv, classical, pair.matches, network_extra=np.zeros((5, 5)))
+    assert torch.equal(plain.pose.t, zero.pose.t)
+    assert torch.equal(plain.covariance, zero.covariance)
+    extra = np.diag([0.0] * 3 + [9.0 * float(cov_c[3, 3])] * 2)
+    wide = fuse_poses(net, lv, classical, pair.matches, network_extra=extra)
+    d_plain = float(pose_to_tangent(plain.pose, Rc, tc, B)[3])
+    d_wide = float(pose_to_tangent(wide.pose, Rc, tc, B)[3])
+    assert 0.0 < d_wide < d_plain  # the network counts less
+    torch.testing.assert_close(wide.network_covariance,
+                               plain.network_covariance + torch.as_tensor(extra))
+    with pytest.raises(ValueError, match=r"Expected network_extra as a finite \[5, 5\]"):
+        fuse_poses(net, lv, classical, pair.matches, network_extra=np.eye(3))

@@ -348,6 +348,7 @@ def fuse_poses(
     inflation: float = 1.0,
     gate_chi2: float | None = GATE_CHI2,
     network_scale: float = 1.0,
+    network_extra: Any = None,
 ) -> FusedPose:
     """Fuses the network's ``T_0to1`` with a classical robust estimate (module docstring).
 
@@ -374,6 +375,9 @@ def fuse_poses(
         gate_chi2: consistency-gate threshold on ``d2``; ``None`` fuses always.
         network_scale: variance multiplier of the network covariance (its calibration,
             e.g. the fitted scale a checkpoint stores; default 1).
+        network_extra: ``[5, 5]`` covariance added to the network's own before the scale,
+            isotropic in each block (so the same in any tangent basis): the swap check's
+            disagreement term (:func:`strl_pyg.inference.methods.swap_covariance`).
 
     Returns:
         :class:`FusedPose`.
@@ -393,6 +397,12 @@ def fuse_poses(
     if threshold_px is not None and not threshold_px > 0:
         raise ValueError(f"Expected threshold_px > 0 or None (got {threshold_px})")
     q, t_net, lv = _network_inputs(net_pose, net_log_var)
+    extra = torch.zeros(5, 5, dtype=torch.float64)
+    if network_extra is not None:
+        extra = torch.as_tensor(np.asarray(network_extra, dtype=np.float64))
+        if extra.shape != (5, 5) or not bool(torch.isfinite(extra).all()):
+            raise ValueError(f"Expected network_extra as a finite [5, 5] covariance (got "
+                             f"shape {tuple(extra.shape)})")
     scale = float(t_net.norm())
     net = Pose.from_quaternion(q, t_net)
     inliers = np.asarray(classical.inliers, dtype=bool).reshape(-1)
@@ -405,7 +415,7 @@ def fuse_poses(
     t_c = classical.pose.t.double()
     if not classical.success or n_in < MIN_INLIERS or float(t_c.norm()) < 1e-12:
         basis = tangent_basis(t_net)
-        cov = network_covariance(q, t_net, lv, basis)
+        cov = network_covariance(q, t_net, lv, basis) + extra
         return FusedPose(net.to(torch.float64), cov, torch.ones(5, dtype=torch.float64),
                          "network", cov, None,
                          {"num_inliers": n_in, "sigma_px": float("nan"),
@@ -415,7 +425,7 @@ def fuse_poses(
     basis = tangent_basis(t_c)
     info_c, cov_c, sigma_px = classical_covariance(classical.pose, matches, inliers,
                                                    min_sigma_px, threshold_px, inflation)
-    cov_n = network_covariance(q, t_net, lv, basis) * network_scale
+    cov_n = (network_covariance(q, t_net, lv, basis) + extra) * network_scale
     x_n = pose_to_tangent(net, R_c, t_c, basis)
     d2 = float(x_n @ torch.linalg.pinv(cov_c + cov_n, hermitian=True) @ x_n)
     gate = {"d2": d2, "threshold": gate_chi2, "fused": True}

@@ -460,8 +460,11 @@ def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     # keeps the 95 % upper bound of the median change against the classical pose <= +5 %)
     settings = ctx.settings if ctx.settings is not None else CheckpointSettings.of(ctx.model)
     scale = settings.calibration.get("regression", 1.0) * settings.fusion_inflation
+    swap = net.info.get("swap_disagreement_deg")  # the swap check's term, as the regression's
+    extra = None if swap is None else swap_covariance(math.radians(swap["rotation"]),
+                                                      math.radians(swap["translation"]))
     f = fuse_poses(net.raw, None, cls.raw, matches, threshold_px=ctx.threshold_px,
-                   network_scale=scale)
+                   network_scale=scale, network_extra=extra)
     ms = (time.perf_counter() - start) * 1e3 + net.time_ms + cls.time_ms
     if f.source == "network":
         return MethodResult("fused", "failed", time_ms=ms, raw=f, warnings=[
