@@ -396,6 +396,7 @@ def fit_fusion_inflation(estimator, pairs, s_reg: float) -> tuple[float, dict]:
     Returns ``(k, {k: [rot ratio, low, high, trans ratio, low, high]})``."""
     from strl_pyg.estimation.classical import have_poselib
     from strl_pyg.estimation.pose_fusion import fuse_poses
+    from strl_pyg.inference.methods import swap_covariance
 
     classical = ("poselib", "opencv") if have_poselib() else ("opencv",)
     model = estimator.model
@@ -409,13 +410,17 @@ def fit_fusion_inflation(estimator, pairs, s_reg: float) -> tuple[float, dict]:
             # as the fused method: the first 'ok' classical estimate
             cls = next((recs[c] for c in classical if recs[c].status == "ok"), None)
             if recs["regression"].status == "ok" and cls is not None:
-                solved.append((m, T, recs["regression"].raw, cls.raw))
+                # the swap check's term, as the fused method adds it (methods._fused)
+                swap = recs["regression"].info.get("swap_disagreement_deg")
+                extra = None if swap is None else swap_covariance(
+                    math.radians(swap["rotation"]), math.radians(swap["translation"]))
+                solved.append((m, T, recs["regression"].raw, cls.raw, extra))
     evidence, chosen = {}, FUSION_INFLATIONS[-1]
     for k in FUSION_INFLATIONS:
         cls_e, fus_e = [], []
-        for m, T, net, cls in solved:
+        for m, T, net, cls, extra in solved:
             f = fuse_poses(net, None, cls, m, threshold_px=estimator.threshold_px,
-                           network_scale=s_reg * k)
+                           network_scale=s_reg * k, network_extra=extra)
             if f.source == "network":  # too few inliers: the fused method reports "failed"
                 continue
             cls_e.append(errors(cls.pose.matrix().numpy(), T))

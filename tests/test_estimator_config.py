@@ -104,3 +104,30 @@ def test_the_swap_check_widens_the_regression_covariance_by_the_disagreement():
         atol=1e-12)
     np.testing.assert_allclose(swap_covariance(0.6, 0.4),
                                np.diag([0.06, 0.06, 0.06, 0.04, 0.04]))
+
+
+def test_numpy_scalars_are_options_as_python_ones():
+    """Review finding: the config refused numpy scalars the 0.3 constructor took."""
+    cfg = EstimatorConfig(seed=np.int64(3), resample=(np.int64(10), np.int64(5)),
+                          threshold_px=np.float32(1.5), raise_errors=np.True_,
+                          bootstrap=np.int32(8), min_inliers=np.int64(4))
+    assert cfg == EstimatorConfig(seed=3, resample=(10, 5), threshold_px=1.5,
+                                  raise_errors=True, bootstrap=8, min_inliers=4)
+    assert type(cfg.seed) is int and type(cfg.raise_errors) is bool
+    with pytest.raises(ValueError, match="Expected methods from"):
+        EstimatorConfig(methods=("poselibb",))
+
+
+def test_a_failing_swap_pass_leaves_the_regression_with_a_warning(monkeypatch):
+    import strl_pyg.inference.methods as methods
+
+    def boom(*a, **k):
+        raise RuntimeError("out of memory\nmore")
+
+    monkeypatch.setattr(methods, "_swap_disagreement", boom)
+    m = generate_pair(2_000_005).matches
+    rec = PoseEstimator(methods="regression").estimate(m).methods["regression"]
+    off = PoseEstimator(methods="regression", swap_check=False).estimate(m).methods["regression"]
+    assert rec.status == "ok" and "swap_disagreement_deg" not in rec.info
+    assert any("raised RuntimeError: out of memory)" in w for w in rec.warnings)
+    np.testing.assert_array_equal(rec.covariance, off.covariance)

@@ -7,8 +7,11 @@ variance inflation)."""
 from __future__ import annotations
 
 import dataclasses
+import numbers
 from dataclasses import dataclass, field
 from typing import Any
+
+import numpy as np
 
 from strl_pyg.estimation.uncertainty import MIN_BOOTSTRAP
 from strl_pyg.inference.checks import check_device
@@ -18,11 +21,13 @@ __all__ = ["EstimatorConfig", "CheckpointSettings"]
 
 
 def _is_int(v: Any) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
+    """An integer, numpy's included, not a bool."""
+    return isinstance(v, numbers.Integral) and not isinstance(v, (bool, np.bool_))
 
 
 def _is_number(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
+    """A real number, numpy's included, not a bool."""
+    return isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
 
 
 @dataclass(frozen=True)
@@ -45,12 +50,17 @@ class EstimatorConfig:
     swap_check: bool = True
 
     def __post_init__(self) -> None:
-        if isinstance(self.methods, str):  # one method by name (tuple("poselib") spelt letters)
-            object.__setattr__(self, "methods", (self.methods,))
-        elif self.methods is not None:
-            object.__setattr__(self, "methods", tuple(self.methods))
+        if self.methods is not None:
+            from strl_pyg.inference.estimator import _checked_names  # imports this module
+
+            object.__setattr__(self, "methods", _checked_names(self.methods))
         if not _is_int(self.seed):
             raise ValueError(f"Expected seed as an integer (got {self.seed!r})")
+        object.__setattr__(self, "seed", int(self.seed))
+        if _is_int(self.bootstrap):
+            object.__setattr__(self, "bootstrap", int(self.bootstrap))
+        if _is_int(self.min_inliers):
+            object.__setattr__(self, "min_inliers", int(self.min_inliers))
         if not (_is_number(self.threshold_px) and self.threshold_px > 0):
             raise ValueError(f"Expected threshold_px > 0 (got {self.threshold_px!r})")
         if not _is_int(self.bootstrap) or not (self.bootstrap == 0
@@ -73,8 +83,10 @@ class EstimatorConfig:
                                  f"(got {r!r})")
             object.__setattr__(self, "resample", (int(r[0]), int(r[1])))
         for name in ("raise_errors", "swap_check"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"Expected {name} as a bool (got {getattr(self, name)!r})")
+            value = getattr(self, name)
+            if not isinstance(value, (bool, np.bool_)):
+                raise ValueError(f"Expected {name} as a bool (got {value!r})")
+            object.__setattr__(self, name, bool(value))
         object.__setattr__(self, "threshold_px", float(self.threshold_px))
         object.__setattr__(self, "min_inlier_ratio", float(self.min_inlier_ratio))
         object.__setattr__(self, "min_in_front", float(self.min_in_front))

@@ -493,7 +493,9 @@ class PoseEstimator:
         settings = self.settings
         ctx = MethodContext(self.seed, self.threshold_px, self.bootstrap, self.device,
                             self.resample, load_model=lambda: self.model, settings=settings,
-                            swap_check=self.config.swap_check)
+                            swap_check=self.config.swap_check,
+                            support=(self.min_inlier_ratio, self.min_inliers,
+                                     self.min_in_front))
         registry = list(METHODS)
         # the registry's order: a method that reads another's result (fused, vp's start,
         # vp_checked) runs after it, whatever order the caller named them in
@@ -604,10 +606,8 @@ class PoseEstimator:
         return self.estimate(matches, methods=names)
 
     def _support(self, res: MethodResult, matches: PairMatches) -> MethodResult:
-        spec = METHODS.get(res.method)
         return check_support(res, matches, self.threshold_px, self.min_inlier_ratio,
-                             self.min_inliers, self.min_in_front,
-                             checked=spec is not None and spec.support_checked)
+                             self.min_inliers, self.min_in_front)  # checked: the registry's
 
     def _recommend(self, results: dict[str, MethodResult], warnings: list[str],
                    matches: PairMatches) -> PoseEstimate:

@@ -68,6 +68,9 @@ class MethodContext:
     #: the regression also runs on the swapped pair and widens its covariance by the two
     #: passes' disagreement (:func:`swap_covariance`)
     swap_check: bool = True
+    #: the support check's ``(min_inlier_ratio, min_inliers, min_in_front)``, for methods that
+    #: check a pose themselves (``vp``'s classical start); None: check_support's defaults
+    support: tuple = ()
 
     @property
     def model(self) -> torch.nn.Module:
@@ -103,11 +106,17 @@ def _regression(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     warnings = []
     if ctx.swap_check:
         start = time.perf_counter()
-        found = _swap_disagreement(model, matches, ctx, pose)
-        ms += (time.perf_counter() - start) * 1e3
-        if found is None:
-            warnings.append("regression: no swap check (the swapped pair's forward pass gave "
-                            "a non-finite or zero pose)")
+        try:
+            found = _swap_disagreement(model, matches, ctx, pose)
+        except Exception as err:  # the forward pose stands; only its check is missing
+            found = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
+        # its own time: time_ms stays the forward pass's, comparable with runs without it
+        info["swap_check_ms"] = (time.perf_counter() - start) * 1e3
+        if found is None or isinstance(found, str):
+            why = ("the swapped pair's forward pass gave a non-finite or zero pose"
+                   if found is None else f"the swapped pair's forward pass raised {found}")
+            warnings.append(f"regression: no swap check ({why}); its covariance is the "
+                            "network's own")
         else:
             rot, trans = found
             cov = cov + swap_covariance(rot, trans)
@@ -202,8 +211,8 @@ def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
         base = "poselib" if have_poselib() else "opencv"
         cls = ctx.results.get(base) or ctx.cache.get("vp_start")
         if cls is None:
-            cls = ctx.cache["vp_start"] = check_support(_classical(base)(matches, ctx), matches,
-                                                        ctx.threshold_px)
+            cls = ctx.cache["vp_start"] = check_support(
+                _classical(base)(matches, ctx), matches, ctx.threshold_px, *ctx.support)
         starts = [cls.T_0to1] if cls.status == "ok" else []
     res = vanishing_point_pose(matches, ctx.threshold_px, seed=ctx.seed,
                                directions=_vanishing_directions(matches, ctx), starts=starts,

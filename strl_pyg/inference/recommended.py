@@ -145,13 +145,14 @@ def estimate_methods(model: Any, image0: np.ndarray, image1: np.ndarray, K0: Any
                      frontend_config: Any, methods: str = "recommended", **estimator_kw: Any):
     """``strl-pose predict --methods``: ``"recommended"`` (:func:`estimate_recommended`),
     ``"all"`` (every installed method) or comma-separated names of
-    :data:`~strl_pyg.inference.estimator.METHODS` (``ValueError`` for others)."""
-    from strl_pyg.inference.estimator import PoseEstimator
+    :data:`~strl_pyg.inference.estimator.METHODS` (``ValueError`` for others); these override
+    the methods of a ``config=``."""
+    from strl_pyg.inference.estimator import METHODS, PoseEstimator
 
     if methods == "recommended":
         return estimate_recommended(model, image0, image1, K0, K1, frontend_config,
                                     **estimator_kw)
-    names = None if methods == "all" else tuple(m.strip() for m in methods.split(",")
-                                                if m.strip())
+    names = (tuple(n for n, s in METHODS.items() if s.available()) if methods == "all"
+             else tuple(m.strip() for m in methods.split(",") if m.strip()))
     return PoseEstimator(model, methods=names, **estimator_kw).estimate_images(
         image0, image1, K0, K1, frontend_config=frontend_config)
