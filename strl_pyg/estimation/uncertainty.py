@@ -87,6 +87,60 @@ def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poseli
     return None if boot is None else boot.covariance
 
 
+def _solve_resamples(matches: PairMatches, draws: list, method: str, threshold_px: float,
+                     seed: int, workers: int) -> list:
+    """The solver's result on each resample (``draws``: row indices), in ``workers``
+    threads; resample ``b`` is solved with seed ``seed + b + 1``."""
+    n = len(draws)
+    fast = template = None
+    if method == "poselib" and matches.has_intrinsics:
+        # the pair normalised once, the resamples' rows taken from it (normalising is per
+        # point, so this is the same input as normalising each resample)
+        import poselib
+
+        from strl_pyg.estimation.classical import _normalised, poselib_normalised
+
+        fast = _normalised(matches, threshold_px)
+    else:
+        # points only: the solver reads neither lines nor images. The first resample is
+        # built (and checked) as a PairMatches; the others are copies of it with their points
+        # swapped in: rows of points already checked need no second check (which held the
+        # GIL for ~0.5 ms per resample, the threads' solves waiting on it)
+        template = replace(matches, points0=matches.points0[draws[0]],
+                           points1=matches.points1[draws[0]],
+                           point_scores=None if matches.point_scores is None
+                           else matches.point_scores[draws[0]], lines0=None, lines1=None,
+                           line_scores=None, image0=None, image1=None)
+
+    def solve(b: int):
+        if fast is not None:
+            idx = draws[b]
+            return poselib_normalised(np.ascontiguousarray(fast[0][idx]),
+                                      np.ascontiguousarray(fast[1][idx]), fast[2], poselib,
+                                      seed=seed + b + 1)
+        sample = template
+        if b:
+            idx = draws[b]
+            sample = copy.copy(template)
+            sample.points0, sample.points1 = matches.points0[idx], matches.points1[idx]
+            if matches.point_scores is not None:
+                sample.point_scores = matches.point_scores[idx]
+        return estimate_relative_pose(sample, method, threshold_px, seed=seed + b + 1)
+
+    workers = min(workers, n)
+    if workers == 1:
+        results = [solve(b) for b in range(n)]
+    else:  # one task per worker (resamples w, w + workers, ...); the last chunk runs here
+        chunks = [range(w, n, workers) for w in range(workers)]
+        futures = [shared_pool("bootstrap", workers - 1).submit(lambda c=c: [solve(b) for b in c])
+                   for c in chunks[1:]]
+        by_index = dict(zip(chunks[0], [solve(b) for b in chunks[0]], strict=True))
+        for c, f in zip(chunks[1:], futures, strict=True):
+            by_index.update(zip(c, f.result(), strict=True))
+        results = [by_index[b] for b in range(n)]
+    return results
+
+
 def bootstrap_resamples(matches: PairMatches, pose: Pose, method: str = "poselib",
                         n: int = 8, threshold_px: float = 1.0, seed: int = 0,
                         workers: int | None = None) -> Bootstrap | None:
@@ -131,52 +185,7 @@ def bootstrap_resamples(matches: PairMatches, pose: Pose, method: str = "poselib
     rng = np.random.default_rng(seed)
     draws = [rng.integers(0, matches.num_points, matches.num_points) for _ in range(n)]
 
-    # points only: the solver reads neither lines nor images. The first resample is built
-    # (and checked) as a PairMatches; the others are copies of it with their points swapped
-    # in: rows of points already checked need no second check (which held the GIL for
-    # ~0.5 ms per resample, the threads' solves waiting on it)
-    template = replace(matches, points0=matches.points0[draws[0]],
-                       points1=matches.points1[draws[0]],
-                       point_scores=None if matches.point_scores is None
-                       else matches.point_scores[draws[0]],
-                       lines0=None, lines1=None, line_scores=None, image0=None, image1=None)
-
-    fast = None
-    if method == "poselib" and matches.has_intrinsics:
-        # the pair normalised once, the resamples' rows taken from it (normalising is per
-        # point, so this is the same input as normalising each resample)
-        import poselib
-
-        from strl_pyg.estimation.classical import _normalised, poselib_normalised
-
-        fast = _normalised(matches, threshold_px)
-
-    def solve(b: int):
-        if fast is not None:
-            idx = draws[b]
-            return poselib_normalised(np.ascontiguousarray(fast[0][idx]),
-                                      np.ascontiguousarray(fast[1][idx]), fast[2], poselib,
-                                      seed=seed + b + 1)
-        sample = template
-        if b:
-            idx = draws[b]
-            sample = copy.copy(template)
-            sample.points0, sample.points1 = matches.points0[idx], matches.points1[idx]
-            if matches.point_scores is not None:
-                sample.point_scores = matches.point_scores[idx]
-        return estimate_relative_pose(sample, method, threshold_px, seed=seed + b + 1)
-
-    workers = min(int(workers), n)
-    if workers == 1:
-        results = [solve(b) for b in range(n)]
-    else:  # one task per worker (resamples w, w + workers, ...); the last chunk runs here
-        chunks = [range(w, n, workers) for w in range(workers)]
-        futures = [shared_pool("bootstrap", workers - 1).submit(lambda c=c: [solve(b) for b in c])
-                   for c in chunks[1:]]
-        by_index = dict(zip(chunks[0], [solve(b) for b in chunks[0]], strict=True))
-        for c, f in zip(chunks[1:], futures, strict=True):
-            by_index.update(zip(c, f.result(), strict=True))
-        results = [by_index[b] for b in range(n)]
+    results = _solve_resamples(matches, draws, method, threshold_px, seed, int(workers))
     ok = [r.pose for r in results if r.success]
     if len(ok) < MIN_BOOTSTRAP:
         return None
