@@ -1,6 +1,6 @@
 """Two ``bench_pose.py`` outputs side by side (the same matches, e.g. the shipped weights and a
 retrained candidate): per set, for the chosen methods, median rotation / translation errors,
-AUC@10 and the 2-sigma coverage of each.
+AUC@10 and the 1- and 2-sigma coverage of each.
 
 Usage::
 
@@ -36,15 +36,15 @@ def main(argv: list[str] | None = None) -> int:
     a, b = read_tables(args.old), read_tables(args.new)
     la, lb = args.labels.split(",")
     sets = list(dict.fromkeys(s for s, _ in a))
-    print(f"| set | method | {la}: rot / trans med (deg) | AUC@10 | 2-sigma | "
-          f"{lb}: rot / trans med (deg) | AUC@10 | 2-sigma |")
-    print("|---|---|---|---|---|---|---|---|")
+    print(f"| set | method | {la}: rot / trans med (deg) | AUC@10 | 1-sigma | 2-sigma | "
+          f"{lb}: rot / trans med (deg) | AUC@10 | 1-sigma | 2-sigma |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for s in sets:
         for m in args.methods.split(","):
             if (s, m) in a and (s, m) in b:
                 x, y = a[(s, m)], b[(s, m)]
-                print(f"| {s} | {m} | {x[0]} / {x[1]} | {x[3]} | {x[7]} | {y[0]} / {y[1]} | "
-                      f"{y[3]} | {y[7]} |")
+                print(f"| {s} | {m} | {x[0]} / {x[1]} | {x[3]} | {x[6]} | {x[7]} | "
+                      f"{y[0]} / {y[1]} | {y[3]} | {y[6]} | {y[7]} |")
     return 0
 
 
