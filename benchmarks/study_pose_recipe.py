@@ -60,6 +60,8 @@ VARIANTS = {
     # follow-ups on "both": the clip (active on 97 % of its steps) and the angular term's weight
     "both-noclip": (["--set", "inputs=flow", "--loss", "balanced", "--grad-clip", "0"]),
     "both-a0.2": (["--set", "inputs=flow", "--loss", "balanced", "--angle-weight", "0.2"]),
+    # a clip above the norms' 95th percentile (46-54 with clip 10 or none): spikes only
+    "both-clip50": (["--set", "inputs=flow", "--loss", "balanced", "--grad-clip", "50"]),
 }
 COMMON = ["--model", "baseline", "--scene-mix", "lines_small", "--data-seed", "0",
           "--val-pairs", "100", "--val-every", "250", "--batch-size", "16", "--lr", "3e-4",
