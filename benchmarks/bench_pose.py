@@ -350,7 +350,9 @@ def fit_calibration(estimator, pairs):
     second pass with both in place, and the recommended order (:func:`recommended_order`).
     Returns ``(scales, order, stats, order_evidence, {"inflation", "evidence"})``."""
     rows = run_set(estimator, pairs, None)
-    scales = _fit_scales(estimator, rows, [m for m in estimator.method_names if m != "fused"])
+    # vp and vp_checked are not calibrated (their covariance is first order, documented so)
+    scales = _fit_scales(estimator, rows, [m for m in estimator.method_names
+                                           if m not in ("fused", "vp", "vp_checked")])
     fusion = {"inflation": 1.0, "evidence": {}}
     if "fused" in estimator.method_names and "regression" in scales:
         # the fusion's network inflation first, then the fused covariance's own scale on fused
@@ -366,7 +368,9 @@ def fit_calibration(estimator, pairs):
         scales.update(_fit_scales(estimator, fused_rows, ["fused"]))
         for row, fused in zip(rows, fused_rows, strict=True):
             row["methods"]["fused"] = fused["methods"].get("fused", {"status": "failed"})
-    stats = {m: summarise(rows, m) for m in estimator.method_names}
+    # vp enters only through the point-poor order and vp_checked is opt-in (not recommended)
+    stats = {m: summarise(rows, m) for m in estimator.method_names
+             if m not in ("vp", "vp_checked")}
     order, evidence = recommended_order(rows, stats)
     return scales, order, stats, evidence, fusion
 
