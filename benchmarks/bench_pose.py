@@ -400,7 +400,7 @@ def fit_fusion_inflation(estimator, pairs, s_reg: float) -> tuple[float, dict]:
     Returns ``(k, {k: [rot ratio, low, high, trans ratio, low, high]})``."""
     from strl_pyg.estimation.classical import have_poselib
     from strl_pyg.estimation.pose_fusion import fuse_poses
-    from strl_pyg.inference.methods import swap_covariance
+    from strl_pyg.inference.methods import swap_term
 
     classical = ("poselib", "opencv") if have_poselib() else ("opencv",)
     model = estimator.model
@@ -414,11 +414,9 @@ def fit_fusion_inflation(estimator, pairs, s_reg: float) -> tuple[float, dict]:
             # as the fused method: the first 'ok' classical estimate
             cls = next((recs[c] for c in classical if recs[c].status == "ok"), None)
             if recs["regression"].status == "ok" and cls is not None:
-                # the swap check's term, as the fused method adds it (methods._fused)
-                swap = recs["regression"].info.get("swap_disagreement_deg")
-                extra = None if swap is None else swap_covariance(
-                    math.radians(swap["rotation"]), math.radians(swap["translation"]))
-                solved.append((m, T, recs["regression"].raw, cls.raw, extra))
+                # the swap check's term, as the fused method adds it
+                solved.append((m, T, recs["regression"].raw, cls.raw,
+                               swap_term(recs["regression"])))
     evidence, chosen = {}, FUSION_INFLATIONS[-1]
     for k in FUSION_INFLATIONS:
         cls_e, fus_e = [], []

@@ -244,7 +244,7 @@ def test_estimator_fusion_uses_the_checkpoints_inflation():
 
     from strl_pyg.estimation.pose_fusion import fuse_poses
     from strl_pyg.inference.estimator import PoseEstimator
-    from strl_pyg.inference.methods import swap_covariance
+    from strl_pyg.inference.methods import swap_covariance, swap_term
     from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.synthetic import SceneConfig, generate_pair
 
@@ -262,6 +262,7 @@ def test_estimator_fusion_uses_the_checkpoints_inflation():
         swap = recs["regression"].info["swap_disagreement_deg"]
         extra = swap_covariance(math.radians(swap["rotation"]),
                                 math.radians(swap["translation"]))
+        np.testing.assert_array_equal(swap_term(recs["regression"]), extra)
         ref = fuse_poses(recs["regression"].raw, None, recs["opencv"].raw, pair.matches,
                          network_scale=scale, network_extra=extra)
         np.testing.assert_allclose(recs["fused"].T_0to1, ref.pose.matrix().numpy(),

@@ -136,6 +136,14 @@ def swap_covariance(rotation_rad: float, translation_rad: float) -> np.ndarray:
     return np.diag([rotation_rad ** 2 / 6] * 3 + [translation_rad ** 2 / 4] * 2)
 
 
+def swap_term(regression: MethodResult) -> np.ndarray | None:
+    """The swap check's :func:`swap_covariance` of a regression record (``None`` when it ran
+    without one): what the fusion adds to the network's variance, as the record did."""
+    swap = regression.info.get("swap_disagreement_deg")
+    return None if swap is None else swap_covariance(math.radians(swap["rotation"]),
+                                                     math.radians(swap["translation"]))
+
+
 def _swap_disagreement(model: torch.nn.Module, matches: PairMatches, ctx: MethodContext,
                        pose: Any) -> tuple[float, float] | None:
     """Angles (rad) between ``pose`` and the inverse of the network's pose of the swapped
@@ -469,11 +477,8 @@ def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     # keeps the 95 % upper bound of the median change against the classical pose <= +5 %)
     settings = ctx.settings if ctx.settings is not None else CheckpointSettings.of(ctx.model)
     scale = settings.calibration.get("regression", 1.0) * settings.fusion_inflation
-    swap = net.info.get("swap_disagreement_deg")  # the swap check's term, as the regression's
-    extra = None if swap is None else swap_covariance(math.radians(swap["rotation"]),
-                                                      math.radians(swap["translation"]))
     f = fuse_poses(net.raw, None, cls.raw, matches, threshold_px=ctx.threshold_px,
-                   network_scale=scale, network_extra=extra)
+                   network_scale=scale, network_extra=swap_term(net))
     ms = (time.perf_counter() - start) * 1e3 + net.time_ms + cls.time_ms
     if f.source == "network":
         return MethodResult("fused", "failed", time_ms=ms, raw=f, warnings=[
@@ -493,9 +498,3 @@ def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     rec = _add_bootstrap(rec, boot, 0 if boot is None else ctx.bootstrap,
                          "information form", f"{cls.method} ")
     return rec
-
-
-def fusion_inflation(model: Any) -> float:
-    """Multiplier of the network's calibrated variance in the fusion
-    (``metadata["fusion_inflation"]``, 1 when absent)."""
-    return CheckpointSettings.of(model).fusion_inflation
