@@ -310,7 +310,8 @@ def test_the_split_modules_stay_importable_from_inference():
         "STATUSES", "RECOMMENDED_ORDER", "recommended_order", "MIN_POINTS", "ZERO_PARALLAX_PX",
         "ZERO_PARALLAX_FRACTION", "FOCAL_RANGE", "METHODS", "MethodSpec", "MethodResult",
         "MethodContext", "PoseEstimate", "PoseEstimator", "register_method", "prepare_matches",
-        "prepare_graph", "forward_pose", "input_warnings", "zero_parallax"}
+        "prepare_graph", "forward_pose", "input_warnings", "zero_parallax",
+        "RECOMMENDED", "methods_needed"}  # the two added in 0.4 (one pass per pair)
     from strl_pyg.inference import config as pose_config
 
     for mod in (pose_record, pose_checks, pose_network, pose_methods, pose_config):
@@ -435,3 +436,38 @@ def test_forward_pose_of_one_graph_equals_the_batch_of_it(pair, row):
         assert after.keys() == before[id(graph)].keys()
         for k, v in before[id(graph)].items():
             assert after[k].dtype == v.dtype and torch.equal(after[k], v), k
+
+
+def test_a_record_keeps_the_methods_pose_object(monkeypatch):
+    """Poses went Pose -> 4x4 -> Pose between a method and the support check (10
+    Pose.from_matrix calls on `predict --methods all`); a record now keeps the method's Pose."""
+    import numpy as np
+    import torch
+
+    from strl_pyg.geometry import Pose
+    from strl_pyg.inference.record import MethodResult
+    from strl_pyg.inference.support import check_support
+    from strl_pyg.synthetic import SceneConfig, generate_pair
+
+    pair = generate_pair(5, SceneConfig(kind="indoor", noise_px=0.5))
+    T = np.asarray(pair.T_0to1, dtype=np.float64)
+    t = T[:3, 3] / np.linalg.norm(T[:3, 3])
+    pose = Pose(torch.from_numpy(T[:3, :3]), torch.from_numpy(t))
+    rec = MethodResult("poselib", "ok", pose)
+    assert isinstance(rec.T_0to1, np.ndarray) and rec.T_0to1.shape == (4, 4)
+    np.testing.assert_array_equal(rec.T_0to1, pose.matrix().numpy())
+    assert rec.as_pose() is not None and torch.equal(rec.as_pose().R, pose.R)
+    calls = []
+    real = Pose.from_matrix.__func__
+    monkeypatch.setattr(Pose, "from_matrix",
+                        classmethod(lambda cls, T: calls.append(1) or real(cls, T)))
+    checked = check_support(rec, pair.matches, 1.0)
+    assert checked.status == "ok" and checked.info["support_inliers"] > 0 and calls == []
+    # a record given as a matrix, or whose T_0to1 was set anew, builds its Pose from it once
+    moved = T.copy()
+    moved[:3, 3] = -t
+    rec.T_0to1 = moved
+    assert torch.equal(rec.as_pose().t, torch.from_numpy(-t)) and len(calls) == 1
+    assert MethodResult("x", "failed", pose).as_pose() is None
+    with pytest.raises(ValueError, match="Expected one pose"):
+        MethodResult("x", "ok", Pose(pose.R.expand(2, 3, 3), pose.t.expand(2, 3)))

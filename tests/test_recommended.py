@@ -173,3 +173,97 @@ def test_the_recommended_path_runs_each_method_at_most_once(model, pair, monkeyp
     assert est.status == "ok" and est.pose.method == "opencv"
     assert calls.get("fused") == 1 and calls.get("opencv") == 1, calls
     assert max(calls.values()) == 1, calls
+
+
+# ----------------------------------------------------------------------------- one pass per pair
+def _counting(monkeypatch, module, name):
+    """Counts the calls of ``module.name`` (patched where it is defined)."""
+    calls = []
+    real = getattr(module, name)
+
+    def counted(*a, **k):
+        calls.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(module, name, counted)
+    return calls
+
+
+def test_a_pair_is_normalised_once_on_the_default_path(model, pair, monkeypatch):
+    """Before, the classical solve, its covariance, its bootstrap and the support check each
+    normalised the pair again (8 normalize_points calls on every default predict)."""
+    from strl_pyg.estimation import classical
+    from strl_pyg.inference.estimator import classical_method
+
+    m = match_images(pair.image0, pair.image1, pair.K, pair.K, FrontendConfig(lines=False))
+    calls = _counting(monkeypatch, classical, "normalize_points")
+    est = PoseEstimator(model, methods=classical_method(), bootstrap=8).estimate(m)
+    rec = est.methods[classical_method()]
+    assert rec.status == "ok" and "bootstrap (8)" in rec.info["covariance"]
+    # PoseLib: the pair's one normalisation (one call per image); OpenCV solves in pixels
+    # and normalises image 1's points of each of its 8 bootstrap resamples itself
+    assert len(calls) == (2 if classical_method() == "poselib" else 3 + 8), len(calls)
+
+
+def test_the_recommended_path_checks_a_point_poor_pair_once(model, monkeypatch):
+    """The point-poor pair used to be checked (deduplicated, intrinsics) once per method
+    tried: with vp not "ok", again for PoseLib, the next of the order."""
+    import dataclasses
+
+    from strl_pyg.data.matches import PairMatches
+    from strl_pyg.inference import estimator
+    from strl_pyg.inference.record import MethodResult
+
+    p = generate_pair(2, SceneConfig(kind="street", image_size=(240, 320)))
+    monkeypatch.setitem(estimator.METHODS, "vp", dataclasses.replace(
+        estimator.METHODS["vp"], fn=lambda m, ctx: MethodResult("vp", "failed",
+                                                                warnings=["planted"])))
+    dedup = _counting(monkeypatch, PairMatches, "deduplicated")
+    problems = _counting(monkeypatch, estimator, "intrinsics_problems")
+    est = estimate_recommended(model, p.image0, p.image1, p.K, p.K,
+                               FrontendConfig(max_keypoints=40))
+    assert est.methods["vp"].status == "failed" and est.num_lines > 0
+    assert est.pose.method == estimator.classical_method() and est.status == "ok"
+    assert len(dedup) == 1 and len(problems) == 1, (len(dedup), len(problems))
+
+
+def test_recommended_is_a_methods_value_of_the_estimator(model, pair):
+    """The recommended walk on given matches: the pose of the run of every method, with only
+    the methods it needs; 'recommended' is no method name."""
+    from strl_pyg.inference.config import EstimatorConfig
+    from strl_pyg.inference.estimator import RECOMMENDED, register_method
+
+    m = match_images(pair.image0, pair.image1, pair.K, pair.K)
+    lazy = PoseEstimator(model, methods=RECOMMENDED).estimate(m)
+    full = PoseEstimator(model).estimate(m)
+    assert lazy.pose.method == full.pose.method and lazy.status == "ok"
+    np.testing.assert_allclose(lazy.T_0to1, full.T_0to1, atol=1e-12)
+    assert set(lazy.methods) < set(full.methods)
+    assert EstimatorConfig(methods="recommended").methods == RECOMMENDED
+    with pytest.raises(ValueError, match="other than 'recommended'"):
+        register_method("recommended", lambda matches, ctx: None)
+
+
+def test_lines_join_a_pair_without_its_check_or_its_point_results_again(model, pair):
+    """_Pair.add_lines: the points' results stay, repeated line matches count once, other
+    points are refused."""
+    from strl_pyg.frontend.pipeline import add_lines
+    from strl_pyg.inference.estimator import classical_method
+
+    cfg = FrontendConfig(lines=False)
+    pts = match_images(pair.image0, pair.image1, pair.K, pair.K, cfg)
+    lined = add_lines(pts, FrontendConfig())
+    assert lined.num_lines > 0
+    est = PoseEstimator(model)
+    run = est._pair(pts)
+    est._run_methods(run, (classical_method(),))
+    kept = run.ctx.results[classical_method()]
+    twice = lined.select(None, np.r_[np.arange(lined.num_lines), 0])  # one line match twice
+    points = run.matches.points0
+    run.add_lines(twice)
+    assert run.matches.num_lines == lined.num_lines
+    assert any("1 repeated line matches removed" in w for w in run.warnings)
+    assert run.ctx.results[classical_method()] is kept
+    assert run.matches.points0 is points  # the same arrays: their normalisation is reused
+    with pytest.raises(ValueError, match="Expected the pair's [0-9]+ point matches"):
+        run.add_lines(lined.select(np.arange(1, lined.num_points)))

@@ -319,7 +319,7 @@ class PairMatches:
         (row order kept). ``info`` entries that hold image-ordered geometry (the front end's
         fundamental matrix and its inliers) are left out; the rest is copied."""
         info = {k: v for k, v in self.info.items()
-                if k not in ("fundamental", *_POINT_ROW_KEYS)}
+                if k not in ("fundamental", *POINT_ROW_KEYS)}
         return PairMatches(
             self.points1, self.points0, self.lines1, self.lines0, self.image_size1,
             self.image_size0, self.point_scores, self.line_scores, self.K1, self.K0,
@@ -418,7 +418,7 @@ class PairMatches:
 
 
 #: ``info`` entries that hold point row indices (re-indexed by :meth:`PairMatches.select`).
-_POINT_ROW_KEYS = ("fundamental_inliers",)
+POINT_ROW_KEYS = ("fundamental_inliers",)
 
 
 def _reindexed_info(info: dict, point_index: Any, num_points: int) -> dict:
@@ -427,7 +427,7 @@ def _reindexed_info(info: dict, point_index: Any, num_points: int) -> dict:
     out = dict(info)
     if isinstance(point_index, slice):
         return out
-    for key in _POINT_ROW_KEYS:
+    for key in POINT_ROW_KEYS:
         if key not in out:
             continue
         rows = np.asarray(out[key], dtype=np.int64).reshape(-1)

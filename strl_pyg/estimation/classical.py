@@ -16,6 +16,9 @@ focal length of both cameras; the two agree when both cameras share a focal leng
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,8 +30,8 @@ from strl_pyg.data.matches import PairMatches
 from strl_pyg.geometry import Pose, normalize_points
 
 __all__ = ["BaselineResult", "BASELINE_METHODS", "MIN_POINTS", "estimate_relative_pose",
-           "mean_focal", "normalised_matches", "have_poselib", "fundamental_matrix",
-           "MIN_POINTS_FUNDAMENTAL"]
+           "mean_focal", "normalised_matches", "normalisation_scope", "have_poselib",
+           "fundamental_matrix", "MIN_POINTS_FUNDAMENTAL"]
 
 #: Point matches of the seven/eight-point fundamental-matrix estimate (its minimal sample is
 #: 7; MAGSAC's final fit uses 8).
@@ -164,21 +167,64 @@ def mean_focal(matches: PairMatches) -> float:
     return float(np.mean([K0[0, 0], K0[1, 1], K1[0, 0], K1[1, 1]]))
 
 
+#: The memo of :func:`normalisation_scope` (``None`` outside one).
+_SCOPE: ContextVar[dict | None] = ContextVar("strl_pyg_normalisation_scope", default=None)
+
+
+@contextmanager
+def normalisation_scope(memo: dict | None = None) -> Iterator[dict]:
+    """Within it, :func:`normalised_matches` normalises the points of one pair once: the
+    result is kept per ``(points0, points1, K0, K1)`` array objects (held, so an id is never
+    reused) and returned again for any :class:`~strl_pyg.data.PairMatches` made of the same
+    arrays (e.g. the same matches with lines added). :class:`~strl_pyg.inference.PoseEstimator`
+    opens one per pair, so its methods, the support check, the covariances and the bootstrap
+    share one normalisation. ``memo``: a dict to keep across scopes (the pair's); a scope
+    opened inside another one uses the outer memo. Yields the memo.
+
+    The solvers do not write into the arrays they are given; a caller that edits a pair's
+    point arrays in place inside a scope gets the normalisation of the old values."""
+    outer = _SCOPE.get()
+    if outer is not None:
+        yield outer
+        return
+    memo = {} if memo is None else memo
+    token = _SCOPE.set(memo)
+    try:
+        yield memo
+    finally:
+        _SCOPE.reset(token)
+
+
 def normalised_matches(matches: PairMatches) -> tuple[torch.Tensor, torch.Tensor, float]:
     """The point matches in normalised camera coordinates, the package's one normalisation
     of matches by their intrinsics: ``x0``, ``x1`` float64 ``[N, 2]``
     (:func:`~strl_pyg.geometry.normalize_points` with ``K0``, ``K1``) and
-    :func:`mean_focal` (divide a pixel threshold by it to get normalised units)."""
+    :func:`mean_focal` (divide a pixel threshold by it to get normalised units); computed once
+    per pair inside a :func:`normalisation_scope`. Treat the tensors as read-only."""
+    memo = _SCOPE.get()
+    arrays = (matches.points0, matches.points1, matches.K0, matches.K1)
+    key = tuple(map(id, arrays))
+    if memo is not None and key in memo:
+        return memo[key][1]
     x0 = normalize_points(matches.points0, matches.K0).double()
     x1 = normalize_points(matches.points1, matches.K1).double()
-    return x0, x1, mean_focal(matches)
+    out = (x0, x1, mean_focal(matches))
+    if memo is not None:
+        memo[key] = (arrays, out)  # the arrays held: their ids stay theirs
+    return out
 
 
 def _normalised(matches: PairMatches, threshold_px: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """Contiguous numpy copies for the solvers, and the threshold in normalised units."""
+    """Contiguous read-only numpy views for the solvers (of the pair's one normalisation), and
+    the threshold in normalised units."""
     x0, x1, focal = normalised_matches(matches)
-    return (np.ascontiguousarray(x0.numpy()), np.ascontiguousarray(x1.numpy()),
-            threshold_px / focal)
+
+    def frozen(x: torch.Tensor) -> np.ndarray:
+        a = np.ascontiguousarray(x.numpy()).view()
+        a.flags.writeable = False
+        return a
+
+    return frozen(x0), frozen(x1), threshold_px / focal
 
 
 def _unit_pose(R: np.ndarray, t: np.ndarray) -> Pose:
@@ -203,7 +249,11 @@ def _opencv(matches, threshold_px, confidence, max_iterations, seed,
     # slice of a 3x4 projection matrix), hence the copy.
     K0 = np.ascontiguousarray(matches.K0, dtype=np.float64)
     p0 = np.ascontiguousarray(matches.points0)
-    x1 = normalize_points(matches.points1, matches.K1).numpy()
+    # the pair's one normalisation where a scope holds it; else image 1's points only
+    memo = _SCOPE.get() or {}
+    known = memo.get(tuple(map(id, (matches.points0, matches.points1, matches.K0, matches.K1))))
+    x1 = (known[1][1] if known is not None
+          else normalize_points(matches.points1, matches.K1).double()).numpy()
     p1 = np.ascontiguousarray(x1 @ K0[:2, :2].T + K0[:2, 2])
     try:
         E, mask = cv2.findEssentialMat(

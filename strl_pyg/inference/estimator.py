@@ -41,16 +41,22 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 import torch
 
-from strl_pyg.data.matches import PairMatches
+from strl_pyg.data.matches import (
+    DUPLICATE_TOLERANCE_PX,
+    POINT_ROW_KEYS,
+    PairMatches,
+    first_unique_rows,
+)
 from strl_pyg.estimation.classical import (
     MIN_POINTS,
     estimate_relative_pose,  # noqa: F401  (0.1.x name here)
+    normalisation_scope,
 )
 from strl_pyg.estimation.uncertainty import MAX_SIGMA_DEG, cap_covariance
 from strl_pyg.inference.checks import (
@@ -92,8 +98,12 @@ __all__ = [
     "ZERO_PARALLAX_FRACTION",
     "FOCAL_RANGE", "METHODS", "MethodSpec", "MethodResult", "MethodContext", "PoseEstimate",
     "PoseEstimator", "register_method", "prepare_matches", "prepare_graph", "forward_pose",
-    "input_warnings", "zero_parallax",
+    "input_warnings", "zero_parallax", "RECOMMENDED", "methods_needed",
 ]
+
+#: ``methods="recommended"``: the recommended pose with only the methods it needs
+#: (:meth:`PoseEstimator.estimate`; ``strl-pose predict``'s default); not a method name.
+RECOMMENDED = "recommended"
 
 #: Which method fills the recommended pose: the first ``"ok"`` one (unavailable ones skipped).
 RECOMMENDED_ORDER: tuple[str, ...] = ("poselib", "opencv", "regression")
@@ -149,6 +159,9 @@ def register_method(name: str, fn: MethodFn, *, min_points: int = MIN_POINTS,
     then in ``strl-pose predict --methods``, ``evaluate``, the support check and the labels."""
     if name in METHODS and not replace_existing:
         raise ValueError(f"Expected a new method name (got {name!r}, already registered)")
+    if name == RECOMMENDED:
+        raise ValueError(f"Expected a method name other than {RECOMMENDED!r} (it selects the "
+                         "recommended methods)")
     known = {f for f in MethodSpec.__dataclass_fields__} - {"fn", "min_points",
                                                              "needs_intrinsics", "available"}
     unknown = sorted(set(spec) - known)
@@ -181,6 +194,20 @@ def __getattr__(name: str) -> Any:
     if name in DERIVED:
         return DERIVED[name]()
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def methods_needed(names: Any) -> tuple[str, ...]:
+    """``names`` with the methods they depend on, in registration order (the order
+    :class:`PoseEstimator` runs them)."""
+    want, todo = set(), list(names)
+    while todo:  # dependencies of dependencies too
+        name = todo.pop()
+        if name in want:
+            continue
+        want.add(name)
+        deps = METHODS[name].depends_on if name in METHODS else ()
+        todo.extend(classical_method() if d == "classical" else d for d in deps)
+    return tuple(m for m in METHODS if m in want)
 
 
 def classical_method() -> str:
@@ -272,13 +299,15 @@ def _attach_fundamental(estimate: PoseEstimate, matches: PairMatches, threshold_
 
 
 def _checked_pair(matches: PairMatches) -> tuple[PairMatches, list[str], np.ndarray,
-                                                  str | None]:
+                                                  str | None, list[str]]:
     """The pair's one input check: the matches with each correspondence once (every decision,
     minimum counts, support, bootstrap sigma, counts correspondences, not rows), the input
-    warnings, the row of every input point in them, and why the pair is degenerate (or
-    ``None``)."""
-    warnings = input_warnings(matches.image_size0, matches.image_size1, matches.K0,
-                              matches.K1)
+    warnings, the row of every input point in them, why the pair is degenerate (or ``None``)
+    and what is wrong with its intrinsics (:func:`intrinsics_problems`)."""
+    problems = intrinsics_problems(matches.image_size0, matches.image_size1, matches.K0,
+                                   matches.K1)
+    warnings = list(problems) if matches.has_intrinsics else input_warnings(
+        matches.image_size0, matches.image_size1, None, None)
     matches, repeats, rows = matches.deduplicated()
     warnings += repeats
     n, degenerate = matches.num_distinct_points, None
@@ -294,16 +323,14 @@ def _checked_pair(matches: PairMatches) -> tuple[PairMatches, list[str], np.ndar
                       "translation is undefined")
     if degenerate is not None:
         warnings.append(degenerate)
-    return matches, warnings, rows, degenerate
+    return matches, warnings, rows, degenerate, problems
 
 
 def _pair_rules(results: dict[str, MethodResult], matches: PairMatches,
-                rows: np.ndarray) -> None:
+                rows: np.ndarray, problems: list[str]) -> None:
     """What holds for every method of a pair, applied in place: intrinsics that fail the
-    checks or none at all make every pose ``"unreliable"``; inlier masks go to the input's
-    rows."""
-    problems = intrinsics_problems(matches.image_size0, matches.image_size1, matches.K0,
-                                   matches.K1)
+    checks (``problems``: :func:`intrinsics_problems`) or none at all make every pose
+    ``"unreliable"``; inlier masks go to the input's rows."""
     reasons = [f"{BAD_INTRINSICS}: " + "; ".join(problems)] if problems else []
     if not matches.has_intrinsics:
         # the network then reads coordinates normalised by the image size, not by K: its
@@ -345,8 +372,11 @@ def _unique(items: list[str]) -> list[str]:
     return list(dict.fromkeys(items))
 
 
-def _checked_names(methods: Any) -> tuple[str, ...]:
-    """Method names to run (``None``: every installed one; one ``str``: one method)."""
+def _checked_names(methods: Any) -> tuple[str, ...] | str:
+    """Method names to run (``None``: every installed one; one ``str``: one method;
+    :data:`RECOMMENDED` stays as it is)."""
+    if isinstance(methods, str) and methods == RECOMMENDED:
+        return RECOMMENDED
     if isinstance(methods, str):
         methods = (methods,)
     names = tuple(methods) if methods is not None else tuple(
@@ -358,6 +388,56 @@ def _checked_names(methods: Any) -> tuple[str, ...]:
     if missing:
         raise ValueError(f"Expected installed methods (got {missing}: not importable here)")
     return names
+
+
+@dataclass
+class _Pair:
+    """One pair's run, the estimator's one context per pair: the matches checked once
+    (:func:`_checked_pair`), their normalisation (the memo of
+    :func:`~strl_pyg.estimation.classical.normalisation_scope`), the results of the methods run
+    so far and what they share (:class:`MethodContext`)."""
+
+    matches: PairMatches  # checked: each correspondence once
+    warnings: list[str]
+    rows: np.ndarray  # the checked row of every input point row
+    degenerate: str | None
+    problems: list[str]  # intrinsics_problems, found once
+    ctx: MethodContext
+    memo: dict = field(default_factory=dict)
+
+    def add_lines(self, lined: PairMatches) -> None:
+        """Joins the line matches of ``lined`` (these point matches with lines added, e.g. by
+        :func:`~strl_pyg.frontend.pipeline.add_lines`): the points, their check and
+        normalisation and the results of the methods that read no lines stay."""
+        first = self._first_rows()
+        if not (lined.num_points == len(self.rows)
+                and np.array_equal(lined.points0[first], self.matches.points0)
+                and np.array_equal(lined.points1[first], self.matches.points1)):
+            raise ValueError(f"Expected the pair's {len(self.rows)} point matches with lines "
+                             f"added (got {lined.num_points} other point matches)")
+        li = first_unique_rows(np.concatenate([lined.lines0, lined.lines1], axis=1),
+                               DUPLICATE_TOLERANCE_PX)
+        if len(li) < lined.num_lines:
+            self.warnings.append(f"{lined.num_lines - len(li)} repeated line matches removed "
+                                 "(a repeated match is one correspondence): "
+                                 f"{len(li)} line matches remain")
+        info = dict(lined.info)  # the point rows the check re-indexed stay re-indexed
+        for key in POINT_ROW_KEYS:
+            info.pop(key, None)
+            if key in self.matches.info:
+                info[key] = self.matches.info[key]
+        # the same point arrays: their normalisation is found again in the memo
+        self.matches = replace(self.matches, lines0=lined.lines0[li], lines1=lined.lines1[li],
+                               line_scores=None if lined.line_scores is None
+                               else lined.line_scores[li], info=info)
+        self.ctx.results = {m: r for m, r in self.ctx.results.items()
+                            if m in METHODS and not METHODS[m].reads_lines}
+        for key in ("vanishing_directions", "full_forward"):  # read the lines
+            self.ctx.cache.pop(key, None)
+
+    def _first_rows(self) -> np.ndarray:
+        """The input row kept for every checked row (the first of its repeats)."""
+        return np.unique(self.rows, return_index=True)[1]
 
 
 class PoseEstimator:
@@ -482,36 +562,95 @@ class PoseEstimator:
         ``known``: results of methods already run on these same matches (e.g. by an earlier
         call, :attr:`PoseEstimate.methods`); they are taken as they are, not run again.
         ``methods``: the names to run this time (default: the estimator's own), with the
-        same configuration and checkpoint settings."""
+        same configuration and checkpoint settings; :data:`RECOMMENDED`: the methods of the
+        recommended order one at a time (with the methods each reads) until the first
+        ``"ok"`` one, the same recommended pose as running every method."""
         if not isinstance(matches, PairMatches):
             raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")
         names = self.method_names if methods is None else _checked_names(methods)
-        matches, warnings, rows, degenerate = _checked_pair(matches)
-        # the model's metadata (the shipped one's when None was given) calibrates the classical
-        # methods too, also when no network method runs (the default predict path: PoseLib
-        # only); the network itself is built only when a method needs it
-        settings = self.settings
+        pair = self._pair(matches)
+        if names == RECOMMENDED:
+            return self._recommended(pair)
+        self._run_methods(pair, names, known)
+        return self._finish(pair, names)
+
+    def _pair(self, matches: PairMatches) -> _Pair:
+        """The pair's one context: its input check, and the context its methods share. The
+        model's metadata (the shipped one's when None was given) calibrates the classical
+        methods too, also when no network method runs; the network itself is built only
+        when a method needs it."""
+        checked, warnings, rows, degenerate, problems = _checked_pair(matches)
         ctx = MethodContext(self.seed, self.threshold_px, self.bootstrap, self.device,
-                            self.resample, load_model=lambda: self.model, settings=settings,
-                            swap_check=self.config.swap_check,
+                            self.resample, load_model=lambda: self.model,
+                            settings=self.settings, swap_check=self.config.swap_check,
                             support=(self.min_inlier_ratio, self.min_inliers,
                                      self.min_in_front))
+        return _Pair(checked, warnings, rows, degenerate, problems, ctx)
+
+    def _run_methods(self, pair: _Pair, names: Any,
+                     known: dict[str, MethodResult] | None = None) -> None:
+        """Runs the methods of ``names`` the pair has no result of yet, in the registry's
+        order (a method that reads another's result runs after it, whatever order the caller
+        named them in), inside the pair's normalisation scope."""
         registry = list(METHODS)
-        # the registry's order: a method that reads another's result (fused, vp's start,
-        # vp_checked) runs after it, whatever order the caller named them in
-        for name in sorted(names, key=registry.index):
-            if known and name in known:
-                ctx.results[name] = known[name]
-                continue
-            res = self._support(self._run(name, matches, ctx, degenerate), matches)
-            ctx.results[name] = self._calibrated(name, res, settings)
-        ctx.results = {name: ctx.results[name] for name in names}  # the caller's order
-        _pair_rules(ctx.results, matches, rows)
-        estimate = self._recommend(ctx.results, warnings, matches)
-        estimate.point_rows = rows
-        if not matches.has_intrinsics:
-            _attach_fundamental(estimate, matches, self.threshold_px, self.seed, rows)
+        results = pair.ctx.results
+        with normalisation_scope(pair.memo):
+            for name in sorted(names, key=registry.index):
+                if name in results:
+                    continue
+                if known and name in known:
+                    results[name] = known[name]
+                    continue
+                res = self._support(self._run(name, pair.matches, pair.ctx, pair.degenerate),
+                                    pair.matches)
+                results[name] = self._calibrated(name, res, pair.ctx.settings)
+
+    def _finish(self, pair: _Pair, names: Any, fundamental: bool = True) -> PoseEstimate:
+        """The estimate of the methods ``names`` of the pair (in that order): the rules that
+        hold for every method of a pair, then the recommended pose; without intrinsics, the
+        pair's fundamental matrix (``fundamental``)."""
+        results = {name: pair.ctx.results[name] for name in names}  # the caller's order
+        _pair_rules(results, pair.matches, pair.rows, pair.problems)
+        estimate = self._recommend(results, list(pair.warnings), pair.matches)
+        estimate.point_rows = pair.rows
+        if fundamental and not pair.matches.has_intrinsics:
+            with normalisation_scope(pair.memo):
+                _attach_fundamental(estimate, pair.matches, self.threshold_px, self.seed,
+                                    pair.rows)
         return estimate
+
+    def _installed_order(self, num_points: int | None = None) -> list[str]:
+        return [m for m in recommended_order(self.settings, num_points)
+                if m in METHODS and METHODS[m].available()]
+
+    def _recommended(self, pair: _Pair, more_lines: Callable[[], PairMatches] | None = None
+                     ) -> PoseEstimate:
+        """The recommended order walked one method at a time (with the methods it reads),
+        stopping at the first ``"ok"`` one, or at the first ``"unreliable"`` one when the
+        intrinsics fail the input checks (every later pose would be too). ``more_lines``: the
+        pair's matches with lines added, called once before the first method that reads
+        lines runs (the front end's second half)."""
+        order = self._installed_order(pair.matches.num_distinct_points)
+        if not order:  # nothing recommended is installed: every installed method runs
+            names = _checked_names(None)
+            if more_lines is not None:
+                pair.add_lines(more_lines())
+            self._run_methods(pair, names)
+            return self._finish(pair, names)
+        bad_K = not pair.matches.has_intrinsics or bool(pair.problems)
+        run: tuple[str, ...] = ()
+        for name in order:
+            run = methods_needed((*run, name))
+            if more_lines is not None and any(METHODS[r].reads_lines for r in run):
+                pair.add_lines(more_lines())
+                more_lines = None
+            self._run_methods(pair, run)
+            est = self._finish(pair, run, fundamental=False)
+            if est.methods[name].status == "ok":
+                break
+            if bad_K and est.pose.status == "unreliable" and est.pose.method == name:
+                break  # every method reads the same K (or none): the later ones are too
+        return self._finish(pair, run)
 
     def _run(self, name: str, matches: PairMatches, ctx: MethodContext,
              degenerate: str | None) -> MethodResult:
@@ -588,22 +727,40 @@ class PoseEstimator:
                         methods: Any = None) -> PoseEstimate:
         """Matches two images with :func:`~strl_pyg.frontend.match_images`, then
         :meth:`estimate` (``methods`` as there). ``K1`` defaults to ``K0`` (one camera). No
-        matches at all gives status ``"degenerate"``."""
-        names = self.method_names if methods is None else _checked_names(methods)
-        from strl_pyg.frontend import NoMatchesError, match_images
+        matches at all gives status ``"degenerate"``. With :data:`RECOMMENDED`, the images
+        are matched once: the points first, the line segments added to them (without
+        detecting the points again) only when a method that reads lines is about to run and
+        ``frontend_config.lines`` is on."""
+        from strl_pyg.frontend import FrontendConfig, NoMatchesError, match_images
+        from strl_pyg.frontend.pipeline import add_lines
 
+        names = self.method_names if methods is None else _checked_names(methods)
+        cfg = frontend_config if frontend_config is not None else FrontendConfig()
+        if not isinstance(cfg, FrontendConfig):
+            raise TypeError(f"Expected a FrontendConfig (got {type(cfg).__name__})")
         if K0 is None and K1 is not None:
             raise ValueError("Expected K0 with K1 (got K1 only)")
         K1 = K0 if K1 is None else K1
+        recommended = names == RECOMMENDED
+        if recommended:  # the first method's matches first (points only unless it reads lines)
+            order = self._installed_order()
+            names = methods_needed(order[:1]) if order else _checked_names(None)
+            first = replace(cfg, lines=cfg.lines and any(METHODS[m].reads_lines
+                                                         for m in names))
+        else:
+            first = cfg
         try:
-            matches = match_images(image0, image1, K0=K0, K1=K1, config=frontend_config)
+            matches = match_images(image0, image1, K0=K0, K1=K1, config=first)
         except NoMatchesError as err:
             warnings = input_warnings(np.shape(image0)[:2], np.shape(image1)[:2], K0, K1)
             why = f"no matches: {str(err).splitlines()[0]}"
             records = {m: MethodResult(m, "degenerate", warnings=[why]) for m in names}
             return PoseEstimate(MethodResult(None, "degenerate", warnings=warnings + [why]),
                                 records, 0, 0, None)
-        return self.estimate(matches, methods=names)
+        if not recommended:
+            return self.estimate(matches, methods=names)
+        more = (lambda: add_lines(matches, cfg)) if cfg.lines and not first.lines else None
+        return self._recommended(self._pair(matches), more)
 
     def _support(self, res: MethodResult, matches: PairMatches) -> MethodResult:
         return check_support(res, matches, self.threshold_px, self.min_inlier_ratio,

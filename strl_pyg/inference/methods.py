@@ -122,7 +122,7 @@ def _regression(matches: PairMatches, ctx: MethodContext) -> MethodResult:
             cov = cov + swap_covariance(rot, trans)
             info["swap_disagreement_deg"] = {"rotation": math.degrees(rot),
                                              "translation": math.degrees(trans)}
-    return MethodResult("regression", "ok", pose.matrix().numpy(), cov, warnings, time_ms=ms,
+    return MethodResult("regression", "ok", pose, cov, warnings, time_ms=ms,
                         info=info, raw=out)
 
 
@@ -178,7 +178,7 @@ def _classical(name: str) -> MethodFn:
             cov = cov.numpy()
         except ValueError as err:
             warnings.append(f"{name}: no covariance ({err})")
-        rec = MethodResult(name, "ok", res.pose.matrix().numpy(), cov, warnings, res.time_ms,
+        rec = MethodResult(name, "ok", res.pose, cov, warnings, res.time_ms,
                            res.num_inliers, info=info, raw=res)
         if cov is not None and ctx.bootstrap:
             # first order (noise around a right solution) + bootstrap (instability of the
@@ -228,7 +228,7 @@ def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     if not res.success:
         return MethodResult("vp", "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
                             info=dict(res.info), warnings=[f"vp: {res.info['reason']}"])
-    rec = _with_covariance("vp", res.pose.matrix().numpy(), matches, ctx.threshold_px,
+    rec = _with_covariance("vp", res.pose, matches, ctx.threshold_px,
                            time_ms=res.time_ms, info=dict(res.info), raw=res)
     if rec.covariance is not None:  # the documented key (the CLI prints it)
         rec.info["covariance"] = "first-order"
@@ -294,7 +294,7 @@ def _vp_checked(matches: PairMatches, ctx: MethodContext) -> MethodResult:
             return MethodResult("vp_checked", rec.status, time_ms=ms, info={**info,
                                 "reason": reason}, warnings=[f"vp_checked: {reason}"]
                                 + [w for w in rec.warnings if w not in reason])
-        return MethodResult("vp_checked", "ok", rec.T_0to1, rec.covariance,
+        return MethodResult("vp_checked", "ok", rec.as_pose(), rec.covariance,
                             list(rec.warnings), ms, rec.num_inliers,
                             info={**info, "source": rec.method, "reason": reason,
                                   "covariance": rec.info.get("covariance"),
@@ -353,13 +353,14 @@ def _no_head(name: str, ctx: MethodContext) -> MethodResult | None:
     return None
 
 
-def _with_covariance(name: str, pose_T: np.ndarray, matches: PairMatches, thr: float,
+def _with_covariance(name: str, pose: Any, matches: PairMatches, thr: float,
                      **kw: Any) -> MethodResult:
+    """An ``"ok"`` record of ``pose`` (a float64 :class:`~strl_pyg.geometry.Pose`) with the
+    first-order covariance of the point matches within ``thr`` px of it."""
     from strl_pyg.estimation.classical import normalised_matches
     from strl_pyg.estimation.pose_fusion import classical_covariance
-    from strl_pyg.geometry import Pose, pose_sampson
+    from strl_pyg.geometry import pose_sampson
 
-    pose = Pose.from_matrix(torch.as_tensor(pose_T, dtype=torch.float64))
     x0, x1, focal = normalised_matches(matches)
     inl = (pose_sampson(pose.R, pose.t, x0, x1).abs() < thr / focal).numpy()
     warnings = list(kw.pop("warnings", []))
@@ -368,7 +369,7 @@ def _with_covariance(name: str, pose_T: np.ndarray, matches: PairMatches, thr: f
         cov = classical_covariance(pose, matches, inl, threshold_px=thr)[1].numpy()
     except ValueError as err:
         warnings.append(f"{name}: no covariance ({err})")
-    return MethodResult(name, "ok", pose_T, cov, warnings, num_inliers=int(inl.sum()), **kw)
+    return MethodResult(name, "ok", pose, cov, warnings, num_inliers=int(inl.sum()), **kw)
 
 
 def _geometric(matches: PairMatches, ctx: MethodContext) -> MethodResult:
@@ -392,7 +393,7 @@ def _geometric(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     x0, x1, focal = normalised_matches(matches)
     R, t = refine_pose(geo.R[:1].cpu(), geo.t[:1].cpu(), x0[None], x1[None], w[None],
                        iterations=10, tau=ctx.threshold_px / focal)
-    T = Pose(R[0], t[0]).matrix().numpy()
+    T = Pose(R[0], t[0])
     ms += (time.perf_counter() - start) * 1e3
     return _with_covariance("geometric", T, matches, ctx.threshold_px, time_ms=ms,
                             info={"mean_weight": float(w.mean())}, raw=out)
@@ -416,7 +417,7 @@ def _guided(matches: PairMatches, ctx: MethodContext) -> MethodResult:
         return MethodResult("guided", "failed", time_ms=ms, raw=res,
                             warnings=[f"guided {base}: no hypothesis found"])
     info = {"base": base, "candidate": res.info["candidate"], "refined": res.info["refined"]}
-    rec = _with_covariance("guided", res.pose.matrix().numpy(), matches,
+    rec = _with_covariance("guided", res.pose, matches,
                            ctx.threshold_px, time_ms=ms, info=info, raw=res)
     boot, n_boot = None, ctx.bootstrap
     if rec.covariance is not None and n_boot:
@@ -488,7 +489,7 @@ def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:
             "sign_disagreement": f.info["sign_disagreement"], "used": f.source,
             "gate_d2": gate.get("d2"), "network_variance_scale": scale}
     warnings = [] if f.source == "fused" else [f"fused: {gate.get('reason')}"]
-    rec = MethodResult("fused", "ok", f.pose.matrix().numpy(), f.covariance.numpy(),
+    rec = MethodResult("fused", "ok", f.pose, f.covariance.numpy(),
                        warnings, time_ms=ms, num_inliers=f.info["num_inliers"], info=info,
                        raw=f)
     # the fused pose stays near the classical one and moves with it when the matches change:

@@ -37,6 +37,7 @@ import numpy as np
 import torch
 
 from strl_pyg.data.matches import PairMatches
+from strl_pyg.geometry.pose import Pose
 
 __all__ = ["STATUSES", "MethodResult", "PoseEstimate"]
 
@@ -50,7 +51,8 @@ class MethodResult:
     Attributes:
         method: the method's name (``None`` for a recommended pose no method could give).
         status: one of :data:`STATUSES`.
-        T_0to1: float64 ``[4, 4]`` when ``status == "ok"``, else ``None``.
+        T_0to1: float64 ``[4, 4]`` when ``status == "ok"``, else ``None`` (given as a ``[4, 4]``
+            array or as a :class:`~strl_pyg.geometry.Pose`, kept for :meth:`as_pose`).
         covariance: ``[5, 5]`` (module docstring) or ``None`` when not available.
         warnings: human-readable reasons and caveats.
         time_ms: wall time of the method.
@@ -77,14 +79,35 @@ class MethodResult:
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
             raise ValueError(f"Expected status in {STATUSES} (got {self.status!r})")
+        pose = self.T_0to1 if isinstance(self.T_0to1, Pose) else None
+        if pose is not None:  # a method's own Pose: kept for as_pose(), the matrix from it
+            if pose.R.shape != (3, 3):
+                raise ValueError(f"Expected one pose (got a batch of shape "
+                                 f"{tuple(pose.R.shape[:-2])})")
+            pose = Pose(pose.R.detach().cpu().double(), pose.t.detach().cpu().double())
+            self.T_0to1 = pose.matrix().numpy()
+        self._pose = self._pose_of = None
         if self.status == "ok":
             T = np.asarray(self.T_0to1, dtype=np.float64) if self.T_0to1 is not None else None
             if T is None or T.shape != (4, 4) or not np.isfinite(T).all():
                 raise ValueError("Expected a finite T_0to1 [4, 4] with status 'ok' (got "
                                  f"{None if T is None else T.shape})")
             self.T_0to1 = T
+            if pose is not None:
+                self._pose, self._pose_of = pose, T
         else:
             self.T_0to1 = self.covariance = None
+
+    def as_pose(self) -> Pose | None:
+        """``T_0to1`` as a float64 :class:`~strl_pyg.geometry.Pose` (``None`` unless
+        ``"ok"``): the method's own when it built the record from one (no round trip through
+        the 4x4 matrix), else made once from ``T_0to1``."""
+        if self.T_0to1 is None:
+            return None
+        if self._pose is None or self._pose_of is not self.T_0to1:  # T_0to1 set anew
+            self._pose = Pose.from_matrix(torch.as_tensor(self.T_0to1, dtype=torch.float64))
+            self._pose_of = self.T_0to1
+        return self._pose
 
     def unreliable(self, reasons: list[str]) -> MethodResult:
         """This record as ``"unreliable"`` (from ``"ok"``; an ``"unreliable"`` one gets the

@@ -9,11 +9,9 @@ decomposition is wrong).
 
 from __future__ import annotations
 
-import torch
-
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.estimation.classical import normalised_matches
-from strl_pyg.geometry import Pose, pose_sampson
+from strl_pyg.geometry import pose_sampson
 from strl_pyg.geometry.essential import triangulated_depths
 from strl_pyg.inference.record import MethodResult
 
@@ -57,7 +55,7 @@ def check_support(res: MethodResult, matches: PairMatches, threshold_px: float =
     if (res.status != "ok" or not checked or res.T_0to1 is None
             or n <= 0 or not matches.has_intrinsics):
         return res
-    pose = Pose.from_matrix(torch.as_tensor(res.T_0to1, dtype=torch.float64))
+    pose = res.as_pose()  # the method's own Pose (no round trip through the matrix)
     x0, x1, focal = normalised_matches(matches)
     band = SUPPORT_BAND * threshold_px
     near = pose_sampson(pose.R, pose.t, x0, x1).abs() < band / focal
