@@ -508,3 +508,21 @@ def test_the_default_predict_does_not_build_the_network(tmp_path, pair, capsys, 
     out = json.loads(capsys.readouterr().out)
     assert code == 0 and out["pose"]["status"] == "ok" and out["pose"]["method"] == "poselib"
     assert out["translation_kind"] == StrLPose.pretrained_header()[0].translation
+
+
+def test_predict_on_a_match_file_runs_the_recommended_methods_only(tmp_path, pair, capsys):
+    """Before, `predict --matches` with the default '--methods recommended' ran every method
+    (the image path ran only the ones the recommended pose needs); the pose is the same."""
+    import json
+
+    path = pair.matches.save(tmp_path / "m.npz")
+    runs = {}
+    for methods in ("recommended", "all"):
+        assert cli_main(["predict", "--matches", str(path), "--methods", methods,
+                         "--json"]) == 0
+        runs[methods] = json.loads(capsys.readouterr().out)
+    lazy, full = runs["recommended"], runs["all"]
+    assert lazy["pose"]["method"] == full["pose"]["method"]
+    np.testing.assert_allclose(lazy["pose"]["T_0to1"], full["pose"]["T_0to1"], atol=1e-12)
+    assert list(lazy["methods"]) == [lazy["pose"]["method"]]
+    assert len(full["methods"]) > 1

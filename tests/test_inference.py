@@ -469,5 +469,13 @@ def test_a_record_keeps_the_methods_pose_object(monkeypatch):
     rec.T_0to1 = moved
     assert torch.equal(rec.as_pose().t, torch.from_numpy(-t)) and len(calls) == 1
     assert MethodResult("x", "failed", pose).as_pose() is None
+    # found in review: the record shared the caller's tensors, and an edit of T_0to1 in place
+    # went unseen
+    R = torch.from_numpy(T[:3, :3].copy())
+    own = MethodResult("x", "ok", Pose(R, torch.from_numpy(t)))
+    R[0, 0] = 5.0
+    assert float(own.as_pose().R[0, 0]) == float(own.T_0to1[0, 0]) != 5.0
+    own.T_0to1[0, 3] = 5.0
+    assert float(own.as_pose().t[0]) == 5.0
     with pytest.raises(ValueError, match="Expected one pose"):
         MethodResult("x", "ok", Pose(pose.R.expand(2, 3, 3), pose.t.expand(2, 3)))

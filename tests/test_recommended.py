@@ -267,3 +267,84 @@ def test_lines_join_a_pair_without_its_check_or_its_point_results_again(model, p
     assert run.matches.points0 is points  # the same arrays: their normalisation is reused
     with pytest.raises(ValueError, match="Expected the pair's [0-9]+ point matches"):
         run.add_lines(lined.select(np.arange(1, lined.num_points)))
+
+
+def test_the_walk_gives_the_full_runs_pose_when_the_regression_stands_in(model, pair,
+                                                                         monkeypatch):
+    """Found in review: the walk stopped at a regression it then refused (no supported solver
+    yet), where running every method lets a supported solver outside the order (vp) keep it."""
+    import dataclasses
+
+    import torch
+
+    from strl_pyg.geometry import Pose
+    from strl_pyg.inference import estimator
+    from strl_pyg.inference.record import MethodResult
+
+    T = np.asarray(pair.T_0to1, dtype=np.float64)
+    true = Pose(torch.from_numpy(T[:3, :3]), torch.from_numpy(T[:3, 3] / np.linalg.norm(T[:3, 3])))
+
+    def planted(name):
+        if name in ("regression", "vp"):
+            return lambda m, ctx: MethodResult(name, "ok", true)
+        if name in ("poselib", "opencv"):
+            return lambda m, ctx: MethodResult(name, "failed", info={"unsupported": True})
+        return lambda m, ctx: MethodResult(name, "failed", warnings=["planted"])
+
+    for name, spec in list(estimator.METHODS.items()):
+        monkeypatch.setitem(estimator.METHODS, name, dataclasses.replace(spec, fn=planted(name)))
+    mdl = _with_order(model, ("poselib", "regression"))
+    full = PoseEstimator(mdl).estimate(pair.matches)
+    lazy = PoseEstimator(mdl, methods="recommended").estimate(pair.matches)
+    assert full.status == "ok" and full.pose.method == "regression"
+    assert lazy.status == "ok" and lazy.pose.method == "regression", lazy.pose.warnings
+    np.testing.assert_array_equal(lazy.T_0to1, full.T_0to1)
+
+
+def test_known_results_are_taken_by_the_recommended_walk(model, pair, monkeypatch):
+    import dataclasses
+
+    from strl_pyg.inference import estimator
+    from strl_pyg.inference.estimator import classical_method
+
+    m = match_images(pair.image0, pair.image1, pair.K, pair.K, FrontendConfig(lines=False))
+    first = PoseEstimator(model, methods="recommended").estimate(m)
+    base = classical_method()
+    assert first.pose.method == base
+    spec = estimator.METHODS[base]
+    monkeypatch.setitem(estimator.METHODS, base, dataclasses.replace(
+        spec, fn=lambda *a: (_ for _ in ()).throw(AssertionError("ran again"))))
+    again = PoseEstimator(model, methods="recommended").estimate(
+        m, known={base: first.methods[base]})
+    np.testing.assert_array_equal(again.T_0to1, first.T_0to1)
+    walk = PoseEstimator(model, methods="recommended")
+    assert isinstance(walk.method_names, tuple) and base in walk.method_names
+    with pytest.raises(ValueError, match="Expected no methods for estimate_recommended"):
+        estimate_recommended(model, pair.image0, pair.image1, pair.K, pair.K,
+                             methods=("opencv",))
+
+
+def test_the_normalisation_memo_hands_out_copies():
+    """Found in review: a method writing into the normalised points changed every later
+    method's input inside the pair's scope."""
+    from strl_pyg.estimation.classical import normalisation_scope, normalised_matches
+
+    p = generate_pair(1, SceneConfig(kind="indoor"))
+    m = p.matches
+    with normalisation_scope() as memo:
+        x0, _, _ = normalised_matches(m)
+        ref = x0.clone()
+        x0 *= 100.0
+        again, _, _ = normalised_matches(m)
+        assert len(memo) == 1
+    assert torch_equal(again, ref)
+    own: dict = {}
+    with normalisation_scope(), normalisation_scope(own):  # an explicit memo is its own
+        normalised_matches(m)
+    assert len(own) == 1
+
+
+def torch_equal(a, b) -> bool:
+    import torch
+
+    return bool(torch.equal(a, b))

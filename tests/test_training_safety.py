@@ -139,3 +139,91 @@ def test_images_of_two_sizes_in_one_cnn_batch_are_one_line():
     with pytest.raises(ValueError, match=r"one image size per batch .*\(got sizes \[\(32, 48\), "
                                          r"\(40, 60\)\]\)"):
         collate([graph(40, 60), graph(32, 48)])
+
+
+# ----------------------------------------------------------------------------- non-finite steps
+def _tiny(out_dir, **kw):
+    from dataclasses import replace
+
+    base = TrainConfig(
+        train_pairs=6, val_pairs=3, batch_size=4, steps=4, val_every=2, num_points=32,
+        num_lines=16, out_dir=str(out_dir), tensorboard=False, seed=3,
+        scene={"image_size": [96, 256], "max_points": 64, "max_lines": 32},
+        model_overrides={"hidden": 16, "layers": 1, "heads": 2, "patch_features": 1})
+    return replace(base, **kw)
+
+
+def _nan_gradients_on(monkeypatch, calls: set):
+    """The pose loss, plus a term whose value is 0 and whose gradient is NaN on the
+    ``calls``-th calls (1-based): sqrt(0 * x) has 0 * inf as its derivative."""
+    from strl_pyg.training import loop
+
+    real = loop._losses
+    count = [0]
+
+    def losses(cfg, model_cfg):
+        pose, geo = real(cfg, model_cfg)
+
+        def planted(out, T):
+            logs = pose(out, T)
+            count[0] += 1
+            if count[0] in calls or -1 in calls:
+                logs["loss"] = logs["loss"] + (0.0 * out.quaternion.sum()).sqrt()
+            return logs
+
+        return planted, geo
+
+    monkeypatch.setattr(loop, "_losses", losses)
+
+
+def test_a_step_with_nan_gradients_is_skipped_not_applied(tmp_path, monkeypatch):
+    """Found on a 3000-pair run (issue 30): at step 569 one batch gave a finite loss with NaN
+    gradients; the step was applied, every weight became NaN, and the run went on for
+    hundreds of steps overwriting last.pt with them."""
+    import csv
+
+    from strl_pyg.training.checkpoints import load_checkpoint
+
+    _nan_gradients_on(monkeypatch, {2})
+    result = train(_tiny(tmp_path / "run"), progress=False)
+    assert result["step"] == 4
+    assert all(bool(torch.isfinite(t).all()) for t in result["model"].state_dict().values()
+               if t.is_floating_point())
+    rows = list(csv.DictReader(open(tmp_path / "run" / "log.csv")))
+    skipped = {int(r["step"]): float(r["value"]) for r in rows if r["key"] == "skipped"}
+    assert skipped == {1: 0.0, 2: 1.0, 3: 0.0, 4: 0.0}
+    state = load_checkpoint(tmp_path / "run" / "last.pt")
+    assert all(bool(torch.isfinite(t).all()) for t in state["model"].values()
+               if t.is_floating_point())
+
+
+def test_steps_without_finite_gradients_stop_the_run_with_one_line(tmp_path, monkeypatch,
+                                                                  capsys):
+    from strl_pyg.training import loop
+
+    monkeypatch.setattr(loop, "MAX_SKIPPED_STEPS", 2)
+    _nan_gradients_on(monkeypatch, {-1})
+    with pytest.raises(loop.TrainingDiverged, match="2 steps in a row"):
+        train(_tiny(tmp_path / "run"), progress=False)
+
+
+def test_non_finite_weights_are_never_checkpointed(tmp_path, monkeypatch):
+    """last.pt keeps the last finite state (step 2 here) when the weights stop being numbers."""
+    from strl_pyg.training import loop
+    from strl_pyg.training.checkpoints import load_checkpoint
+
+    real_step = torch.optim.Adam.step
+    count = [0]
+
+    def poisoning(self, *a, **k):
+        out = real_step(self, *a, **k)
+        count[0] += 1
+        if count[0] == 3:
+            with torch.no_grad():
+                self.param_groups[0]["params"][0].fill_(float("nan"))
+        return out
+
+    monkeypatch.setattr(torch.optim.Adam, "step", poisoning)
+    with pytest.raises(loop.TrainingDiverged, match="Expected finite weights to checkpoint"):
+        train(_tiny(tmp_path / "run"), progress=False)
+    assert load_checkpoint(tmp_path / "run" / "last.pt")["step"] == 2

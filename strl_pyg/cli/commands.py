@@ -80,12 +80,6 @@ def _predict_model(args):
     return None
 
 
-def _shipped_config():
-    from strl_pyg.inference.estimator import shipped_header
-
-    return shipped_header().config
-
-
 # ----------------------------------------------------------------------------- the pipeline
 def predict_pair(model, matches, resample_seed: int | None = 0,
                  warmup: bool = False) -> dict[str, Any]:
@@ -311,36 +305,39 @@ def cmd_predict(args) -> int:
     when it is ``"unreliable"`` (printed either way)."""
     methods = "regression" if args.no_baseline else args.methods
     _check_methods(methods)  # before the images and the model are read
+    # one estimator for both inputs: "recommended" (estimator.RECOMMENDED) walks the
+    # recommended order (the images matched once), "all" runs every installed method; torch
+    # is imported only once the inputs are read
+    names = (methods if methods == "recommended" else None if methods == "all"
+             else _method_names(methods))
     if args.matches:
         if args.image0 or args.image1:
             raise UsageError(f"Expected either two images or --matches (got both: "
                              f"{args.image0} and --matches {args.matches})")
         matches = _read_match_file(args)
         K0 = matches.K0
-        model = _predict_model(args)
         from strl_pyg.inference.estimator import PoseEstimator
 
-        names = None if methods in ("recommended", "all") else _method_names(methods)
-        estimator = PoseEstimator(model, methods=names, bootstrap=args.bootstrap)
+        estimator = PoseEstimator(_predict_model(args), methods=names,
+                                  bootstrap=args.bootstrap)
         est = estimator.estimate(matches)
-        kind = estimator.model_config.translation
     else:
         if not (args.image0 and args.image1):
             raise UsageError("Expected two images, or --matches FILE (got "
                              f"{'one image' if args.image0 else 'neither'})")
         inputs = read_pair(args)  # fail on bad files before any heavy work
-        model = _predict_model(args)
+        from strl_pyg.inference.estimator import PoseEstimator
+
+        estimator = PoseEstimator(_predict_model(args), methods=names,
+                                  bootstrap=args.bootstrap)
         from strl_pyg.frontend import FrontendConfig
 
         img0, img1, K0, K1 = inputs
-        from strl_pyg.inference.recommended import estimate_methods
-
-        est = estimate_methods(model, img0, img1, K0, K1,
-                               FrontendConfig(detector=args.detector), methods,
-                               bootstrap=args.bootstrap)
-        kind = (model.config if model is not None else _shipped_config()).translation
+        est = estimator.estimate_images(img0, img1, K0, K1,
+                                        FrontendConfig(detector=args.detector))
         if inputs.downscaled:
             _intrinsics_in_original_frame(est, inputs)
+    kind = estimator.model_config.translation  # without building the shipped network
     code = STATUS_EXIT[est.status]
     if args.json:
         print(json.dumps({**est.to_dict(), "translation_kind": kind,

@@ -177,14 +177,14 @@ def normalisation_scope(memo: dict | None = None) -> Iterator[dict]:
     result is kept per ``(points0, points1, K0, K1)`` array objects (held, so an id is never
     reused) and returned again for any :class:`~strl_pyg.data.PairMatches` made of the same
     arrays (e.g. the same matches with lines added). :class:`~strl_pyg.inference.PoseEstimator`
-    opens one per pair, so its methods, the support check, the covariances and the bootstrap
-    share one normalisation. ``memo``: a dict to keep across scopes (the pair's); a scope
-    opened inside another one uses the outer memo. Yields the memo.
-
-    The solvers do not write into the arrays they are given; a caller that edits a pair's
-    point arrays in place inside a scope gets the normalisation of the old values."""
+    opens one per pair (with the pair's own ``memo``), so its methods, the support check, the
+    covariances and the bootstrap share one normalisation. ``memo``: a dict to keep across
+    scopes; without one, a scope opened inside another one uses the outer memo. Yields the
+    memo. Each call returns its own copy of the tensors (a caller may write into them); a
+    caller that edits a pair's point arrays in place inside a scope gets the normalisation of
+    the old values (the estimator's scopes end with its call)."""
     outer = _SCOPE.get()
-    if outer is not None:
+    if outer is not None and memo is None:
         yield outer
         return
     memo = {} if memo is None else memo
@@ -205,13 +205,14 @@ def normalised_matches(matches: PairMatches) -> tuple[torch.Tensor, torch.Tensor
     arrays = (matches.points0, matches.points1, matches.K0, matches.K1)
     key = tuple(map(id, arrays))
     if memo is not None and key in memo:
-        return memo[key][1]
+        x0, x1, focal = memo[key][1]
+        return x0.clone(), x1.clone(), focal
     x0 = normalize_points(matches.points0, matches.K0).double()
     x1 = normalize_points(matches.points1, matches.K1).double()
-    out = (x0, x1, mean_focal(matches))
-    if memo is not None:
-        memo[key] = (arrays, out)  # the arrays held: their ids stay theirs
-    return out
+    if memo is not None:  # the arrays held: their ids stay theirs
+        memo[key] = (arrays, (x0, x1, mean_focal(matches)))
+        return x0.clone(), x1.clone(), mean_focal(matches)
+    return x0, x1, mean_focal(matches)
 
 
 def _normalised(matches: PairMatches, threshold_px: float) -> tuple[np.ndarray, np.ndarray, float]:

@@ -504,7 +504,11 @@ class PoseEstimator:
         cfg = (config or EstimatorConfig()).replace(**options) if options else (
             config or EstimatorConfig())
         self.config = cfg
-        self.method_names = _checked_names(cfg.methods)
+        names = _checked_names(cfg.methods)
+        #: whether estimate() walks the recommended order by default (methods="recommended")
+        self.recommended_only = names == RECOMMENDED
+        #: the methods this estimator may run (all installed ones for "recommended")
+        self.method_names = _checked_names(None) if self.recommended_only else names
         self._model = model
         self._settings: CheckpointSettings | None = None
         if cfg.device is not None and self._model is not None:
@@ -567,12 +571,19 @@ class PoseEstimator:
         ``"ok"`` one, the same recommended pose as running every method."""
         if not isinstance(matches, PairMatches):
             raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")
-        names = self.method_names if methods is None else _checked_names(methods)
+        names = self._names(methods)
         pair = self._pair(matches)
         if names == RECOMMENDED:
-            return self._recommended(pair)
+            return self._recommended(pair, known=known)
         self._run_methods(pair, names, known)
         return self._finish(pair, names)
+
+    def _names(self, methods: Any) -> tuple[str, ...] | str:
+        """The names to run: ``methods`` checked, or the estimator's own (:data:`RECOMMENDED`
+        for an estimator made with it)."""
+        if methods is not None:
+            return _checked_names(methods)
+        return RECOMMENDED if self.recommended_only else self.method_names
 
     def _pair(self, matches: PairMatches) -> _Pair:
         """The pair's one context: its input check, and the context its methods share. The
@@ -623,20 +634,22 @@ class PoseEstimator:
         return [m for m in recommended_order(self.settings, num_points)
                 if m in METHODS and METHODS[m].available()]
 
-    def _recommended(self, pair: _Pair, more_lines: Callable[[], PairMatches] | None = None
-                     ) -> PoseEstimate:
+    def _recommended(self, pair: _Pair, more_lines: Callable[[], PairMatches] | None = None,
+                     known: dict[str, MethodResult] | None = None) -> PoseEstimate:
         """The recommended order walked one method at a time (with the methods it reads),
-        stopping at the first ``"ok"`` one, or at the first ``"unreliable"`` one when the
-        intrinsics fail the input checks (every later pose would be too). ``more_lines``: the
-        pair's matches with lines added, called once before the first method that reads
-        lines runs (the front end's second half)."""
+        stopping once the recommended pose is ``"ok"``, or at the first ``"unreliable"`` one
+        when the intrinsics fail the input checks (every later pose would be too).
+        ``more_lines``: the pair's matches with lines added, called once before the first
+        method that reads lines runs (the front end's second half). ``known``: as in
+        :meth:`estimate`.
+
+        The same pose as running every method: when the walk ends without an ``"ok"`` pose
+        and a solver's pose was refused for lack of support, the remaining installed methods
+        run too (the regression stands in only while some solver's pose is supported, and
+        a solver outside the order, e.g. ``vp``, may be)."""
         order = self._installed_order(pair.matches.num_distinct_points)
-        if not order:  # nothing recommended is installed: every installed method runs
-            names = _checked_names(None)
-            if more_lines is not None:
-                pair.add_lines(more_lines())
-            self._run_methods(pair, names)
-            return self._finish(pair, names)
+        if not order:  # nothing recommended is installed: the estimator's methods run
+            return self._run_all(pair, more_lines, known)
         bad_K = not pair.matches.has_intrinsics or bool(pair.problems)
         run: tuple[str, ...] = ()
         for name in order:
@@ -644,13 +657,24 @@ class PoseEstimator:
             if more_lines is not None and any(METHODS[r].reads_lines for r in run):
                 pair.add_lines(more_lines())
                 more_lines = None
-            self._run_methods(pair, run)
+            self._run_methods(pair, run, known)
             est = self._finish(pair, run, fundamental=False)
-            if est.methods[name].status == "ok":
+            if est.pose.status == "ok":
                 break
             if bad_K and est.pose.status == "unreliable" and est.pose.method == name:
                 break  # every method reads the same K (or none): the later ones are too
+        else:
+            if any(r.info.get("unsupported") for r in pair.ctx.results.values()):
+                return self._run_all(pair, more_lines, known)
         return self._finish(pair, run)
+
+    def _run_all(self, pair: _Pair, more_lines: Callable[[], PairMatches] | None,
+                 known: dict[str, MethodResult] | None) -> PoseEstimate:
+        """Every method of the estimator on the pair (the results it has are kept)."""
+        if more_lines is not None and any(METHODS[m].reads_lines for m in self.method_names):
+            pair.add_lines(more_lines())
+        self._run_methods(pair, self.method_names, known)
+        return self._finish(pair, self.method_names)
 
     def _run(self, name: str, matches: PairMatches, ctx: MethodContext,
              degenerate: str | None) -> MethodResult:
@@ -734,7 +758,7 @@ class PoseEstimator:
         from strl_pyg.frontend import FrontendConfig, NoMatchesError, match_images
         from strl_pyg.frontend.pipeline import add_lines
 
-        names = self.method_names if methods is None else _checked_names(methods)
+        names = self._names(methods)
         cfg = frontend_config if frontend_config is not None else FrontendConfig()
         if not isinstance(cfg, FrontendConfig):
             raise TypeError(f"Expected a FrontendConfig (got {type(cfg).__name__})")
@@ -744,7 +768,7 @@ class PoseEstimator:
         recommended = names == RECOMMENDED
         if recommended:  # the first method's matches first (points only unless it reads lines)
             order = self._installed_order()
-            names = methods_needed(order[:1]) if order else _checked_names(None)
+            names = methods_needed(order[:1]) if order else self.method_names
             first = replace(cfg, lines=cfg.lines and any(METHODS[m].reads_lines
                                                          for m in names))
         else:

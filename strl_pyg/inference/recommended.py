@@ -60,7 +60,10 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
     """
     from strl_pyg.inference.estimator import RECOMMENDED, PoseEstimator
 
-    estimator_kw.pop("methods", None)
+    if "methods" in estimator_kw:
+        raise ValueError("Expected no methods for estimate_recommended (got methods="
+                         f"{estimator_kw['methods']!r}): it runs the recommended ones; "
+                         "PoseEstimator(...).estimate_images(..., methods=...) runs others")
     return PoseEstimator(model, **estimator_kw).estimate_images(
         image0, image1, K0, K1, frontend_config, methods=RECOMMENDED)
 

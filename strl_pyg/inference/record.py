@@ -84,7 +84,9 @@ class MethodResult:
             if pose.R.shape != (3, 3):
                 raise ValueError(f"Expected one pose (got a batch of shape "
                                  f"{tuple(pose.R.shape[:-2])})")
-            pose = Pose(pose.R.detach().cpu().double(), pose.t.detach().cpu().double())
+            # its own copy: the caller's tensors may change later, the record must not
+            pose = Pose(pose.R.detach().cpu().double().clone(),
+                        pose.t.detach().cpu().double().clone())
             self.T_0to1 = pose.matrix().numpy()
         self._pose = self._pose_of = None
         if self.status == "ok":
@@ -94,7 +96,7 @@ class MethodResult:
                                  f"{None if T is None else T.shape})")
             self.T_0to1 = T
             if pose is not None:
-                self._pose, self._pose_of = pose, T
+                self._pose, self._pose_of = pose, T.copy()
         else:
             self.T_0to1 = self.covariance = None
 
@@ -104,9 +106,10 @@ class MethodResult:
         the 4x4 matrix), else made once from ``T_0to1``."""
         if self.T_0to1 is None:
             return None
-        if self._pose is None or self._pose_of is not self.T_0to1:  # T_0to1 set anew
-            self._pose = Pose.from_matrix(torch.as_tensor(self.T_0to1, dtype=torch.float64))
-            self._pose_of = self.T_0to1
+        T = np.asarray(self.T_0to1, dtype=np.float64)
+        if self._pose is None or not np.array_equal(self._pose_of, T):  # T_0to1 changed
+            self._pose = Pose.from_matrix(torch.as_tensor(T.copy()))
+            self._pose_of = T.copy()
         return self._pose
 
     def unreliable(self, reasons: list[str]) -> MethodResult:

@@ -67,6 +67,8 @@ from strl_pyg.training.validation import evaluate_model, mean_pose
 __all__ = [
     "TrainConfig",
     "train",
+    "TrainingDiverged",
+    "MAX_SKIPPED_STEPS",
     "check_run_folder",
     "RESUME_FREE_FIELDS",
     "evaluate_model",
@@ -93,6 +95,15 @@ _Logger = TrainLogger
 #: do not change what is computed.
 RESUME_FREE_FIELDS = ("steps", "out_dir", "num_workers", "device", "tensorboard", "val_every",
                       "checkpoint_every", "checkpoint_minutes")
+
+#: Consecutive optimiser steps with a non-finite loss or gradient (each one skipped) after
+#: which training stops with :class:`TrainingDiverged`: it is not one bad batch then.
+MAX_SKIPPED_STEPS = 20
+
+
+class TrainingDiverged(RuntimeError):
+    """Training stopped: its losses, gradients or weights are no longer finite; ``last.pt``
+    keeps the last state saved before that."""
 
 #: Files whose presence marks a folder as holding a run.
 _RUN_FILES = ("last.pt", "model.pt", "log.csv", "config.json")
@@ -209,6 +220,12 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     def save_last(metrics_done: bool) -> None:
         if rank != 0:
             return
+        bad = [n for n, t in model.state_dict().items()
+               if t.is_floating_point() and not bool(torch.isfinite(t).all())]
+        if bad:  # never overwrite a good last.pt with weights that are not numbers
+            raise TrainingDiverged(f"Expected finite weights to checkpoint at step {step} (got "
+                               f"non-finite values in {len(bad)} tensors, e.g. {bad[0]}); "
+                               f"'{ckpt_path}' keeps the last good state")
         save_checkpoint(ckpt_path, _checkpoint_payload(cfg, model, optimizer, step, history,
                                                        trivial_buf))
         if metrics_done:
@@ -219,6 +236,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     stop = _StopSignals() if rank == 0 and start_step < cfg.steps else None
     last_save = time.monotonic()
     bar = tqdm(total=cfg.steps, initial=start_step, desc="train", disable=not progress or rank)
+    skipped_in_a_row = 0
     for batch in loader:
         ddp_model.train()
         batch = batch.to(device)
@@ -226,6 +244,14 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         if sum(t.shape[0] for t in trivial_buf) < 4096:
             trivial_buf.append(unaugmented_poses(batch).cpu())
         logs = _train_step(cfg, ddp_model, model, optimizer, (loss_fn, geo_fn), batch, step)
+        skipped_in_a_row = skipped_in_a_row + 1 if float(logs["skipped"]) else 0
+        if skipped_in_a_row:
+            bar.write(f"step {step + 1}: non-finite loss or gradient, optimiser step skipped "
+                      f"({skipped_in_a_row} in a row)")
+        if skipped_in_a_row >= MAX_SKIPPED_STEPS:
+            raise TrainingDiverged(f"Expected finite losses and gradients (got {skipped_in_a_row} "
+                               f"steps in a row without, up to step {step + 1}); "
+                               f"'{ckpt_path}' keeps the last saved state")
         step += 1
         pairs_seen += T_gt.shape[0] * world
         bar.update(1)
@@ -422,7 +448,15 @@ def _train_step(cfg: TrainConfig, ddp_model: torch.nn.Module, model: StrLPose,
                                                cfg.grad_clip or float("inf"))
     logs["grad_norm"] = grad_norm.detach()
     logs["clipped"] = (grad_norm > cfg.grad_clip).float() if cfg.grad_clip else torch.zeros(())
-    optimizer.step()
+    # a non-finite loss or gradient (one bad batch: a degenerate solve in the geometric head)
+    # would turn every weight into NaN for good: the step is skipped and logged instead. Under
+    # DDP the norm is of the all-reduced gradients, so every rank skips the same steps.
+    finite = bool(torch.isfinite(grad_norm)) and bool(torch.isfinite(logs["loss"].detach()))
+    logs["skipped"] = torch.tensor(0.0 if finite else 1.0)
+    if finite:
+        optimizer.step()
+    else:
+        optimizer.zero_grad(set_to_none=True)
     return logs
 
 
@@ -507,6 +541,9 @@ def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
     except (ValueError, TypeError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    except TrainingDiverged as err:  # not a usage error: the run itself failed
+        print(f"error: {err}", file=sys.stderr)
+        return 1
     last = Path(cfg.out_dir) / "last.pt"
     if result.get("already_finished"):
         print(f"run already finished: '{last}' is at step {result['step']} = --steps; nothing "
