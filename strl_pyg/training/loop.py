@@ -220,12 +220,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     def save_last(metrics_done: bool) -> None:
         if rank != 0:
             return
-        bad = [n for n, t in model.state_dict().items()
-               if t.is_floating_point() and not bool(torch.isfinite(t).all())]
-        if bad:  # never overwrite a good last.pt with weights that are not numbers
-            raise TrainingDiverged(f"Expected finite weights to checkpoint at step {step} (got "
-                               f"non-finite values in {len(bad)} tensors, e.g. {bad[0]}); "
-                               f"'{ckpt_path}' keeps the last good state")
+        _check_finite_weights(model, step, ckpt_path)
         save_checkpoint(ckpt_path, _checkpoint_payload(cfg, model, optimizer, step, history,
                                                        trivial_buf))
         if metrics_done:
@@ -244,14 +239,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         if sum(t.shape[0] for t in trivial_buf) < 4096:
             trivial_buf.append(unaugmented_poses(batch).cpu())
         logs = _train_step(cfg, ddp_model, model, optimizer, (loss_fn, geo_fn), batch, step)
-        skipped_in_a_row = skipped_in_a_row + 1 if float(logs["skipped"]) else 0
-        if skipped_in_a_row:
-            bar.write(f"step {step + 1}: non-finite loss or gradient, optimiser step skipped "
-                      f"({skipped_in_a_row} in a row)")
-        if skipped_in_a_row >= MAX_SKIPPED_STEPS:
-            raise TrainingDiverged(f"Expected finite losses and gradients (got {skipped_in_a_row} "
-                               f"steps in a row without, up to step {step + 1}); "
-                               f"'{ckpt_path}' keeps the last saved state")
+        skipped_in_a_row = _count_skipped(logs, skipped_in_a_row, step + 1, bar, ckpt_path)
         step += 1
         pairs_seen += T_gt.shape[0] * world
         bar.update(1)
@@ -277,13 +265,18 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         if stop is not None and stop.received:
             result["interrupted"] = stop.received
             break
+    _close(bar, stop, logger, own_group)
+    return {**result, "step": step, "history": history, "model": model}
+
+
+def _close(bar: Any, stop: Any, logger: Any, own_group: bool) -> None:
+    """The end of a run: the progress bar, the signal handlers, the log, the process group."""
     bar.close()
     if stop is not None:
         stop.restore()
     logger.close()
     if own_group:
         torch.distributed.destroy_process_group()
-    return {**result, "step": step, "history": history, "model": model}
 
 
 # ----------------------------------------------------------------------------- command line
@@ -425,6 +418,30 @@ def _write_validation(bar: Any, step: int, metrics: dict[str, float]) -> None:
                   f"{metrics['geo_rot_err_med']:.2f} deg, trans "
                   f"{metrics['geo_trans_err_med']:.2f} deg, "
                   f"AUC@10 {metrics['geo_auc10']:.3f}")
+
+
+def _check_finite_weights(model: StrLPose, step: int, ckpt_path: Path) -> None:
+    """Never overwrite a good ``last.pt`` with weights that are not numbers."""
+    bad = [n for n, t in model.state_dict().items()
+           if t.is_floating_point() and not bool(torch.isfinite(t).all())]
+    if bad:
+        raise TrainingDiverged(f"Expected finite weights to checkpoint at step {step} (got "
+                               f"non-finite values in {len(bad)} tensors, e.g. {bad[0]}); "
+                               f"'{ckpt_path}' keeps the last good state")
+
+
+def _count_skipped(logs: dict, in_a_row: int, step: int, bar: Any, ckpt_path: Path) -> int:
+    """Steps skipped in a row (:func:`_train_step`'s ``logs["skipped"]``), said under the
+    progress bar; :class:`TrainingDiverged` at :data:`MAX_SKIPPED_STEPS`."""
+    in_a_row = in_a_row + 1 if float(logs["skipped"]) else 0
+    if in_a_row:
+        bar.write(f"step {step}: non-finite loss or gradient, optimiser step skipped "
+                  f"({in_a_row} in a row)")
+    if in_a_row >= MAX_SKIPPED_STEPS:
+        raise TrainingDiverged(f"Expected finite losses and gradients (got {in_a_row} steps "
+                               f"in a row without, up to step {step}); '{ckpt_path}' keeps "
+                               "the last saved state")
+    return in_a_row
 
 
 def _train_step(cfg: TrainConfig, ddp_model: torch.nn.Module, model: StrLPose,
