@@ -39,6 +39,7 @@ from strl_pyg.estimation.classical import estimate_relative_pose, have_poselib
 from strl_pyg.estimation.uncertainty import (
     FAR_ROTATION_DEG,
     FAR_TRANSLATION_DEG,
+    MIN_BOOTSTRAP,
     bootstrap_resamples,
 )
 from strl_pyg.inference.config import CheckpointSettings
@@ -458,8 +459,8 @@ def _add_bootstrap(rec: MethodResult, boot: np.ndarray | None, n_boot: int, kind
     else:
         rec.info["covariance"] = kind
         if n_boot:
-            rec.warnings.append(f"{rec.method}: fewer than 3 of {n_boot} bootstrap resamples "
-                                f"gave a pose; {kind} covariance only")
+            rec.warnings.append(f"{rec.method}: fewer than {MIN_BOOTSTRAP} of {n_boot} "
+                                f"bootstrap resamples gave a pose; {kind} covariance only")
     return rec
 
 
