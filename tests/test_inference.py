@@ -401,7 +401,10 @@ def test_readme_snippet_runs_from_another_directory(tmp_path):
                          capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr[-2000:]
     lines = res.stdout.splitlines()
-    assert lines[0].startswith("ok ") and lines[-1] == "ok"
+    assert lines[0].startswith("ok ") and lines[-2] == "ok"  # the regression's status
+    # the recommended pose alone: the same method, and only what it needs ran
+    method = lines[0].split()[1]
+    assert lines[-1] == f"{method} {[method]}", lines[-1]
 
 
 @pytest.mark.parametrize("row", ["baseline", "LP", "R", "LP+V", "full"])
