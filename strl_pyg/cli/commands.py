@@ -80,6 +80,14 @@ def _predict_model(args):
     return None
 
 
+def _predict_estimator(args, names):
+    """``predict``'s one estimator (``names``: "recommended", ``None`` for all, or names),
+    made once the inputs are read (torch is imported here)."""
+    from strl_pyg.inference.estimator import PoseEstimator
+
+    return PoseEstimator(_predict_model(args), methods=names, bootstrap=args.bootstrap)
+
+
 # ----------------------------------------------------------------------------- the pipeline
 def predict_pair(model, matches, resample_seed: int | None = 0,
                  warmup: bool = False) -> dict[str, Any]:
@@ -316,20 +324,14 @@ def cmd_predict(args) -> int:
                              f"{args.image0} and --matches {args.matches})")
         matches = _read_match_file(args)
         K0 = matches.K0
-        from strl_pyg.inference.estimator import PoseEstimator
-
-        estimator = PoseEstimator(_predict_model(args), methods=names,
-                                  bootstrap=args.bootstrap)
+        estimator = _predict_estimator(args, names)
         est = estimator.estimate(matches)
     else:
         if not (args.image0 and args.image1):
             raise UsageError("Expected two images, or --matches FILE (got "
                              f"{'one image' if args.image0 else 'neither'})")
         inputs = read_pair(args)  # fail on bad files before any heavy work
-        from strl_pyg.inference.estimator import PoseEstimator
-
-        estimator = PoseEstimator(_predict_model(args), methods=names,
-                                  bootstrap=args.bootstrap)
+        estimator = _predict_estimator(args, names)
         from strl_pyg.frontend import FrontendConfig
 
         img0, img1, K0, K1 = inputs

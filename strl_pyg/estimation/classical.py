@@ -202,17 +202,29 @@ def normalised_matches(matches: PairMatches) -> tuple[torch.Tensor, torch.Tensor
     :func:`mean_focal` (divide a pixel threshold by it to get normalised units); computed once
     per pair inside a :func:`normalisation_scope`. Treat the tensors as read-only."""
     memo = _SCOPE.get()
-    arrays = (matches.points0, matches.points1, matches.K0, matches.K1)
-    key = tuple(map(id, arrays))
-    if memo is not None and key in memo:
-        x0, x1, focal = memo[key][1]
+    known = _memoised(matches)
+    if known is not None:
+        x0, x1, focal = known
         return x0.clone(), x1.clone(), focal
     x0 = normalize_points(matches.points0, matches.K0).double()
     x1 = normalize_points(matches.points1, matches.K1).double()
-    if memo is not None:  # the arrays held: their ids stay theirs
-        memo[key] = (arrays, (x0, x1, mean_focal(matches)))
-        return x0.clone(), x1.clone(), mean_focal(matches)
-    return x0, x1, mean_focal(matches)
+    focal = mean_focal(matches)
+    if memo is None:
+        return x0, x1, focal
+    arrays = (matches.points0, matches.points1, matches.K0, matches.K1)
+    memo[tuple(map(id, arrays))] = (arrays, (x0, x1, focal))  # arrays held: ids stay theirs
+    return x0.clone(), x1.clone(), focal
+
+
+def _memoised(matches: PairMatches) -> tuple[torch.Tensor, torch.Tensor, float] | None:
+    """The scope's normalisation of these matches' arrays (``None`` outside a scope or when
+    not computed yet); the memo's own tensors: do not write into them."""
+    memo = _SCOPE.get()
+    if memo is None:
+        return None
+    entry = memo.get(tuple(map(id, (matches.points0, matches.points1, matches.K0,
+                                    matches.K1))))
+    return None if entry is None else entry[1]
 
 
 def _normalised(matches: PairMatches, threshold_px: float) -> tuple[np.ndarray, np.ndarray, float]:
@@ -251,9 +263,8 @@ def _opencv(matches, threshold_px, confidence, max_iterations, seed,
     K0 = np.ascontiguousarray(matches.K0, dtype=np.float64)
     p0 = np.ascontiguousarray(matches.points0)
     # the pair's one normalisation where a scope holds it; else image 1's points only
-    memo = _SCOPE.get() or {}
-    known = memo.get(tuple(map(id, (matches.points0, matches.points1, matches.K0, matches.K1))))
-    x1 = (known[1][1] if known is not None
+    known = _memoised(matches)
+    x1 = (known[1] if known is not None
           else normalize_points(matches.points1, matches.K1).double()).numpy()
     p1 = np.ascontiguousarray(x1 @ K0[:2, :2].T + K0[:2, 2])
     try:

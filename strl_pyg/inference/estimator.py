@@ -652,6 +652,7 @@ class PoseEstimator:
             return self._run_all(pair, more_lines, known)
         bad_K = not pair.matches.has_intrinsics or bool(pair.problems)
         run: tuple[str, ...] = ()
+        est = None
         for name in order:
             run = methods_needed((*run, name))
             if more_lines is not None and any(METHODS[r].reads_lines for r in run):
@@ -666,7 +667,9 @@ class PoseEstimator:
         else:
             if any(r.info.get("unsupported") for r in pair.ctx.results.values()):
                 return self._run_all(pair, more_lines, known)
-        return self._finish(pair, run)
+        # the last step's estimate is the answer; without intrinsics it gets the pair's
+        # fundamental matrix (fitted once, at the end)
+        return est if pair.matches.has_intrinsics else self._finish(pair, run)
 
     def _run_all(self, pair: _Pair, more_lines: Callable[[], PairMatches] | None,
                  known: dict[str, MethodResult] | None) -> PoseEstimate:

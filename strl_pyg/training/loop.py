@@ -465,10 +465,11 @@ def _train_step(cfg: TrainConfig, ddp_model: torch.nn.Module, model: StrLPose,
                                                cfg.grad_clip or float("inf"))
     logs["grad_norm"] = grad_norm.detach()
     logs["clipped"] = (grad_norm > cfg.grad_clip).float() if cfg.grad_clip else torch.zeros(())
-    # a non-finite loss or gradient (one bad batch: a degenerate solve in the geometric head)
-    # would turn every weight into NaN for good: the step is skipped and logged instead. Under
-    # DDP the norm is of the all-reduced gradients, so every rank skips the same steps.
-    finite = bool(torch.isfinite(grad_norm)) and bool(torch.isfinite(logs["loss"].detach()))
+    # a non-finite gradient (one bad batch: a degenerate solve in the geometric head; a
+    # non-finite loss gives one too) would turn every weight into NaN for good: the step is
+    # skipped and logged instead. Decided on the norm alone: under DDP it is of the
+    # all-reduced gradients, so every rank skips the same steps (a rank's own loss is not).
+    finite = bool(torch.isfinite(grad_norm))
     logs["skipped"] = torch.tensor(0.0 if finite else 1.0)
     if finite:
         optimizer.step()
