@@ -12,6 +12,7 @@ from strl_pyg.geometry.essential import (
     decompose_essential,
     refine_pose,
     sampson_sq,
+    smallest_eigenvector,
     weighted_essential,
 )
 from strl_pyg.metrics.two_view import rotation_error_deg, translation_angle_error_deg
@@ -136,6 +137,66 @@ def test_gradcheck_float64():
     a = x0.clone().requires_grad_()
     assert gradcheck(lambda w, a: weighted_essential(a, x1, w, iterations=2, tau=1e-2).E,
                      (w, a))
+
+
+def _eigvec_grad(M, g, fn):
+    M = M.clone().requires_grad_()
+    v = fn(M)
+    v = v * torch.sign(v[..., :1])  # the sign of an eigenvector is arbitrary: fix it
+    (v * g).sum().backward()
+    return M.grad
+
+
+def test_smallest_eigenvector_has_eigh_gradient_on_separated_spectra():
+    g = torch.Generator().manual_seed(0)
+    A = torch.randn(3, 20, 9, generator=g, dtype=torch.float64)
+    M = A.transpose(-1, -2) @ A
+    up = torch.randn(3, 9, generator=g, dtype=torch.float64)
+    ours = _eigvec_grad(M, up, smallest_eigenvector)
+    ref = _eigvec_grad(M, up, lambda m: torch.linalg.eigh(m)[1][..., 0])
+    # eigh's gradient for a symmetric input, symmetrised (only that part reaches a symmetric M)
+    torch.testing.assert_close(ours, 0.5 * (ref + ref.transpose(-1, -2)), rtol=1e-9,
+                               atol=1e-12)
+    torch.testing.assert_close(smallest_eigenvector(M), torch.linalg.eigh(M)[1][..., 0])
+    assert gradcheck(lambda m: smallest_eigenvector(0.5 * (m + m.transpose(-1, -2))) *
+                     torch.sign(smallest_eigenvector(0.5 * (m + m.transpose(-1, -2)))[..., :1]),
+                     (M[:1].clone().requires_grad_(),))
+
+
+def test_smallest_eigenvector_gradient_is_finite_with_tied_upper_eigenvalues():
+    """torch.linalg.eigh's backward divides by every pair's gap: two equal eigenvalues that the
+    smallest eigenvector does not depend on give a NaN gradient (the weighted eight-point reads
+    only that eigenvector)."""
+    Q = torch.linalg.qr(torch.randn(9, 9, generator=torch.Generator().manual_seed(1),
+                                    dtype=torch.float64))[0]
+    lam = torch.tensor([0.01, 1.0, 2.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0], dtype=torch.float64)
+    M = (Q * lam) @ Q.T
+    M = (0.5 * (M + M.T))[None]
+    up = torch.randn(1, 9, generator=torch.Generator().manual_seed(2), dtype=torch.float64)
+    D = torch.diag(lam)[None]  # the same spectrum, diagonal: eigh's ties are exact there
+    assert not torch.isfinite(_eigvec_grad(D, up, lambda m: torch.linalg.eigh(m)[1][..., 0])).all()
+    grad = _eigvec_grad(D, up, smallest_eigenvector)
+    assert torch.isfinite(grad).all()
+    # dv0 = sum_j v_j v_j^T dM v0 / (l0 - lj): for a diagonal M, v0 = e0 and the gradient is
+    # (up_j / (l0 - lj)) at (j, 0), symmetrised
+    expect = torch.zeros(9, 9, dtype=torch.float64)
+    expect[1:, 0] = up[0, 1:] / (lam[0] - lam[1:])
+    expect = 0.5 * (expect + expect.T)
+    torch.testing.assert_close(grad[0], expect)
+    # a rotated copy of the same spectrum: the finite-difference derivative agrees (v0 is
+    # a smooth function of M there; only eigh's backward was not)
+    def fixed_sign(m):
+        v = smallest_eigenvector(0.5 * (m + m.transpose(-1, -2)))
+        return v * torch.sign(v[..., :1])
+
+    assert gradcheck(fixed_sign, (M.clone().requires_grad_(),))
+
+
+def test_smallest_eigenvector_gradient_stays_finite_at_a_repeated_smallest_eigenvalue():
+    M = torch.diag(torch.tensor([1.0, 1.0, 2.0], dtype=torch.float64))[None]
+    grad = _eigvec_grad(M, torch.ones(1, 3, dtype=torch.float64),
+                        lambda m: smallest_eigenvector(m, gap_tol=1e-6))
+    assert torch.isfinite(grad).all() and grad.abs().max() <= 1e6
 
 
 def test_bad_shapes_raise_one_line_errors():

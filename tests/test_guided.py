@@ -146,6 +146,35 @@ def test_geometric_loss_labels_follow_the_true_epipolar_error():
                         g["T_0to1"])
 
 
+def test_geometric_loss_gradient_is_finite_at_a_node_on_both_epipoles():
+    """Step 569 of a 3000-pair run (issue 30): a near-rank-1 E from the weighted solve had a
+    node with Sampson denominator 0 in float32; its capped term passes no gradient, but the
+    division's backward computed 0 * r^2 / (1e-30)^2 = 0 / 0 (1e-60 is 0 in float32): NaN in
+    every weight. Planted here with E = e3 e3^T (den = 0 at every node, r = 1)."""
+    from types import SimpleNamespace
+
+    from strl_pyg.geometry import Pose
+
+    n = 12
+    g = torch.Generator().manual_seed(0)
+    coords = 0.3 * torch.randn(n, 4, generator=g)
+    E = torch.zeros(1, 3, 3)
+    E[0, 2, 2] = 1.0
+    E.requires_grad_()
+    logits = torch.zeros(n, requires_grad=True)
+    geo = SimpleNamespace(logits=logits, batch=torch.zeros(n, dtype=torch.long), coords=coords,
+                          E=E, status=torch.zeros(1, dtype=torch.long),
+                          R=torch.eye(3)[None].double(), t=torch.tensor([[1.0, 0, 0]]).double(),
+                          focal=torch.full((1,), 500.0))
+    # the truth: pure sideways motion, so that half the nodes are labelled inliers
+    T = Pose(torch.eye(3), torch.tensor([1.0, 0.0, 0.0])).matrix()[None]
+    coords[: n // 2, 2:] = coords[: n // 2, :2]  # x1 = x0 fits x1^T [t]x x0 = 0 for these
+    logs = GeometricLoss(ess_weight=1.0)(SimpleNamespace(geometric=geo), T)
+    assert float(logs["loss_ess"]) == pytest.approx(GeometricLoss().cap, rel=1e-6)
+    logs["loss"].backward()
+    assert torch.isfinite(E.grad).all() and torch.isfinite(logits.grad).all()
+
+
 @pytest.mark.parametrize("weighting", ["network", "blend", "uniform"])
 def test_guided_refinement_weightings_never_raise_the_msac_cost(outlier_pair, weighting):
     p, base = outlier_pair

@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 import torch
 
+from strl_pyg import StrLPose
 from strl_pyg.training import TrainConfig, train
 from strl_pyg.training.loop import check_device, check_run_folder
 
@@ -227,3 +228,43 @@ def test_non_finite_weights_are_never_checkpointed(tmp_path, monkeypatch):
     with pytest.raises(loop.TrainingDiverged, match="Expected finite weights to checkpoint"):
         train(_tiny(tmp_path / "run"), progress=False)
     assert load_checkpoint(tmp_path / "run" / "last.pt")["step"] == 2
+
+
+def test_a_skipped_step_keeps_its_batch_and_weights_to_reproduce_it(tmp_path, monkeypatch):
+    """The step-569 batch of issue 30 could not be looked at afterwards: the skipped step now
+    leaves ``skipped/stepN.pt`` (safe loading), from which the same forward pass is rebuilt."""
+    from strl_pyg.training import loop
+
+    seen = {}
+    real_step = loop._train_step
+
+    def recording(cfg, ddp_model, model, optimizer, losses, batch, step):
+        if step == 1:  # the second step, the planted one
+            seen["weights"] = {k: v.clone() for k, v in model.state_dict().items()}
+            with torch.no_grad():
+                seen["q"] = model.eval()(batch).quaternion.clone()
+            model.train()
+        return real_step(cfg, ddp_model, model, optimizer, losses, batch, step)
+
+    monkeypatch.setattr(loop, "_train_step", recording)
+    _nan_gradients_on(monkeypatch, {2})
+    cfg = _tiny(tmp_path / "run")
+    train(cfg, progress=False)
+    files = sorted((tmp_path / "run" / "skipped").iterdir())
+    assert [f.name for f in files] == ["step000002.pt"]
+    model = StrLPose(cfg.model_config())
+    step, batch = loop.load_skipped_step(files[0], model)
+    assert step == 2
+    for k, v in model.state_dict().items():
+        assert torch.equal(v, seen["weights"][k]), k
+    with torch.no_grad():
+        q = model.eval()(batch).quaternion
+    torch.testing.assert_close(q, seen["q"], rtol=1e-5, atol=1e-6)
+
+
+def test_a_file_that_is_not_a_skipped_step_is_one_line(tmp_path):
+    from strl_pyg.training import loop
+
+    torch.save({"step": 3}, tmp_path / "x.pt")
+    with pytest.raises(ValueError, match="Expected a skipped-step file"):
+        loop.load_skipped_step(tmp_path / "x.pt", StrLPose(_tiny(tmp_path).model_config()))

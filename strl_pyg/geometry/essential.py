@@ -45,6 +45,7 @@ __all__ = [
     "sampson_sq",
     "decompose_essential",
     "refine_pose",
+    "smallest_eigenvector",
 ]
 
 OK = 0
@@ -116,6 +117,45 @@ def _apply(T: Tensor, x: Tensor) -> Tensor:
     return x @ T[:, :2, :2].transpose(-1, -2) + T[:, None, :2, 2]
 
 
+class _SmallestEigenvector(torch.autograd.Function):
+    """The eigenvector of the smallest eigenvalue of symmetric ``M`` ``[B, n, n]``, with a
+    backward that reads only the gaps ``l_0 - l_j`` to the other eigenvalues, each kept at
+    least ``gap_tol * max |l|`` away from zero."""
+
+    @staticmethod
+    def forward(ctx, M: Tensor, gap_tol: float) -> Tensor:
+        evals, vecs = torch.linalg.eigh(M)
+        ctx.save_for_backward(evals, vecs)
+        ctx.gap_tol = gap_tol
+        return vecs[..., 0]
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad: Tensor) -> tuple[Tensor, None]:
+        evals, vecs = ctx.saved_tensors
+        # dv_0 = sum_{j > 0} v_j (v_j^T dM v_0) / (l_0 - l_j); l_0 - l_j <= 0 (ascending)
+        scale = evals.abs().amax(-1, keepdim=True).clamp_min(torch.finfo(evals.dtype).tiny)
+        gap = torch.minimum(evals[..., :1] - evals[..., 1:], -ctx.gap_tol * scale)
+        rest = vecs[..., 1:]
+        coef = (rest.transpose(-1, -2) @ grad[..., None])[..., 0] / gap  # [B, n - 1]
+        G = (rest @ coef[..., None]) @ vecs[..., None, :, 0]  # [B, n, n]
+        return 0.5 * (G + G.transpose(-1, -2)), None
+
+
+def smallest_eigenvector(M: Tensor, gap_tol: float = 1e-12) -> Tensor:
+    """Unit eigenvector ``[B, n]`` of the smallest eigenvalue of each symmetric ``M``
+    ``[B, n, n]`` (``torch.linalg.eigh``, sign as it returns it), differentiable.
+
+    ``torch.linalg.eigh``'s own backward divides by the gaps between *all* pairs of
+    eigenvalues, so two equal eigenvalues that the smallest eigenvector does not depend on
+    still give a NaN gradient (``0 / 0``). This backward forms only the gaps to the smallest
+    eigenvalue (the derivative of that eigenvector), each at least ``gap_tol`` times the largest
+    eigenvalue's magnitude away from zero, so a near-repeated smallest eigenvalue gives a large
+    but finite gradient; elsewhere it equals ``eigh``'s (tested).
+    """
+    return _SmallestEigenvector.apply(M, gap_tol)
+
+
 _FALLBACK = torch.diag(torch.arange(1.0, 10.0, dtype=torch.float64))
 
 
@@ -135,8 +175,7 @@ def _eight_point(x0: Tensor, x1: Tensor, w: Tensor, rank_tol: float) -> tuple[Te
     # A rank-deficient M has tied eigenvalues and an undefined eigenvector gradient: solve a
     # fixed, well-conditioned system instead and report the pair.
     M = torch.where(bad[:, None, None], _FALLBACK.to(M), M)
-    _, vecs = torch.linalg.eigh(M)
-    En = vecs[..., 0].reshape(-1, 3, 3)
+    En = smallest_eigenvector(M, rank_tol).reshape(-1, 3, 3)
     E = T1.transpose(-1, -2) @ En @ T0
     E = E / E.flatten(-2).norm(dim=-1).clamp_min(1e-300)[:, None, None]
     return E, bad

@@ -100,6 +100,9 @@ RESUME_FREE_FIELDS = ("steps", "out_dir", "num_workers", "device", "tensorboard"
 #: which training stops with :class:`TrainingDiverged`: it is not one bad batch then.
 MAX_SKIPPED_STEPS = 20
 
+#: At most this many skipped steps per run keep their batch and weights (``skipped/``).
+MAX_SKIPPED_DUMPS = 3
+
 
 class TrainingDiverged(RuntimeError):
     """Training stopped: its losses, gradients or weights are no longer finite; ``last.pt``
@@ -231,7 +234,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     stop = _StopSignals() if rank == 0 and start_step < cfg.steps else None
     last_save = time.monotonic()
     bar = tqdm(total=cfg.steps, initial=start_step, desc="train", disable=not progress or rank)
-    skipped_in_a_row = 0
+    skipped_in_a_row = dumps = 0
     for batch in loader:
         ddp_model.train()
         batch = batch.to(device)
@@ -239,6 +242,10 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         if sum(t.shape[0] for t in trivial_buf) < 4096:
             trivial_buf.append(unaugmented_poses(batch).cpu())
         logs = _train_step(cfg, ddp_model, model, optimizer, (loss_fn, geo_fn), batch, step)
+        if rank == 0 and float(logs["skipped"]) and dumps < MAX_SKIPPED_DUMPS:
+            dumps += 1
+            bar.write(f"step {step + 1}: its batch and weights are kept in "
+                      f"'{save_skipped_step(out_dir, step + 1, model, batch)}'")
         skipped_in_a_row = _count_skipped(logs, skipped_in_a_row, step + 1, bar, ckpt_path)
         step += 1
         pairs_seen += T_gt.shape[0] * world
@@ -428,6 +435,33 @@ def _check_finite_weights(model: StrLPose, step: int, ckpt_path: Path) -> None:
         raise TrainingDiverged(f"Expected finite weights to checkpoint at step {step} (got "
                                f"non-finite values in {len(bad)} tensors, e.g. {bad[0]}); "
                                f"'{ckpt_path}' keeps the last good state")
+
+
+def save_skipped_step(out_dir: str | os.PathLike, step: int, model: StrLPose,
+                      batch: Any) -> Path:
+    """Keeps what a skipped step needs to be reproduced: ``<out_dir>/skipped/step<N>.pt``
+    with the weights before the step and the batch, one graph per entry (plain tensors, read
+    back by :func:`load_skipped_step` with safe loading)."""
+    graphs = [g.to_dict() for g in batch.cpu().to_data_list()]
+    path = Path(out_dir) / "skipped" / f"step{step:06d}.pt"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return save_checkpoint(path, {"step": step, "model": model.state_dict(), "graphs": graphs})
+
+
+def load_skipped_step(path: str | os.PathLike, model: StrLPose) -> tuple[int, Any]:
+    """Reads a :func:`save_skipped_step` file: loads its weights into ``model`` and returns
+    ``(step, batch)``, the batch collated as the training loop did."""
+    from torch_geometric.data import HeteroData
+
+    from strl_pyg.utils.io import safe_torch_load
+
+    state = safe_torch_load(Path(path), "skipped training step")
+    if not isinstance(state, dict) or not {"step", "model", "graphs"} <= set(state):
+        raise ValueError(f"Expected a skipped-step file with keys ['graphs', 'model', 'step'] "
+                         f"in '{path}' (got {type(state).__name__})")
+    model.load_state_dict(state["model"])
+    graphs = [HeteroData.from_dict(g) for g in state["graphs"]]
+    return state["step"], _collater(model.config)(graphs)
 
 
 def _count_skipped(logs: dict, in_a_row: int, step: int, bar: Any, ckpt_path: Path) -> int:
