@@ -17,7 +17,6 @@ from pathlib import Path
 import pytest
 import torch
 
-from strl_pyg import StrLPose
 from strl_pyg.training import TrainConfig, train
 from strl_pyg.training.loop import check_device, check_run_folder
 
@@ -252,14 +251,26 @@ def test_a_skipped_step_keeps_its_batch_and_weights_to_reproduce_it(tmp_path, mo
     train(cfg, progress=False)
     files = sorted((tmp_path / "run" / "skipped").iterdir())
     assert [f.name for f in files] == ["step000002.pt"]
-    model = StrLPose(cfg.model_config())
-    step, batch = loop.load_skipped_step(files[0], model)
-    assert step == 2
+    step, cfg_back, model, batch = loop.load_skipped_step(files[0])
+    assert step == 2 and cfg_back == cfg
     for k, v in model.state_dict().items():
         assert torch.equal(v, seen["weights"][k]), k
     with torch.no_grad():
         q = model.eval()(batch).quaternion
     torch.testing.assert_close(q, seen["q"], rtol=1e-5, atol=1e-6)
+    # the replay script finds the planted NaN (the loss term is still planted: its 3rd call)
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "replay", Path(__file__).resolve().parents[1] / "benchmarks" / "replay_skipped_step.py")
+    replay = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(replay)
+    _nan_gradients_on(monkeypatch, {-1})
+    # sqrt(0 * x): sqrt's backward gives inf, the product's backward 0 * inf = NaN
+    with pytest.warns(UserWarning, match="Error detected in MulBackward0"):
+        r = replay.replay(str(files[0]))
+    assert r["step"] == 2 and "MulBackward0' returned nan" in r["anomaly"]
+    assert r["grad_norm"] != r["grad_norm"]  # NaN
 
 
 def test_a_file_that_is_not_a_skipped_step_is_one_line(tmp_path):
@@ -267,4 +278,4 @@ def test_a_file_that_is_not_a_skipped_step_is_one_line(tmp_path):
 
     torch.save({"step": 3}, tmp_path / "x.pt")
     with pytest.raises(ValueError, match="Expected a skipped-step file"):
-        loop.load_skipped_step(tmp_path / "x.pt", StrLPose(_tiny(tmp_path).model_config()))
+        loop.load_skipped_step(tmp_path / "x.pt")

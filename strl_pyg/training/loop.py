@@ -245,7 +245,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         if rank == 0 and float(logs["skipped"]) and dumps < MAX_SKIPPED_DUMPS:
             dumps += 1
             bar.write(f"step {step + 1}: its batch and weights are kept in "
-                      f"'{save_skipped_step(out_dir, step + 1, model, batch)}'")
+                      f"'{save_skipped_step(out_dir, step + 1, cfg, model, batch)}'")
         skipped_in_a_row = _count_skipped(logs, skipped_in_a_row, step + 1, bar, ckpt_path)
         step += 1
         pairs_seen += T_gt.shape[0] * world
@@ -437,31 +437,37 @@ def _check_finite_weights(model: StrLPose, step: int, ckpt_path: Path) -> None:
                                f"'{ckpt_path}' keeps the last good state")
 
 
-def save_skipped_step(out_dir: str | os.PathLike, step: int, model: StrLPose,
-                      batch: Any) -> Path:
-    """Keeps what a skipped step needs to be reproduced: ``<out_dir>/skipped/step<N>.pt``
-    with the weights before the step and the batch, one graph per entry (plain tensors, read
-    back by :func:`load_skipped_step` with safe loading)."""
+def save_skipped_step(out_dir: str | os.PathLike, step: int, cfg: TrainConfig,
+                      model: StrLPose, batch: Any) -> Path:
+    """Keeps what a skipped step needs to be replayed: ``<out_dir>/skipped/step<N>.pt`` with
+    the run's config, the weights before the step and the batch, one graph per entry (plain
+    values, read back by :func:`load_skipped_step` with safe loading)."""
     graphs = [g.to_dict() for g in batch.cpu().to_data_list()]
     path = Path(out_dir) / "skipped" / f"step{step:06d}.pt"
     path.parent.mkdir(parents=True, exist_ok=True)
-    return save_checkpoint(path, {"step": step, "model": model.state_dict(), "graphs": graphs})
+    return save_checkpoint(path, {"step": step, "config": json.loads(json.dumps(asdict(cfg))),
+                                  "model": model.state_dict(), "graphs": graphs})
 
 
-def load_skipped_step(path: str | os.PathLike, model: StrLPose) -> tuple[int, Any]:
-    """Reads a :func:`save_skipped_step` file: loads its weights into ``model`` and returns
-    ``(step, batch)``, the batch collated as the training loop did."""
+def load_skipped_step(path: str | os.PathLike) -> tuple[int, TrainConfig, StrLPose, Any]:
+    """Reads a :func:`save_skipped_step` file: ``(step, config, model, batch)``, the model with
+    the weights before the step and the batch collated as the training loop did, to replay
+    the step (``benchmarks/replay_skipped_step.py``)."""
     from torch_geometric.data import HeteroData
 
     from strl_pyg.utils.io import safe_torch_load
 
+    need = {"step", "config", "model", "graphs"}
     state = safe_torch_load(Path(path), "skipped training step")
-    if not isinstance(state, dict) or not {"step", "model", "graphs"} <= set(state):
-        raise ValueError(f"Expected a skipped-step file with keys ['graphs', 'model', 'step'] "
-                         f"in '{path}' (got {type(state).__name__})")
+    if not isinstance(state, dict) or not need <= set(state):
+        got = sorted(state) if isinstance(state, dict) else type(state).__name__
+        raise ValueError(f"Expected a skipped-step file with keys {sorted(need)} in '{path}' "
+                         f"(got {got})")
+    cfg = TrainConfig.from_dict(state["config"])
+    model = StrLPose(cfg.model_config())
     model.load_state_dict(state["model"])
     graphs = [HeteroData.from_dict(g) for g in state["graphs"]]
-    return state["step"], _collater(model.config)(graphs)
+    return state["step"], cfg, model, _collater(model.config)(graphs)
 
 
 def _count_skipped(logs: dict, in_a_row: int, step: int, bar: Any, ckpt_path: Path) -> int:
