@@ -414,7 +414,7 @@ def fit_fusion_inflation(estimator, pairs, s_reg: float) -> tuple[float, dict]:
             # as the fused method: the first 'ok' classical estimate
             cls = next((recs[c] for c in classical if recs[c].status == "ok"), None)
             if recs["regression"].status == "ok" and cls is not None:
-                # the swap check's term, as the fused method adds it
+                # the swap check's term, as the fused method adds it (not the data check's)
                 solved.append((m, T, recs["regression"].raw, cls.raw,
                                swap_term(recs["regression"])))
     evidence, chosen = {}, FUSION_INFLATIONS[-1]

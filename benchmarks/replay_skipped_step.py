@@ -8,6 +8,9 @@ and the gradient norm::
 
     python benchmarks/replay_skipped_step.py runs/ship_balanced_3000/skipped/step000569.pt
 
+The replay runs on the CPU in float32, whatever device the run trained on: a non-finite value
+that only a GPU's arithmetic produces (TF32, other kernels) may not show here.
+
 It is how the NaN of issue 30's phase-2 run (step 569) was traced to the float32 Sampson
 division of the geometric head's essential loss (``benchmarks/training.md``).
 """

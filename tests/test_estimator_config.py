@@ -91,8 +91,9 @@ def test_the_swap_check_widens_the_regression_covariance_by_the_disagreement():
     from strl_pyg.inference.methods import swap_covariance
 
     m = generate_pair(2_000_005).matches
-    on = PoseEstimator(methods="regression").estimate(m).methods["regression"]
-    off = PoseEstimator(methods="regression", swap_check=False).estimate(m).methods["regression"]
+    on = PoseEstimator(methods="regression", data_check=False).estimate(m).methods["regression"]
+    off = PoseEstimator(methods="regression", swap_check=False,
+                        data_check=False).estimate(m).methods["regression"]
     np.testing.assert_array_equal(on.T_0to1, off.T_0to1)  # the pose is the forward pass's
     d = on.info["swap_disagreement_deg"]
     assert "swap_disagreement_deg" not in off.info
@@ -104,6 +105,115 @@ def test_the_swap_check_widens_the_regression_covariance_by_the_disagreement():
         atol=1e-12)
     np.testing.assert_allclose(swap_covariance(0.6, 0.4),
                                np.diag([0.06, 0.06, 0.06, 0.04, 0.04]))
+
+
+def test_the_data_check_widens_the_regression_covariance_by_the_refined_distance():
+    from strl_pyg.inference.methods import data_covariance
+
+    m = generate_pair(2_000_005).matches
+    on = PoseEstimator(methods="regression").estimate(m).methods["regression"]
+    off = PoseEstimator(methods="regression", data_check=False).estimate(m).methods["regression"]
+    np.testing.assert_array_equal(on.T_0to1, off.T_0to1)
+    d = on.info["data_disagreement_deg"]
+    assert "data_disagreement_deg" not in off.info and on.info["data_check_ms"] > 0
+    scale = on.info.get("calibration_scale", 1.0)
+    np.testing.assert_allclose(
+        on.covariance - off.covariance,
+        scale * data_covariance(np.radians(d["rotation"]), np.radians(d["translation"])),
+        atol=1e-12)
+    np.testing.assert_allclose(data_covariance(0.6, 0.4),
+                               np.diag([0.12, 0.12, 0.12, 0.08, 0.08]))
+    with pytest.raises(ValueError, match="Expected data_check as a bool"):
+        PoseEstimator(methods="regression", data_check="no")
+
+
+def _ctx():
+    from strl_pyg.inference.methods import MethodContext
+
+    return MethodContext(seed=0, threshold_px=1.0, bootstrap=0)
+
+
+def test_the_data_check_measures_how_far_a_wrong_pose_is_from_what_the_matches_support():
+    """A pose 6 deg off in rotation and 25 deg off in translation direction, on clean matches:
+    the classical pose is the true one to a fraction of a degree, so the distance is the
+    error itself; a backward translation (the network's typical failure on forward motion)
+    is ~180 deg away."""
+    import torch
+
+    from strl_pyg.geometry import Pose, so3_exp
+    from strl_pyg.inference.methods import _data_disagreement
+    from strl_pyg.synthetic import SceneConfig
+
+    p = generate_pair(2_000_011, SceneConfig(kind="indoor", noise_px=0.3))
+    true = Pose.from_matrix(torch.as_tensor(p.T_0to1, dtype=torch.float64))
+    axis = torch.tensor([0.3, -0.8, 0.5], dtype=torch.float64)
+    R = so3_exp((np.radians(6.0) * axis / axis.norm())[None])[0] @ true.R.double()
+    t = true.t.double() / true.t.double().norm()
+    side = torch.linalg.cross(t, torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64))
+    t_off = np.cos(np.radians(25)) * t + np.sin(np.radians(25)) * side / side.norm()
+    rot, trans = _data_disagreement(p.matches, Pose(R, t_off), _ctx())
+    assert np.degrees(rot) == pytest.approx(6.0, abs=0.3)
+    assert np.degrees(trans) == pytest.approx(25.0, abs=1.0)
+    rot, trans = _data_disagreement(p.matches, Pose(true.R, -true.t), _ctx())
+    assert np.degrees(trans) > 178.0 and np.degrees(rot) < 0.3
+    rot, trans = _data_disagreement(p.matches, true, _ctx())
+    assert np.degrees(rot) < 0.3 and np.degrees(trans) < 2.0
+
+
+def test_the_data_check_and_the_classical_method_share_one_solve(monkeypatch):
+    from strl_pyg.estimation.classical import have_poselib
+    from strl_pyg.inference import methods
+
+    calls = []
+    real = methods.estimate_relative_pose
+
+    def counting(m, name, *a, **k):
+        calls.append(name)
+        return real(m, name, *a, **k)
+
+    monkeypatch.setattr(methods, "estimate_relative_pose", counting)
+    name = "poselib" if have_poselib() else "opencv"
+    est = PoseEstimator(methods=["regression", name], bootstrap=0).estimate(
+        generate_pair(2_000_005).matches)
+    assert calls == [name]
+    reg, cls = est.methods["regression"], est.methods[name]
+    d = reg.info["data_disagreement_deg"]
+    R0, R1 = reg.as_pose().R.double(), cls.as_pose().R.double()
+    expect = np.degrees(np.arccos(np.clip((float(np.trace(R0.T @ R1)) - 1) / 2, -1, 1)))
+    assert d["rotation"] == pytest.approx(expect, abs=1e-6)
+
+
+def test_the_data_check_says_why_it_did_not_run():
+    from dataclasses import replace
+
+    import torch
+
+    from strl_pyg.geometry import Pose
+    from strl_pyg.inference.methods import _data_disagreement
+
+    p = generate_pair(2_000_005)
+    pose = Pose.from_matrix(torch.as_tensor(p.T_0to1, dtype=torch.float64))
+    m = p.matches
+    assert _data_disagreement(replace(m, K0=None, K1=None), pose, _ctx()) == "no intrinsics"
+    few = replace(m, points0=m.points0[:5], points1=m.points1[:5])
+    assert _data_disagreement(few, pose, _ctx()) == "5 distinct point matches (fewer than 8)"
+    # repeated rows are not more matches
+    rep = replace(m, points0=np.repeat(m.points0[:4], 3, axis=0),
+                  points1=np.repeat(m.points1[:4], 3, axis=0))
+    assert _data_disagreement(rep, pose, _ctx()) == "4 distinct point matches (fewer than 8)"
+
+
+def test_the_regression_says_when_its_data_check_did_not_run(monkeypatch):
+    from strl_pyg.inference import methods
+
+    def broken(*args):
+        raise RuntimeError("planted")
+
+    monkeypatch.setattr(methods, "_data_disagreement", broken)
+    rec = PoseEstimator(methods="regression").estimate(
+        generate_pair(2_000_005).matches).methods["regression"]
+    assert rec.status == "ok" and rec.info["data_check"] == "not run: RuntimeError: planted"
+    assert any("no data check (RuntimeError: planted)" in w for w in rec.warnings)
 
 
 def test_numpy_scalars_are_options_as_python_ones():

@@ -48,6 +48,7 @@ class EstimatorConfig:
     device: Any = None
     raise_errors: bool = False
     swap_check: bool = True
+    data_check: bool = True
 
     def __post_init__(self) -> None:
         if self.methods is not None:
@@ -82,7 +83,7 @@ class EstimatorConfig:
                 raise ValueError(f"Expected resample 'model', None or (points, lines) >= 0 "
                                  f"(got {r!r})")
             object.__setattr__(self, "resample", (int(r[0]), int(r[1])))
-        for name in ("raise_errors", "swap_check"):
+        for name in ("raise_errors", "swap_check", "data_check"):
             value = getattr(self, name)
             if not isinstance(value, (bool, np.bool_)):
                 raise ValueError(f"Expected {name} as a bool (got {value!r})")

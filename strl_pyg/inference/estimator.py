@@ -485,6 +485,10 @@ class PoseEstimator:
             (:func:`~strl_pyg.inference.methods.swap_covariance`; default ``True``): the
             network's own variances are fitted on its training distribution and stay small
             away from it.
+        data_check: the regression's covariance also grows by its distance to the classical
+            pose of the same matches (PoseLib's, else OpenCV's; one solve per pair, shared
+            with that method) (:func:`~strl_pyg.inference.methods.data_covariance`; default
+            ``True``; needs intrinsics and 8 distinct point matches).
     """
 
     def __init__(self, model: Any = None, methods: Any = None, *,
@@ -594,6 +598,7 @@ class PoseEstimator:
         ctx = MethodContext(self.seed, self.threshold_px, self.bootstrap, self.device,
                             self.resample, load_model=lambda: self.model,
                             settings=self.settings, swap_check=self.config.swap_check,
+                            data_check=self.config.data_check,
                             support=(self.min_inlier_ratio, self.min_inliers,
                                      self.min_in_front))
         return _Pair(checked, warnings, rows, degenerate, problems, ctx)

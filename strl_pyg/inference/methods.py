@@ -69,6 +69,9 @@ class MethodContext:
     #: the regression also runs on the swapped pair and widens its covariance by the two
     #: passes' disagreement (:func:`swap_covariance`)
     swap_check: bool = True
+    #: the regression's covariance is widened by the distance to the classical pose of the
+    #: same matches (:func:`data_covariance`)
+    data_check: bool = True
     #: the support check's ``(min_inlier_ratio, min_inliers, min_in_front)``, for methods that
     #: check a pose themselves (``vp``'s classical start); None: check_support's defaults
     support: tuple = ()
@@ -123,8 +126,73 @@ def _regression(matches: PairMatches, ctx: MethodContext) -> MethodResult:
             cov = cov + swap_covariance(rot, trans)
             info["swap_disagreement_deg"] = {"rotation": math.degrees(rot),
                                              "translation": math.degrees(trans)}
+    if ctx.data_check:
+        start = time.perf_counter()
+        try:
+            found = _data_disagreement(matches, pose, ctx)
+        except Exception as err:  # the forward pose stands; only its check is missing
+            found = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
+        info["data_check_ms"] = (time.perf_counter() - start) * 1e3
+        if isinstance(found, str):
+            info["data_check"] = f"not run: {found}"
+            if matches.has_intrinsics:  # without K the pose is "unreliable" anyway
+                warnings.append(f"regression: no data check ({found}); its covariance does "
+                                "not hold the distance to the classical pose")
+        else:
+            cov = cov + data_covariance(*found)
+            info["data_disagreement_deg"] = {"rotation": math.degrees(found[0]),
+                                             "translation": math.degrees(found[1])}
     return MethodResult("regression", "ok", pose, cov, warnings, time_ms=ms,
                         info=info, raw=out)
+
+
+#: Fewest distinct point matches for the regression's data check (a 5-dof pose needs 5; the
+#: classical solvers need more to be worth comparing with).
+DATA_CHECK_MIN_POINTS = 8
+
+
+def _solve(name: str, matches: PairMatches, ctx: MethodContext) -> Any:
+    """The classical solver ``name`` on the pair, run once per pair (the data check and the
+    classical method share it)."""
+    key = f"solve_{name}"
+    if key not in ctx.cache:
+        ctx.cache[key] = estimate_relative_pose(matches, name, ctx.threshold_px, seed=ctx.seed)
+    return ctx.cache[key]
+
+
+def _data_disagreement(matches: PairMatches, pose: Any,
+                       ctx: MethodContext) -> tuple[float, float] | str:
+    """Angles (rad) between ``pose`` and the pose the point matches support: the classical
+    solver's (PoseLib's where installed, else OpenCV's; robust, so a global answer, with its
+    sign of ``t`` from cheirality), rotation and translation direction. A string says why it
+    did not run."""
+
+    if not matches.has_intrinsics:
+        return "no intrinsics"
+    n = matches.num_distinct_points
+    if n < DATA_CHECK_MIN_POINTS:
+        return f"{n} distinct point matches (fewer than {DATA_CHECK_MIN_POINTS})"
+    name = "poselib" if have_poselib() else "opencv"
+    res = _solve(name, matches, ctx)
+    if not res.success:
+        return f"{name} found no pose"
+    R0, t0 = pose.R.double(), pose.t.double() / pose.t.double().norm()
+    R, t = res.pose.R.double(), res.pose.t.double() / res.pose.t.double().norm()
+    cos_r = ((torch.trace(R0.T @ R) - 1) / 2).clamp(-1, 1)
+    cos_t = (t0 @ t).clamp(-1, 1)
+    return float(torch.arccos(cos_r)), float(torch.arccos(cos_t))
+
+
+def data_covariance(rotation_rad: float, translation_rad: float) -> np.ndarray:
+    """The ``[5, 5]`` tangent covariance that the regression's data check adds
+    (:data:`MethodContext.data_check`), before its calibration scale as the swap check's term:
+    the classical pose is far more precise than the network's where it is right, so the
+    distance to it stands for the network's own error, its square spread over the 3 rotation
+    and the 2 direction axes (``d_R^2 / 3``, ``d_t^2 / 2``). Where the classical pose is wrong
+    the term is wide whatever the network's error (conservative). The regression's record
+    carries it; the fusion does not (its consistency gate compares the network with the same
+    classical pose: the term would let every network pose pass it)."""
+    return np.diag([rotation_rad ** 2 / 3] * 3 + [translation_rad ** 2 / 2] * 2)
 
 
 def swap_covariance(rotation_rad: float, translation_rad: float) -> np.ndarray:
@@ -168,7 +236,7 @@ def _classical(name: str) -> MethodFn:
         from strl_pyg.estimation.pose_fusion import classical_covariance
 
         thr = ctx.threshold_px
-        res = estimate_relative_pose(matches, name, thr, seed=ctx.seed)
+        res = _solve(name, matches, ctx)
         if not res.success:
             return MethodResult(name, "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
                                 warnings=[f"{name} found no pose (no essential matrix with "

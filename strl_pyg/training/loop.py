@@ -242,10 +242,15 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         if sum(t.shape[0] for t in trivial_buf) < 4096:
             trivial_buf.append(unaugmented_poses(batch).cpu())
         logs = _train_step(cfg, ddp_model, model, optimizer, (loss_fn, geo_fn), batch, step)
-        if rank == 0 and float(logs["skipped"]) and dumps < MAX_SKIPPED_DUMPS:
+        if float(logs["skipped"]) and dumps < MAX_SKIPPED_DUMPS:
+            # every rank keeps its own shard: the skip was decided on the all-reduced norm
             dumps += 1
-            bar.write(f"step {step + 1}: its batch and weights are kept in "
-                      f"'{save_skipped_step(out_dir, step + 1, cfg, model, batch)}'")
+            try:
+                kept = save_skipped_step(out_dir, step + 1, cfg, model, batch,
+                                         rank=rank if world > 1 else None)
+                bar.write(f"step {step + 1}: its batch and weights are kept in '{kept}'")
+            except (OSError, TypeError, RuntimeError) as err:  # the run goes on without it
+                bar.write(f"step {step + 1}: its batch could not be kept ({err})")
         skipped_in_a_row = _count_skipped(logs, skipped_in_a_row, step + 1, bar, ckpt_path)
         step += 1
         pairs_seen += T_gt.shape[0] * world
@@ -438,12 +443,14 @@ def _check_finite_weights(model: StrLPose, step: int, ckpt_path: Path) -> None:
 
 
 def save_skipped_step(out_dir: str | os.PathLike, step: int, cfg: TrainConfig,
-                      model: StrLPose, batch: Any) -> Path:
-    """Keeps what a skipped step needs to be replayed: ``<out_dir>/skipped/step<N>.pt`` with
-    the run's config, the weights before the step and the batch, one graph per entry (plain
-    values, read back by :func:`load_skipped_step` with safe loading)."""
-    graphs = [g.to_dict() for g in batch.cpu().to_data_list()]
-    path = Path(out_dir) / "skipped" / f"step{step:06d}.pt"
+                      model: StrLPose, batch: Any, rank: int | None = None) -> Path:
+    """Keeps what a skipped step needs to be replayed: ``<out_dir>/skipped/step<N>.pt``
+    (``step<N>_rank<r>.pt`` for a DDP rank's shard) with the run's config, the weights before
+    the step and the batch, one graph per entry (plain values, read back by
+    :func:`load_skipped_step` with safe loading)."""
+    graphs = [g.cpu().to_dict() for g in batch.to_data_list()]  # copies: the batch stays
+    name = f"step{step:06d}" + ("" if rank is None else f"_rank{rank}")
+    path = Path(out_dir) / "skipped" / f"{name}.pt"
     path.parent.mkdir(parents=True, exist_ok=True)
     return save_checkpoint(path, {"step": step, "config": json.loads(json.dumps(asdict(cfg))),
                                   "model": model.state_dict(), "graphs": graphs})
