@@ -242,15 +242,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         if sum(t.shape[0] for t in trivial_buf) < 4096:
             trivial_buf.append(unaugmented_poses(batch).cpu())
         logs = _train_step(cfg, ddp_model, model, optimizer, (loss_fn, geo_fn), batch, step)
-        if float(logs["skipped"]) and dumps < MAX_SKIPPED_DUMPS:
-            # every rank keeps its own shard: the skip was decided on the all-reduced norm
-            dumps += 1
-            try:
-                kept = save_skipped_step(out_dir, step + 1, cfg, model, batch,
-                                         rank=rank if world > 1 else None)
-                bar.write(f"step {step + 1}: its batch and weights are kept in '{kept}'")
-            except (OSError, TypeError, RuntimeError) as err:  # the run goes on without it
-                bar.write(f"step {step + 1}: its batch could not be kept ({err})")
+        dumps = _keep_skipped(logs, dumps, bar, step + 1, cfg, model, batch, rank, world)
         skipped_in_a_row = _count_skipped(logs, skipped_in_a_row, step + 1, bar, ckpt_path)
         step += 1
         pairs_seen += T_gt.shape[0] * world
@@ -440,6 +432,22 @@ def _check_finite_weights(model: StrLPose, step: int, ckpt_path: Path) -> None:
         raise TrainingDiverged(f"Expected finite weights to checkpoint at step {step} (got "
                                f"non-finite values in {len(bad)} tensors, e.g. {bad[0]}); "
                                f"'{ckpt_path}' keeps the last good state")
+
+
+def _keep_skipped(logs: dict, dumps: int, bar: Any, step: int, cfg: TrainConfig,
+                  model: StrLPose, batch: Any, rank: int, world: int) -> int:
+    """The first :data:`MAX_SKIPPED_DUMPS` skipped steps of a run keep their batch and weights
+    (:func:`save_skipped_step`); returns how many were kept."""
+    if not float(logs["skipped"]) or dumps >= MAX_SKIPPED_DUMPS:
+        return dumps
+    # every rank keeps its own shard: the skip was decided on the all-reduced norm
+    try:
+        kept = save_skipped_step(cfg.out_dir, step, cfg, model, batch,
+                                 rank=rank if world > 1 else None)
+        bar.write(f"step {step}: its batch and weights are kept in '{kept}'")
+    except (OSError, TypeError, RuntimeError) as err:  # the run goes on without it
+        bar.write(f"step {step}: its batch could not be kept ({err})")
+    return dumps + 1
 
 
 def save_skipped_step(out_dir: str | os.PathLike, step: int, cfg: TrainConfig,
