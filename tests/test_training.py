@@ -78,6 +78,38 @@ def test_config_validation():
         TrainConfig(batch_size=0)
     with pytest.raises(ValueError, match="unknown keys"):
         TrainConfig.from_dict({"steps": 3, "epochs": 2})
+    with pytest.raises(ValueError, match="Expected rot_weight > 0"):
+        TrainConfig(rot_weight=0.0)
+
+
+def test_the_rotation_weight_reaches_the_pose_loss():
+    """--rot-weight (the next single change of issue 30's study) multiplies the rotation terms;
+    a config stored before it existed reads as 1."""
+    import argparse
+
+    import torch
+
+    from strl_pyg.model.config import PoseOutput
+    from strl_pyg.training.config import add_train_arguments
+    from strl_pyg.training.loop import _losses, config_from_args
+
+    ap = add_train_arguments(argparse.ArgumentParser())
+    cfg = config_from_args(ap.parse_args(["--rot-weight", "3"]), ap)
+    assert cfg.rot_weight == 3.0
+    assert TrainConfig.from_dict({"steps": 3, "loss": "balanced"}).rot_weight == 1.0
+    g = torch.Generator().manual_seed(0)
+    q = torch.nn.functional.normalize(torch.randn(4, 4, generator=g), dim=-1)
+    t = torch.nn.functional.normalize(torch.randn(4, 3, generator=g), dim=-1)
+    out = PoseOutput(quaternion=q, translation=t, log_var=torch.zeros(4, 7), geometric=None)
+    T = torch.eye(4).repeat(4, 1, 1)
+    T[:, :3, 3] = torch.tensor([0.0, 0.0, 1.0])
+    model_cfg = cfg.model_config()
+    one = _losses(TrainConfig(), model_cfg)[0](out, T)
+    three = _losses(cfg, model_cfg)[0](out, T)
+    # loss = w_R l_rot + l_trans, the terms themselves unchanged
+    torch.testing.assert_close(three["loss_rot"], one["loss_rot"])
+    assert float(one["loss_rot"]) != 0.0
+    torch.testing.assert_close(three["loss"] - one["loss"], 2.0 * one["loss_rot"])
 
 
 def test_step_sampler_is_a_function_of_step_and_shards_the_batch():

@@ -71,6 +71,7 @@ class TrainConfig:
     # config stored without this key predates it: "paper" loss on "paper" inputs (from_dict)
     loss: str = "balanced"
     angle_weight: float = 1.0  # "balanced": weight of the angular translation term (radians)
+    rot_weight: float = 1.0  # weight of the pose loss's rotation terms (both loss forms)
     seed: int = 0  # model initialisation (and, unless data_seed is set, the data below)
     # pairs, batch order and resampling (None: ``seed``); rows of an ablation share it so they
     # train on the same pairs in the same order while ``seed`` varies the initialisation
@@ -106,6 +107,8 @@ class TrainConfig:
                                  f"(got {self.scene_mix!r})")
         if not self.angle_weight >= 0:
             raise ValueError(f"Expected angle_weight >= 0 (got {self.angle_weight!r})")
+        if not self.rot_weight > 0:
+            raise ValueError(f"Expected rot_weight > 0 (got {self.rot_weight!r})")
         if self.loss not in ("paper", "balanced"):
             raise ValueError(f"Expected loss in ('paper', 'balanced') (got {self.loss!r})")
         if self.data_seed is not None and (not isinstance(self.data_seed, int)
@@ -188,6 +191,8 @@ def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
                          "is the paper's recipe")
     ap.add_argument("--angle-weight", type=float, default=d.angle_weight,
                     help="--loss balanced: weight of the angular translation term")
+    ap.add_argument("--rot-weight", type=float, default=d.rot_weight,
+                    help="weight of the pose loss's rotation terms (translation's: 1)")
     ap.add_argument("--grad-clip", type=float, default=d.grad_clip,
                     help="max gradient norm (0: off); the norm is logged every step")
     ap.add_argument("--outlier-augment", type=float, default=d.outlier_augment,
