@@ -50,7 +50,7 @@ def point_poor_pairs(cache: Path, n: int = POINT_POOR_PAIRS, seed0: int = POINT_
                      ) -> list[tuple[str, Any, np.ndarray]]:
     """The ``point_poor`` set (see the module docstring); another ``seed0`` gives another
     split selected the same way (``bench_vanishing.py --fit``'s calibration split)."""
-    from bench_pose import _cached
+    from bench_pose import _cached, match_cache
 
     from strl_pyg.data.matches import PairMatches
     from strl_pyg.frontend import NoMatchesError, match_images
@@ -61,11 +61,12 @@ def point_poor_pairs(cache: Path, n: int = POINT_POOR_PAIRS, seed0: int = POINT_
         return m.num_points <= 30 and lines >= 20
 
     dist = point_poor_distribution()
+    store = match_cache(cache, scene=dist)
     out = []
     for seed in range(seed0, seed0 + POINT_POOR_MAX_CANDIDATES):
         if len(out) == n:
             break
-        path = cache / f"pp_{seed}.npz"
+        path = store.path(f"pp_{seed}")
         # a candidate matched before and not wanted is not rendered again (most are not:
         # about 1 in 12 is point-poor); the wanted ones are, for their ground-truth pose
         if path.is_file() and not wanted(PairMatches.load(path)):
@@ -73,7 +74,7 @@ def point_poor_pairs(cache: Path, n: int = POINT_POOR_PAIRS, seed0: int = POINT_
         p = generate_pair(seed, dist.config(seed))
         try:
             m = _cached(cache, f"pp_{seed}", lambda p=p: match_images(
-                p.image0, p.image1, K0=p.K, K1=p.K))
+                p.image0, p.image1, K0=p.K, K1=p.K), scene=dist)
         except (NoMatchesError, RuntimeError):
             continue
         if wanted(m):

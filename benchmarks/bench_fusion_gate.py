@@ -49,9 +49,10 @@ def _sets(cache: Path, calib_pairs: int, per_set: int = 30) -> dict:
 
     dist = scene_distribution("mixed_small")
     calib = []
+    store = bp.match_cache(cache, scene=dist)
     for i in range(calib_pairs):
         seed = 3_000_000 + i
-        path = cache / f"calib_{seed}.npz"
+        path = store.path(f"calib_{seed}")
         if path.is_file():  # written by bench_pose.py --calibrate
             calib.append((f"calib/{seed}", PairMatches.load(path),
                           np.asarray(generate_pair(seed, dist.config(seed)).T_0to1)))

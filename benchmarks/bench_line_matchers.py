@@ -92,11 +92,14 @@ def few_point_pairs(cache: Path, limit: int | None = None):
     from strl_pyg.synthetic import generate_pair
     from strl_pyg.synthetic.distributions import eval_distribution
 
+    from bench_pose import match_cache
+
     dist = eval_distribution("low_texture", kinds=("street", "indoor", "boxes"))
+    store = match_cache(cache, scene=dist)  # ablation_eval.point_poor_pairs' candidates
     out = []
     for seed0, n in FEW_POINT_SEEDS:
         for seed in range(seed0, seed0 + n):
-            path = cache / f"pp_{seed}.npz"
+            path = store.path(f"pp_{seed}")
             if not path.is_file():
                 continue
             m = PairMatches.load(path)

@@ -77,16 +77,32 @@ def _read(path):
     return img
 
 
-def _cached(cache: Path, key: str, make):
-    from strl_pyg.data.matches import PairMatches
+def match_cache(cache: Path, config=None, **what):
+    """The :class:`~strl_pyg.datasets.cache.MatchCache` of this benchmark's matches under
+    ``cache``: its folder is named by a fingerprint of the front end's configuration (the
+    defaults when ``config`` is None) and of ``what`` (e.g. ``scene=`` the generated
+    distribution), so matches made by another front end or for another distribution are
+    never read back under the same pair name. (Before 2026-12-04 the cache was keyed by the
+    pair's name alone: a changed front end or distribution silently reused stale matches.)"""
+    from dataclasses import asdict, is_dataclass
 
-    path = cache / f"{key.replace('/', '_')}.npz"
-    if path.is_file():
-        return PairMatches.load(path)
-    m = make()
-    cache.mkdir(parents=True, exist_ok=True)
-    m.save(path)
-    return m
+    from strl_pyg.datasets.cache import MatchCache
+    from strl_pyg.frontend import FrontendConfig
+
+    cfg = FrontendConfig() if config is None else config
+    fields = cfg.result_fields() if hasattr(cfg, "result_fields") else asdict(cfg)
+    fingerprint = {"kind": "benchmarks", "frontend": {"type": type(cfg).__name__, **fields}}
+    fingerprint.update({k: asdict(v) if is_dataclass(v) else v for k, v in what.items()})
+    return MatchCache(cache, fingerprint)
+
+
+def _cached(cache: Path, key: str, make, config=None, **what):
+    """The matches of pair ``key``: read from :func:`match_cache` or made by ``make()`` and
+    stored (atomically). ``make``'s errors propagate and nothing is stored for them."""
+    mc = match_cache(cache, config, **what)
+    key = key.replace("/", "_")
+    mc.build([key], [None], lambda _payload: make(), progress=False)
+    return mc.load(key)
 
 
 def generated_pairs(name: str, n: int, cache: Path, seed0: int = 2_000_000):
@@ -100,7 +116,7 @@ def generated_pairs(name: str, n: int, cache: Path, seed0: int = 2_000_000):
         try:
             p = generate_pair(seed, dist.config(seed))
             m = _cached(cache, f"gen_{name}_{seed}", lambda p=p: match_images(
-                p.image0, p.image1, K0=p.K, K1=p.K))
+                p.image0, p.image1, K0=p.K, K1=p.K), scene=dist)
         except (NoMatchesError, RuntimeError) as err:
             print(f"  {name} seed {seed}: skipped ({type(err).__name__})")
             continue
@@ -128,19 +144,6 @@ def plant_outliers(m, fraction: float, seed: int):
     return replace(m, points1=p1, info={**m.info, "planted_outliers": k})
 
 
-def _tag(config) -> str:
-    """Cache-key suffix of a non-default front-end configuration."""
-    if config is None:
-        return ""
-    import hashlib
-    import json
-    from dataclasses import asdict
-
-    fields = config.result_fields() if hasattr(config, "result_fields") else asdict(config)
-    text = json.dumps(fields, sort_keys=True, default=repr)
-    return "_fe" + hashlib.sha1(text.encode()).hexdigest()[:8]
-
-
 def kitti_pairs(gap: int, cache: Path, config=None):
     from strl_pyg.frontend import NoMatchesError, match_images
     from strl_pyg.geometry import Pose
@@ -163,9 +166,10 @@ def kitti_pairs(gap: int, cache: Path, config=None):
         Tj = np.vstack([poses[j], [0, 0, 0, 1]])
         T = Pose.from_matrix(np.linalg.inv(np.linalg.inv(Ti) @ Tj)).matrix().numpy()
         try:
-            m = _cached(cache, f"kitti06_{i}_{j}{_tag(config)}", lambda i=i, j=j: match_images(
+            m = _cached(cache, f"kitti06_{i}_{j}", lambda i=i, j=j: match_images(
                 _read(seq / "image_0" / f"{i:06d}.png"),
-                _read(seq / "image_0" / f"{j:06d}.png"), K0=K, K1=K, config=config))
+                _read(seq / "image_0" / f"{j:06d}.png"), K0=K, K1=K, config=config),
+                config)
         except NoMatchesError:
             m = None
         out.append((f"kitti06/{i}-{j}", m, T))
@@ -182,9 +186,9 @@ def dino_pairs(cache: Path, config=None):
     out = []
     for a, b, T in middlebury_pairs(root):
         try:
-            m = _cached(cache, f"dino_{a.path.stem}_{b.path.stem}{_tag(config)}",
+            m = _cached(cache, f"dino_{a.path.stem}_{b.path.stem}",
                         lambda a=a, b=b: match_images(_read(a.path), _read(b.path), K0=a.K,
-                                                      K1=b.K, config=config))
+                                                      K1=b.K, config=config), config)
         except NoMatchesError:
             print(f"  dino {a.name}-{b.name}: no matches")
             out.append((f"dino/{a.path.stem}-{b.path.stem}", None, T))
@@ -205,8 +209,9 @@ def demon_pairs(cache: Path, config=None):
         T1 = np.vstack([P[1], [0, 0, 0, 1]])
         T = T1 @ np.linalg.inv(T0)
         try:
-            m = _cached(cache, f"demon_{d.name}{_tag(config)}", lambda d=d, K=K: match_images(
-                _read(d / "0000.jpg"), _read(d / "0001.jpg"), K0=K, K1=K, config=config))
+            m = _cached(cache, f"demon_{d.name}", lambda d=d, K=K: match_images(
+                _read(d / "0000.jpg"), _read(d / "0001.jpg"), K0=K, K1=K, config=config),
+                config)
         except NoMatchesError:
             m = None
         out.append((f"demon/{d.name}", m, T))
@@ -573,7 +578,7 @@ def main(argv=None) -> int:
             try:
                 p = generate_pair(seed, dist.config(seed))
                 m = _cached(cache, f"calib_{seed}", lambda p=p: match_images(
-                    p.image0, p.image1, K0=p.K, K1=p.K))
+                    p.image0, p.image1, K0=p.K, K1=p.K), scene=dist)
             except (NoMatchesError, RuntimeError):
                 continue
             cal.append((f"calib/{seed}", m, np.asarray(p.T_0to1)))
