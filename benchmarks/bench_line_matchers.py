@@ -88,11 +88,11 @@ def _errors(T_est, T_gt) -> tuple[float, float]:
 def few_point_pairs(cache: Path, limit: int | None = None):
     """The cached generated candidates with fewer than 8 point matches (rendered again for
     their ground truth)."""
+    from bench_pose import match_cache
+
     from strl_pyg.data.matches import PairMatches
     from strl_pyg.synthetic import generate_pair
     from strl_pyg.synthetic.distributions import eval_distribution
-
-    from bench_pose import match_cache
 
     dist = eval_distribution("low_texture", kinds=("street", "indoor", "boxes"))
     store = match_cache(cache, scene=dist)  # ablation_eval.point_poor_pairs' candidates

@@ -52,7 +52,8 @@ def test_same_fingerprint_reads_back_without_matching_again(tmp_path):
 
 
 def test_another_distribution_or_front_end_is_not_served_stale_matches(tmp_path):
-    bench_pose._cached(tmp_path, "gen_x_7", _Maker(_matches(12)), scene=eval_distribution("driving"))
+    driving = eval_distribution("driving")
+    bench_pose._cached(tmp_path, "gen_x_7", _Maker(_matches(12)), scene=driving)
     other_scene = _Maker(_matches(20))
     m = bench_pose._cached(tmp_path, "gen_x_7", other_scene, scene=eval_distribution("indoor"))
     assert other_scene.calls == 1 and m.num_points == 20
