@@ -62,6 +62,8 @@ VARIANTS = {
     "both-a0.2": (["--set", "inputs=flow", "--loss", "balanced", "--angle-weight", "0.2"]),
     # a clip above the norms' 95th percentile (46-54 with clip 10 or none): spikes only
     "both-clip50": (["--set", "inputs=flow", "--loss", "balanced", "--grad-clip", "50"]),
+    # the rotation's share of the gradient (the balanced recipe cost 1-1.5 deg of rotation)
+    "both-rw3": (["--set", "inputs=flow", "--loss", "balanced", "--rot-weight", "3"]),
 }
 COMMON = ["--model", "baseline", "--scene-mix", "lines_small", "--data-seed", "0",
           "--val-pairs", "100", "--val-every", "250", "--batch-size", "16", "--lr", "3e-4",
@@ -152,7 +154,7 @@ def gradient_shares(run: Path, batches: int = 8) -> dict[str, float]:
     model.train()
     train, _ = build_datasets(cfg)
     loss_fn = PoseLoss(translation=model.config.translation, form=cfg.loss,
-                       angle_weight=cfg.angle_weight)
+                       angle_weight=cfg.angle_weight, rot_weight=cfg.rot_weight)
     shared = [p for n, p in model.named_parameters() if not n.startswith("pose_head.")]
     collate = _collater(model.config)
     data = _Resampled(train, cfg.num_points, cfg.num_lines, 12345, cfg.swap_prob)
@@ -174,10 +176,11 @@ def gradient_shares(run: Path, batches: int = 8) -> dict[str, float]:
 
 
 def _term(loss_fn, out, T, which: str):
-    """The rotation or the translation term of ``loss_fn`` alone (the other weight 0)."""
+    """The rotation or the translation term of ``loss_fn`` alone, with its own weight (the
+    other's weight 0)."""
     from strl_pyg.training.loss import PoseLoss
 
-    f = PoseLoss(loss_fn.translation, rot_weight=float(which == "rot"),
+    f = PoseLoss(loss_fn.translation, rot_weight=loss_fn.rot_weight * float(which == "rot"),
                  trans_weight=float(which == "trans"), form=loss_fn.form, beta=loss_fn.beta,
                  angle_weight=loss_fn.angle_weight)
     return f(out, T)["loss"]
