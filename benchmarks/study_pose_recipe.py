@@ -291,7 +291,7 @@ def plot(runs: dict[str, dict], path: Path) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharex=True)
     for name, r in runs.items():
         steps = [h["step"] for h in r["history"]]
-        style = "-" if name.startswith("fe") else "--"
+        style = "--" if name.startswith("gt") else "-"
         for ax, key in zip(axes, ("trans_err_deg", "trans_err_med"), strict=True):
             ax.plot(steps, [h[key] for h in r["history"]], style, marker="o", ms=3,
                     label=name)
