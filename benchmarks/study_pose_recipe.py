@@ -213,6 +213,10 @@ def cmd_score(args: argparse.Namespace) -> int:
         if not (run / "model.pt").exists() or (path.exists() and not args.again):
             continue
         state = torch.load(run / "last.pt", map_location="cpu", weights_only=False)
+        planned = int(state["train_config"]["steps"])
+        if int(state["step"]) < planned:  # model.pt is also written at every checkpoint
+            print(f"{run.name}: at step {state['step']} of {planned}; not scored yet")
+            continue
         clip, norm = _clip_share(run)
         ae.save_json(path, {
             "run": run.name, "step": int(state["step"]), "history": state["history"],
