@@ -292,19 +292,21 @@ def plot(runs: dict[str, dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharex=True)
-    for name, r in runs.items():
+    fig, axes = plt.subplots(1, 2, figsize=(13, 4.6), sharex=True)
+    colours = plt.get_cmap("tab20").colors  # one colour per run (the default cycle has 10)
+    for i, (name, r) in enumerate(runs.items()):
         steps = [h["step"] for h in r["history"]]
         style = "--" if name.startswith("gt") else "-"
         for ax, key in zip(axes, ("trans_err_deg", "trans_err_med"), strict=True):
             ax.plot(steps, [h[key] for h in r["history"]], style, marker="o", ms=3,
-                    label=name)
+                    color=colours[i % len(colours)], label=name)
     for ax, title in zip(axes, ("mean", "median"), strict=True):
         ax.set_title(f"validation translation-direction error, {title}")
         ax.set_xlabel("training step")
         ax.set_ylabel("degrees")
         ax.grid(alpha=0.3)
-    axes[1].legend(fontsize=7, title="matches-variant-seed", title_fontsize=7)
+    axes[1].legend(fontsize=7, title="matches-variant-seed", title_fontsize=7,
+                   loc="upper left", bbox_to_anchor=(1.02, 1.0))
     fig.suptitle("Training recipe study (baseline row; solid: front-end matches, "
                  "dashed: generator's matches)")
     fig.tight_layout()
