@@ -94,8 +94,12 @@ def _batched(x0: Tensor, x1: Tensor, weights: Tensor, mask: Tensor | None):
 def sampson_sq(E: Tensor, x0: Tensor, x1: Tensor) -> Tensor:
     """Squared Sampson distances ``[B, N]`` of normalised matches ``x0``, ``x1`` ``[B, N, 2]``
     under ``E`` ``[B, 3, 3]`` (``x1^T E x0 = 0``); invariant to the scale of ``E``. The same
-    as :func:`strl_pyg.geometry.sampson_error` (``eps = 1e-30``)."""
-    return sampson_error(E, x0, x1, eps=1e-30)
+    as :func:`strl_pyg.geometry.sampson_error` (``eps = 1e-30``), computed in float64 whatever
+    the inputs' dtype and returned in theirs: the division's backward squares ``eps``, which
+    float32 cannot hold (1e-60 is 0), so a match on both epipoles (denominator 0) gave
+    ``0 * r^2 / 0`` = NaN in the gradient even where the caller passes none (issue 30)."""
+    dtype = torch.promote_types(E.dtype, x0.dtype)
+    return sampson_error(E.double(), x0.double(), x1.double(), eps=1e-30).to(dtype)
 
 
 def _conditioning(x: Tensor, w: Tensor) -> Tensor:

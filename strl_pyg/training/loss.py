@@ -257,13 +257,10 @@ class GeometricLoss(nn.Module):
         has_both = (npos > 0).to(bce) + (nneg > 0).to(bce)
         l_cls = ((lpos + lneg) / has_both.clamp_min(1)).mean()
         valid = (geo.status == 0) & has_t
-        # float64: in float32 the backward of r^2 / (den + 1e-30) squares 1e-30 to 0, and a
-        # node with den = 0 (both epipoles of a near-rank-1 E) gave 0 * r^2 / 0 = NaN in the
-        # gradient although its capped term passes none (step 569 of a 3000-pair run)
-        d_pred = sampson_sq(geo.E[b].double(), x0.double(), x1.double())[:, 0]
-        d_pred = d_pred.clamp_min(1e-30).sqrt()
-        per = torch.clamp(d_pred / thr.double(), max=self.cap).to(label) * label * \
-            valid[b].to(label)
+        # sampson_sq divides in float64: a node on both epipoles of a near-rank-1 E no longer
+        # gives a NaN gradient (step 569 of a 3000-pair run)
+        d_pred = sampson_sq(geo.E[b], x0, x1)[:, 0].clamp_min(1e-30).sqrt()
+        per = torch.clamp(d_pred / thr, max=self.cap) * label * valid[b].to(label)
         denom = (label * valid[b].to(label)).sum()
         l_ess = per.sum() / denom.clamp_min(1)
         loss = self.cls_weight * l_cls + self.ess_weight * l_ess
