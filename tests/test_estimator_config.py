@@ -87,6 +87,21 @@ def test_swapped_matches_exchange_the_images_and_twice_is_the_pair():
     np.testing.assert_array_equal(back.K1, m.K1)
 
 
+def _assert_widened_by(on, off, key: str, covariance) -> None:
+    """``on``'s record has the pose of ``off`` (the check leaves the forward pass's pose) and
+    its covariance plus the check's term, ``covariance`` of the angles in ``info[key]``, times
+    the calibration scale."""
+    np.testing.assert_array_equal(on.T_0to1, off.T_0to1)
+    d = on.info[key]
+    assert key not in off.info
+    assert 0.0 <= d["rotation"] <= 180.0 and 0.0 <= d["translation"] <= 180.0
+    scale = on.info.get("calibration_scale", 1.0)
+    np.testing.assert_allclose(
+        on.covariance - off.covariance,
+        scale * covariance(np.radians(d["rotation"]), np.radians(d["translation"])),
+        atol=1e-12)
+
+
 def test_the_swap_check_widens_the_regression_covariance_by_the_disagreement():
     from strl_pyg.inference.methods import swap_covariance
 
@@ -94,33 +109,19 @@ def test_the_swap_check_widens_the_regression_covariance_by_the_disagreement():
     on = PoseEstimator(methods="regression", data_check=False).estimate(m).methods["regression"]
     off = PoseEstimator(methods="regression", swap_check=False,
                         data_check=False).estimate(m).methods["regression"]
-    np.testing.assert_array_equal(on.T_0to1, off.T_0to1)  # the pose is the forward pass's
-    d = on.info["swap_disagreement_deg"]
-    assert "swap_disagreement_deg" not in off.info
-    assert 0.0 <= d["rotation"] < 180.0 and 0.0 <= d["translation"] <= 180.0
-    scale = on.info.get("calibration_scale", 1.0)
-    np.testing.assert_allclose(
-        on.covariance - off.covariance,
-        scale * swap_covariance(np.radians(d["rotation"]), np.radians(d["translation"])),
-        atol=1e-12)
+    _assert_widened_by(on, off, "swap_disagreement_deg", swap_covariance)
     np.testing.assert_allclose(swap_covariance(0.6, 0.4),
                                np.diag([0.06, 0.06, 0.06, 0.04, 0.04]))
 
 
-def test_the_data_check_widens_the_regression_covariance_by_the_refined_distance():
+def test_the_data_check_widens_the_regression_covariance_by_its_distance_to_the_classical():
     from strl_pyg.inference.methods import data_covariance
 
     m = generate_pair(2_000_005).matches
     on = PoseEstimator(methods="regression").estimate(m).methods["regression"]
     off = PoseEstimator(methods="regression", data_check=False).estimate(m).methods["regression"]
-    np.testing.assert_array_equal(on.T_0to1, off.T_0to1)
-    d = on.info["data_disagreement_deg"]
-    assert "data_disagreement_deg" not in off.info and on.info["data_check_ms"] > 0
-    scale = on.info.get("calibration_scale", 1.0)
-    np.testing.assert_allclose(
-        on.covariance - off.covariance,
-        scale * data_covariance(np.radians(d["rotation"]), np.radians(d["translation"])),
-        atol=1e-12)
+    _assert_widened_by(on, off, "data_disagreement_deg", data_covariance)
+    assert on.info["data_check_ms"] > 0
     np.testing.assert_allclose(data_covariance(0.6, 0.4),
                                np.diag([0.12, 0.12, 0.12, 0.08, 0.08]))
     with pytest.raises(ValueError, match="Expected data_check as a bool"):
