@@ -255,3 +255,63 @@ def test_curves_show_the_training_loss_beside_validation(tmp_path):
     # the geometric head's loss is taken out: the validation loss is the pose loss alone
     geo = {"loss": ([1, 2], [5.0, 4.0]), "geo_loss": ([1, 2], [2.0, 1.5])}
     assert _train_pose_loss(geo) == ([1, 2], [3.0, 2.5])
+
+
+def test_learning_rate_schedules():
+    """--lr-schedule / --warmup-steps: the rate of every step from the config alone."""
+    import math
+
+    const = TrainConfig(lr=1e-3, steps=10)
+    assert [const.learning_rate(s) for s in (0, 5, 9)] == [1e-3] * 3
+    warm = TrainConfig(lr=1e-3, steps=10, warmup_steps=4)
+    assert [warm.learning_rate(s) for s in range(5)] == pytest.approx(
+        [2.5e-4, 5e-4, 7.5e-4, 1e-3, 1e-3])
+    cos = TrainConfig(lr=1e-3, steps=104, warmup_steps=4, lr_schedule="cosine")
+    assert cos.learning_rate(3) == pytest.approx(1e-3)
+    assert cos.learning_rate(4) == pytest.approx(1e-3)  # the cosine starts at the peak
+    assert cos.learning_rate(54) == pytest.approx(5e-4)  # half-way down
+    assert cos.learning_rate(103) == pytest.approx(1e-3 * 0.5 * (1 + math.cos(math.pi * 0.99)))
+    rates = [cos.learning_rate(s) for s in range(4, 104)]
+    assert all(a > b for a, b in zip(rates, rates[1:]))
+    with pytest.raises(ValueError, match="lr_schedule"):
+        TrainConfig(lr_schedule="step")
+    with pytest.raises(ValueError, match=r"warmup_steps an integer in \[0, steps=10\)"):
+        TrainConfig(steps=10, warmup_steps=10)
+    # a stored config from before the schedule reads as the paper's constant rate
+    assert TrainConfig.from_dict({"steps": 3, "loss": "balanced"}).lr_schedule == "constant"
+
+
+def test_a_cosine_run_logs_its_rates_and_resumes_on_the_same_schedule(tmp_path, monkeypatch):
+    import os
+    import signal
+
+    from strl_pyg.training import loop
+
+    kw = dict(lr=1e-3, lr_schedule="cosine", warmup_steps=1)
+    full = train(tiny_config(tmp_path / "full", **kw), progress=False)
+    assert full["step"] == 4
+    rows = (tmp_path / "full" / "log.csv").read_text().splitlines()
+    logged = [float(r.split(",")[3]) for r in rows if ",train,lr," in r]
+    cfg = tiny_config(tmp_path / "x", **kw)
+    assert logged == pytest.approx([cfg.learning_rate(s) for s in range(4)], rel=1e-6)
+    assert logged == pytest.approx([1e-3, 1e-3, 7.5e-4, 2.5e-4], rel=1e-6)
+    # stopped by a signal during step 2 of the same 4-step schedule, then resumed: the same
+    # weights as the uninterrupted run (the rate is the step's, not the optimiser state's)
+    real = loop.TrainLogger.log
+
+    def log(self, step, split, values):
+        if step == 2 and split == "train":
+            os.kill(os.getpid(), signal.SIGTERM)
+        return real(self, step, split, values)
+
+    monkeypatch.setattr(loop.TrainLogger, "log", log)
+    cut = train(tiny_config(tmp_path / "split", **kw), progress=False)
+    monkeypatch.setattr(loop.TrainLogger, "log", real)
+    assert cut["interrupted"] == "SIGTERM" and cut["step"] == 2
+    train(tiny_config(tmp_path / "split", **kw), resume=True, progress=False)
+    a = load_checkpoint(tmp_path / "full" / "last.pt")
+    b = load_checkpoint(tmp_path / "split" / "last.pt")
+    assert states_equal(a["model"], b["model"])
+    # a cosine run is not extended by resuming with more steps: its schedule has ended
+    with pytest.raises(ValueError, match="Expected --steps 4 to resume: a cosine"):
+        train(tiny_config(tmp_path / "full", steps=8, **kw), resume=True, progress=False)

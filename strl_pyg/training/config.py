@@ -9,6 +9,7 @@ and argument errors return before torch is loaded.
 from __future__ import annotations
 
 import argparse
+import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -34,6 +35,10 @@ DATA_CHANNELS = {"synthetic": 1, "kitti": 1, "demon": 3}
 ABLATION_NAMES = ("baseline", "L", "LP", "R", "V", "LP+R", "LP+V", "V+W", "full")
 
 
+#: Learning-rate schedules (``TrainConfig.lr_schedule``, ``--lr-schedule``).
+LR_SCHEDULES = ("constant", "cosine")
+
+
 @dataclass
 class TrainConfig:
     """Everything that decides a training run (stored in each checkpoint)."""
@@ -56,7 +61,11 @@ class TrainConfig:
     limit: int | None = None  # real datasets: keep only the first pairs (smoke runs)
     model: str = "full"  # ablation row of the paper (StrLPoseConfig.ablation)
     model_overrides: dict[str, Any] = field(default_factory=dict)  # other StrLPoseConfig fields
-    lr: float = 1e-4  # Adam, as the paper
+    lr: float = 1e-4  # Adam, as the paper (the peak rate under a schedule)
+    # "constant" (the paper) | "cosine": half a cosine from lr down to 0 at `steps`, after the
+    # warm-up; learning_rate(cfg, step) is the rate of every step
+    lr_schedule: str = "constant"
+    warmup_steps: int = 0  # linear warm-up from lr / warmup_steps to lr (0: none)
     batch_size: int = 16  # global batch (split over DDP ranks), as the paper
     steps: int = 2000  # optimiser steps
     val_every: int = 200  # validate and checkpoint every this many steps (and at the end)
@@ -127,8 +136,25 @@ class TrainConfig:
             raise ValueError(f"Expected swap_prob in [0, 1] (got {self.swap_prob!r})")
         if not self.lr > 0:
             raise ValueError(f"Expected a positive learning rate (got {self.lr!r})")
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise ValueError(f"Expected lr_schedule in {LR_SCHEDULES} (got {self.lr_schedule!r})")
+        if not isinstance(self.warmup_steps, int) or not 0 <= self.warmup_steps < self.steps:
+            raise ValueError(f"Expected warmup_steps an integer in [0, steps={self.steps}) "
+                             f"(got {self.warmup_steps!r})")
         if self.dataset != "synthetic" and not self.data_root:
             raise ValueError(f"Expected --data-root for dataset '{self.dataset}' (got none)")
+
+    def learning_rate(self, step: int) -> float:
+        """The learning rate of optimiser step ``step`` (0-based): a linear warm-up over
+        ``warmup_steps`` (``lr * (step + 1) / warmup_steps``), then ``lr`` (``constant``) or
+        half a cosine from ``lr`` at the warm-up's end to 0 at ``steps`` (``cosine``). A pure
+        function of the step, so a resumed run continues the same schedule."""
+        if step < self.warmup_steps:
+            return self.lr * (step + 1) / self.warmup_steps
+        if self.lr_schedule == "constant":
+            return self.lr
+        progress = min(1.0, (step - self.warmup_steps) / (self.steps - self.warmup_steps))
+        return self.lr * 0.5 * (1.0 + math.cos(math.pi * progress))
 
     @property
     def resolved_data_seed(self) -> int:
@@ -205,7 +231,12 @@ def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     ap.add_argument("--train-sequences", default=None, help="KITTI sequences, comma-separated")
     ap.add_argument("--val-sequences", default=None, help="KITTI sequences, comma-separated")
     ap.add_argument("--limit", type=int, default=None, help="keep only the first pairs")
-    ap.add_argument("--lr", type=float, default=d.lr)
+    ap.add_argument("--lr", type=float, default=d.lr,
+                    help="Adam's learning rate (the peak under --lr-schedule cosine)")
+    ap.add_argument("--lr-schedule", choices=LR_SCHEDULES, default=d.lr_schedule,
+                    help="constant (default, the paper) or cosine (to 0 at --steps)")
+    ap.add_argument("--warmup-steps", type=int, default=d.warmup_steps,
+                    help="linear learning-rate warm-up over this many steps (default 0)")
     ap.add_argument("--batch-size", type=int, default=d.batch_size)
     ap.add_argument("--steps", type=int, default=d.steps)
     ap.add_argument("--val-every", type=int, default=d.val_every)

@@ -335,6 +335,10 @@ def _resume(cfg: TrainConfig, ckpt_path: Path, model: StrLPose,
         raise ValueError(f"Expected the checkpoint's config to match this run "
                          f"(got differences {{key: (checkpoint, now)}} = {diff})")
     start_step = int(state["step"])
+    if saved.lr_schedule != "constant" and cfg.steps != saved.steps:
+        raise ValueError(f"Expected --steps {saved.steps} to resume: a {saved.lr_schedule} "
+                         f"learning-rate schedule ends at the run's last step (got "
+                         f"{cfg.steps}); to train on, start a new run with --init-from")
     if cfg.steps < start_step:
         raise ValueError(f"Expected --steps of at least the checkpoint's step {start_step} "
                          f"to resume (got {cfg.steps})")
@@ -516,6 +520,10 @@ def _train_step(cfg: TrainConfig, ddp_model: torch.nn.Module, model: StrLPose,
         logs["loss"] = logs["loss"] + geo_logs["loss"]
     optimizer.zero_grad(set_to_none=True)
     logs["loss"].backward()
+    lr = cfg.learning_rate(step)
+    for group in optimizer.param_groups:
+        group["lr"] = lr
+    logs["lr"] = torch.tensor(lr)
     grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(),
                                                cfg.grad_clip or float("inf"))
     logs["grad_norm"] = grad_norm.detach()
@@ -594,6 +602,7 @@ def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> T
         checkpoint_every=args.checkpoint_every, checkpoint_minutes=args.checkpoint_minutes,
         loss=args.loss, grad_clip=args.grad_clip if args.grad_clip > 0 else None,
         angle_weight=args.angle_weight, rot_weight=args.rot_weight,
+        lr_schedule=args.lr_schedule, warmup_steps=args.warmup_steps,
     )
 
 
@@ -619,8 +628,12 @@ def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
         return 1
     last = Path(cfg.out_dir) / "last.pt"
     if result.get("already_finished"):
+        how = ("pass a larger --steps with --resume to continue"
+               if cfg.lr_schedule == "constant" else
+               f"its {cfg.lr_schedule} schedule has ended: start a new run with --init-from "
+               f"'{last}' to train on")
         print(f"run already finished: '{last}' is at step {result['step']} = --steps; nothing "
-              f"to train (pass a larger --steps with --resume to continue)")
+              f"to train ({how})")
         return 0
     if result.get("interrupted"):
         print(f"stopped by {result['interrupted']} at step {result['step']} of {cfg.steps}: "
