@@ -64,6 +64,12 @@ VARIANTS = {
     "both-clip50": (["--set", "inputs=flow", "--loss", "balanced", "--grad-clip", "50"]),
     # the rotation's share of the gradient (the balanced recipe cost 1-1.5 deg of rotation)
     "both-rw3": (["--set", "inputs=flow", "--loss", "balanced", "--rot-weight", "3"]),
+    # the learning rate's schedule (the runs underfit: training error above validation's at
+    # step 2000): a cosine decay after 100 warm-up steps, at the same peak and at 1e-3
+    "both-cos": (["--set", "inputs=flow", "--loss", "balanced", "--lr-schedule", "cosine",
+                  "--warmup-steps", "100"]),
+    "both-cos1e-3": (["--set", "inputs=flow", "--loss", "balanced", "--lr-schedule", "cosine",
+                      "--warmup-steps", "100", "--lr", "1e-3"]),
 }
 COMMON = ["--model", "baseline", "--scene-mix", "lines_small", "--data-seed", "0",
           "--val-pairs", "100", "--val-every", "250", "--batch-size", "16", "--lr", "3e-4",
@@ -226,6 +232,113 @@ def cmd_score(args: argparse.Namespace) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- by motion
+def validation_pairs(run: Path) -> list[tuple[str, object, object]]:
+    """The run's own validation pairs as ``(motion, matches, T_0to1)``: the cached matches
+    that its validation read, with the generator's motion of each pair."""
+    import numpy as np
+
+    from strl_pyg.training.config import TrainConfig
+    from strl_pyg.training.data import build_datasets
+    from strl_pyg.training.loop import load_checkpoint
+
+    cfg = TrainConfig.from_dict(load_checkpoint(run / "last.pt")["train_config"])
+    _, val = build_datasets(cfg, progress=False)
+    if cfg.matches != "frontend":
+        raise SystemExit(f"error: expected a run on front-end matches (got '{run}': "
+                         f"{cfg.matches})")
+    out = []
+    for i in range(len(val)):
+        m = val.load_matches(i)
+        out.append((m.info["motion"], m, np.asarray(m.info["T_0to1"], dtype=np.float64)))
+    return out
+
+
+def cmd_motion(args: argparse.Namespace) -> int:
+    """The validation translation errors by the generator's motion, for runs and for PoseLib
+    on the same matches: where the validation mean comes from. Writes
+    ``results_pose_recipe/by_motion.json`` and ``figures/pose_recipe_by_motion.png``."""
+    import ablation_eval as ae
+    import torch
+
+    torch.set_num_threads(1)
+    runs = [Path(r) for r in args.runs]
+    pairs = validation_pairs(runs[0])
+    motions = [mo for mo, _, _ in pairs]
+    sets = {"val": [(f"val/{i}", m, T) for i, (_, m, T) in enumerate(pairs)]}
+    rows = {"PoseLib": ae.poselib_errors(sets)["val"]}
+    for run in runs:
+        if [mo for mo, _, _ in validation_pairs(run)] != motions:
+            raise SystemExit(f"error: expected runs with the same validation pairs (got "
+                             f"'{run}' against '{runs[0]}')")
+        rows[run.name] = eval_errors(run, sets)["val"]
+    result = {"motions": motions, "errors": rows}
+    ae.save_json(RESULTS / "by_motion.json", result)
+    print(motion_table(result))
+    plot_by_motion(result, HERE / "figures" / "pose_recipe_by_motion.png")
+    return 0
+
+
+def _by_motion(result: dict) -> tuple[list[str], dict[str, dict[str, tuple]]]:
+    """``(motions, {method: {motion or 'all': (n, mean, median, share > 90 deg)}})`` of the
+    translation errors (a pair without a pose counts as 90 deg)."""
+    import numpy as np
+
+    motions = result["motions"]
+    kinds = sorted(set(motions))
+    table = {}
+    for name, errs in result["errors"].items():
+        t = np.array([90.0 if e is None else e[1] for e in errs])
+        cell = {}
+        for kind in ["all", *kinds]:
+            sel = t if kind == "all" else t[[mo == kind for mo in motions]]
+            cell[kind] = (int(sel.size), float(sel.mean()), float(np.median(sel)),
+                          float((sel > 90).mean()))
+        table[name] = cell
+    return kinds, table
+
+
+def motion_table(result: dict) -> str:
+    kinds, table = _by_motion(result)
+    first = next(iter(table.values()))
+    head = "| method | all | " + " | ".join(f"{k} ({first[k][0]})" for k in kinds) + " |"
+    lines = ["Validation translation error by the generator's motion, mean / median (deg); "
+             "a pair without a pose counts as 90 deg.", "", head,
+             "|" + "---|" * (head.count("|") - 1)]
+    for name, cell in table.items():
+        lines.append(f"| {name} | " + " | ".join(
+            f"{cell[k][1]:.1f} / {cell[k][2]:.1f}" for k in ["all", *kinds]) + " |")
+    return "\n".join(lines)
+
+
+def plot_by_motion(result: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    kinds, table = _by_motion(result)
+    groups = ["all", *kinds]
+    fig, ax = plt.subplots(figsize=(11, 4.6))
+    width = 0.8 / len(table)
+    for j, (name, cell) in enumerate(table.items()):
+        ax.bar(np.arange(len(groups)) + j * width, [cell[g][1] for g in groups], width,
+               label=name)
+    first = next(iter(table.values()))
+    ax.set_xticks(np.arange(len(groups)) + 0.4 - width / 2)
+    ax.set_xticklabels([f"{g}\n({first[g][0]} pairs)" for g in groups])
+    ax.set_ylabel("mean translation-direction error (deg)")
+    ax.set_xlabel("the generator's motion of the validation pair")
+    ax.set_title("Validation translation error by motion (same front-end matches)")
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 # ----------------------------------------------------------------------------- report
 def _load() -> dict[str, dict]:
     return {p.stem: json.loads(p.read_text()) for p in sorted(RESULTS.glob("*-s*.json"))}
@@ -328,10 +441,14 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("--steps", type=int, default=STEPS)
     s = sub.add_parser("score", help="score the finished runs into results_pose_recipe/")
     s.add_argument("--again", action="store_true", help="re-score runs already scored")
+    m = sub.add_parser("motion", help="validation errors by motion: runs (folders with "
+                       "last.pt and model.pt, the same validation pairs) and PoseLib")
+    m.add_argument("runs", nargs="+")
     r = sub.add_parser("report", help="the table and the curves")
     r.add_argument("--out", default=str(HERE / "results_pose_recipe.md"))
     args = ap.parse_args(argv)
-    return {"train": cmd_train, "score": cmd_score, "report": cmd_report}[args.cmd](args)
+    return {"train": cmd_train, "score": cmd_score, "motion": cmd_motion,
+            "report": cmd_report}[args.cmd](args)
 
 
 if __name__ == "__main__":
