@@ -232,6 +232,49 @@ def cmd_score(args: argparse.Namespace) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- paired
+def pooled_errors(runs: dict[str, dict], prefix: str) -> dict[int, dict[str, list]]:
+    """``{seed: errors}`` of the scored runs named ``<prefix>-s<seed>``."""
+    out = {}
+    for name, r in runs.items():
+        head, _, seed = name.rpartition("-s")
+        if head == prefix and seed.isdigit():
+            out[int(seed)] = r["errors"]
+    return out
+
+
+def compare_table(runs: dict[str, dict], a: str, b: str) -> str:
+    """Median ratio ``a / b`` per evaluation set, rotation and translation, over the (seed,
+    pair) errors of the seeds both variants have, with a paired-bootstrap interval over
+    those pairs (the variance between seeds is not in it)."""
+    import ablation_eval as ae
+
+    ea, eb = pooled_errors(runs, a), pooled_errors(runs, b)
+    seeds = sorted(set(ea) & set(eb))
+    if not seeds:
+        raise SystemExit(f"error: expected scored runs '{a}-sN' and '{b}-sN' with a common seed "
+                         f"(got seeds {sorted(ea)} and {sorted(eb)})")
+    lines = [f"`{a}` over `{b}`, seeds {', '.join(map(str, seeds))}: median ratio [95 % paired "
+             "bootstrap over (seed, pair)], pairs", "",
+             "| set | rotation | translation |", "|---|---|---|"]
+    for s in EVAL_SETS:
+        if not all(s in ea[k] and s in eb[k] for k in seeds):
+            continue
+        xa = [row for k in seeds for row in ea[k][s]]
+        xb = [row for k in seeds for row in eb[k][s]]
+        cells = []
+        for which in (0, 1):
+            r, lo, hi, n = ae.paired_ratio(xa, xb, which)
+            cells.append(f"{r:.2f} [{lo:.2f}, {hi:.2f}], {n}")
+        lines.append(f"| {s} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    print(compare_table(_load(), args.a, args.b))
+    return 0
+
+
 # ----------------------------------------------------------------------------- by motion
 def validation_pairs(run: Path) -> list[tuple[str, object, object]]:
     """The run's own validation pairs as ``(motion, matches, T_0to1)``: the cached matches
@@ -444,10 +487,15 @@ def main(argv: list[str] | None = None) -> int:
     m = sub.add_parser("motion", help="validation errors by motion: runs (folders with "
                        "last.pt and model.pt, the same validation pairs) and PoseLib")
     m.add_argument("runs", nargs="+")
+    c = sub.add_parser("compare", help="paired median ratios of two scored variants, e.g. "
+                       "t3-both-cos1e-3 t3-both (seeds pooled)")
+    c.add_argument("a")
+    c.add_argument("b")
     r = sub.add_parser("report", help="the table and the curves")
     r.add_argument("--out", default=str(HERE / "results_pose_recipe.md"))
     args = ap.parse_args(argv)
     return {"train": cmd_train, "score": cmd_score, "motion": cmd_motion,
+            "compare": cmd_compare,
             "report": cmd_report}[args.cmd](args)
 
 

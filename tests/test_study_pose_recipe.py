@@ -39,3 +39,20 @@ def test_schedule_variants_parse():
     assert "--lr-schedule" in spr.VARIANTS["both-cos1e-3"]
     with pytest.raises(SystemExit, match="MATCHES:VARIANT"):
         spr.parse_run("fe:cosine")
+
+
+def test_compare_pools_the_common_seeds_pairwise():
+    def run(rows):
+        return {"errors": {"driving": rows}}
+
+    runs = {"t3-x-s0": run([[1.0, 2.0], [2.0, 4.0]]), "t3-x-s1": run([[1.0, 2.0], None]),
+            "t3-y-s0": run([[2.0, 4.0], [4.0, 8.0]]), "t3-y-s1": run([[2.0, 4.0], [9.0, 9.0]]),
+            "t3-y-s2": run([[5.0, 5.0], [5.0, 5.0]]), "t3-x-y-s0": run([[0.0, 0.0]] * 2)}
+    assert sorted(spr.pooled_errors(runs, "t3-x")) == [0, 1]  # not t3-x-y
+    text = spr.compare_table(runs, "t3-x", "t3-y")
+    # seeds 0 and 1 (y's seed 2 has no partner); the pair without a pose is left out: 3 pairs,
+    # every one exactly half
+    assert "seeds 0, 1:" in text
+    assert "| driving | 0.50 [0.50, 0.50], 3 | 0.50 [0.50, 0.50], 3 |" in text
+    with pytest.raises(SystemExit, match="common seed"):
+        spr.compare_table(runs, "t3-x", "t3-z")
