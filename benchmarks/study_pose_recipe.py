@@ -70,6 +70,10 @@ VARIANTS = {
                   "--warmup-steps", "100"]),
     "both-cos1e-3": (["--set", "inputs=flow", "--loss", "balanced", "--lr-schedule", "cosine",
                       "--warmup-steps", "100", "--lr", "1e-3"]),
+    # handheld and orbit pairs carry the validation mean (`motion`): two second-order flow
+    # products that a rotation about x / y leaves (A(x)^T u), on the cosine-1e-3 recipe
+    "flow2-cos1e-3": (["--set", "inputs=flow2", "--loss", "balanced", "--lr-schedule",
+                       "cosine", "--warmup-steps", "100", "--lr", "1e-3"]),
 }
 COMMON = ["--model", "baseline", "--scene-mix", "lines_small", "--data-seed", "0",
           "--val-pairs", "100", "--val-every", "250", "--batch-size", "16", "--lr", "3e-4",

@@ -112,3 +112,41 @@ def test_beta_nll_weights_and_the_detached_w():
                          torch.tensor(torch.pi))
     with pytest.raises(ValueError, match="Expected form in"):
         PoseLoss(form="huber")
+
+
+def test_second_order_flow_products_give_back_a_small_rotation():
+    """inputs="flow2": (r_x, r_y, -curl) is A(x)^T u for the small-rotation flow u = A(x) w,
+    so the least squares over the matches gives w back; a translation parallel to the image
+    (the same u everywhere) leaves a different signature than a rotation about y."""
+    g = torch.Generator().manual_seed(0)
+    x0 = (torch.rand(200, 2, generator=g, dtype=torch.float64) - 0.5) * 0.8
+    x, y = x0[:, 0], x0[:, 1]
+    A = torch.stack([torch.stack([x * y, -(1 + x * x), y], -1),
+                     torch.stack([1 + y * y, -x * y, -x], -1)], 1)  # [N, 2, 3]
+    w = torch.tensor([0.01, -0.02, 0.015], dtype=torch.float64)
+    u = A @ w
+    f = flow_features(torch.cat([x0, x0 + u], -1), order=2)
+    assert f.shape == (200, 10)
+    torch.testing.assert_close(f[:, :8], flow_features(torch.cat([x0, x0 + u], -1)))
+    rhs = torch.stack([f[:, 8], f[:, 9], -f[:, 7]], -1).sum(0)
+    torch.testing.assert_close(torch.linalg.solve((A.transpose(1, 2) @ A).sum(0), rhs), w)
+    with pytest.raises(ValueError, match="order 1 or 2"):
+        flow_features(torch.cat([x0, x0 + u], -1), order=3)
+
+
+def test_flow2_encoder_fits_ten_features_and_round_trips(tmp_path):
+    torch.manual_seed(0)
+    enc = SpatialCoordinateEncoder(16, inputs="flow2")
+    assert enc.feature_mean.shape == (10,)
+    x0 = 0.3 * torch.randn(500, 2)
+    coords = torch.cat([x0, x0 * 1.05 + 0.01 * torch.randn(500, 2)], -1)
+    enc.fit_standardisation(coords, symmetric=True)
+    both = torch.cat([coords, coords[:, [2, 3, 0, 1]]])
+    z = (flow_features(both, order=2) - enc.feature_mean) / enc.feature_std
+    torch.testing.assert_close(z.mean(0), torch.zeros(10), atol=1e-5, rtol=0)
+    assert enc(coords).shape == (500, 16)
+    model = StrLPose(StrLPoseConfig.ablation("baseline", hidden=16, layers=1, inputs="flow2"))
+    model.sce.feature_std.mul_(3.0)
+    back = StrLPose.load(model.save(tmp_path / "m.pt"))
+    assert back.config.inputs == "flow2"
+    torch.testing.assert_close(back.sce.feature_std, model.sce.feature_std)

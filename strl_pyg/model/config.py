@@ -65,7 +65,8 @@ class StrLPoseConfig:
     image_channels: int = 3  # channels of image0/image1 for visual="cnn"
     translation: str = "direction"  # "direction" (unit vector, scale-free data) | "metric"
     # node inputs of the SCE: "flow" (beyond the paper: coordinates, displacement and its
-    # divergence / curl products, standardised) | "paper" (the four coordinates); a checkpoint
+    # divergence / curl products, standardised) | "flow2" ("flow" and two second-order
+    # rotation products) | "paper" (the four coordinates); a checkpoint
     # saved without this key was trained with "paper" (from_dict)
     inputs: str = "flow"
     dropout: float = 0.0  # attention-weight dropout

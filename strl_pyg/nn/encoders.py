@@ -44,8 +44,10 @@ class _MLPEncoder(nn.Module):
 #: ``[x0, y0, x1, y1]`` of the paper; ``"flow"``, those plus the displacement ``u = x1 - x0``
 #: and its first-order flow products ``x0 . u`` (divergence: expansion / contraction under
 #: forward motion) and ``x0 x u`` (curl: rotation about the optical axis), each feature
-#: standardised with fixed per-feature statistics (buffers, stored in the checkpoint).
-INPUT_MODES = ("paper", "flow")
+#: standardised with fixed per-feature statistics (buffers, stored in the checkpoint);
+#: ``"flow2"``, the ``"flow"`` features plus two second-order products that a small rotation
+#: about the x and y axes leaves in the flow (:func:`flow_features` with ``order=2``).
+INPUT_MODES = ("paper", "flow", "flow2")
 
 #: Per-feature ``(mean, std)`` of the ``"flow"`` inputs before a training set's own statistics
 #: are fitted (:meth:`SpatialCoordinateEncoder.fit_standardisation`, which training does): the
@@ -55,16 +57,34 @@ FLOW_DEFAULT_STATS = (
     (-0.013, -0.004, -0.013, -0.004, 0.0, 0.0, -0.012, 0.0),
     (0.307, 0.228, 0.307, 0.228, 0.143, 0.066, 0.059, 0.035),
 )
+#: The same for the two more features of ``"flow2"`` (fitted likewise: the first 128 training
+#: pairs of the Table 3 protocol, 2026-12-04).
+FLOW2_EXTRA_STATS = ((0.0, 0.0), (0.080, 0.171))
 
 
-def flow_features(coords: Tensor) -> Tensor:
+def flow_features(coords: Tensor, order: int = 1) -> Tensor:
     r"""``[x0, y0, x1, y1, u_x, u_y, x0 \cdot u, x0 \times u]`` of ``[N, 4]`` coordinates
-    ``[x0, y0, x1, y1]`` (normalised), with ``u = x1 - x0``; ``[N, 8]``."""
+    ``[x0, y0, x1, y1]`` (normalised), with ``u = x1 - x0``; ``[N, 8]``.
+
+    With ``order=2`` also :math:`r_x = xy\,u_x + (1 + y^2)\,u_y` and :math:`r_y = -(1 +
+    x^2)\,u_x - xy\,u_y` (``x, y`` of image 0); ``[N, 10]``. A small rotation
+    :math:`\boldsymbol\omega` moves a point by :math:`A(\mathbf{x})\boldsymbol\omega` with
+    :math:`A = \begin{bmatrix} xy & -(1+x^2) & y \\ 1+y^2 & -xy & -x \end{bmatrix}`;
+    :math:`(r_x, r_y, -\mathbf{x}_0 \times \mathbf{u})` is :math:`A^\top \mathbf{u}`, whose
+    mean over the matches is the right-hand side of the least-squares rotation, while a
+    translation parallel to the image moves every point alike (``u`` itself)."""
     x0, x1 = coords[:, :2], coords[:, 2:]
     u = x1 - x0
     div = (x0 * u).sum(-1, keepdim=True)
     curl = x0[:, :1] * u[:, 1:] - x0[:, 1:] * u[:, :1]
-    return torch.cat([coords, u, div, curl], dim=-1)
+    parts = [coords, u, div, curl]
+    if order == 2:
+        x, y = x0[:, :1], x0[:, 1:]
+        ux, uy = u[:, :1], u[:, 1:]
+        parts += [x * y * ux + (1 + y * y) * uy, -(1 + x * x) * ux - x * y * uy]
+    elif order != 1:
+        raise ValueError(f"Expected order 1 or 2 (got {order!r})")
+    return torch.cat(parts, dim=-1)
 
 
 class SpatialCoordinateEncoder(_MLPEncoder):
@@ -83,7 +103,8 @@ class SpatialCoordinateEncoder(_MLPEncoder):
 
     Args:
         out_channels (int): Output size :math:`C`.
-        inputs (str, optional): ``"paper"`` or ``"flow"``. (default: :obj:`"paper"`)
+        inputs (str, optional): ``"paper"``, ``"flow"`` or ``"flow2"`` (``"flow"`` and the
+            two rotation products of :func:`flow_features`). (default: :obj:`"paper"`)
 
     Shapes:
         - **input:** :math:`(N, 4)` ``[pos0 || pos1]``, normalised coordinates
@@ -94,10 +115,12 @@ class SpatialCoordinateEncoder(_MLPEncoder):
         if inputs not in INPUT_MODES:
             raise ValueError(f"Expected inputs in {INPUT_MODES} (got {inputs!r})")
         self.inputs = inputs
-        super().__init__(4 if inputs == "paper" else 8, out_channels,
+        super().__init__({"paper": 4, "flow": 8, "flow2": 10}[inputs], out_channels,
                          [out_channels // 2, out_channels])
-        if inputs == "flow":
-            mean, std = (torch.tensor(v, dtype=torch.float32) for v in FLOW_DEFAULT_STATS)
+        if inputs != "paper":
+            stats = FLOW_DEFAULT_STATS if inputs == "flow" else tuple(
+                a + b for a, b in zip(FLOW_DEFAULT_STATS, FLOW2_EXTRA_STATS, strict=True))
+            mean, std = (torch.tensor(v, dtype=torch.float32) for v in stats)
             self.register_buffer("feature_mean", mean)
             self.register_buffer("feature_std", std)
         else:
@@ -106,24 +129,30 @@ class SpatialCoordinateEncoder(_MLPEncoder):
     @torch.no_grad()
     def fit_standardisation(self, coords: Tensor, symmetric: bool = True) -> None:
         """Sets ``feature_mean`` / ``feature_std`` from ``[N, 4]`` node coordinates of a
-        training set (``inputs="flow"`` only). With ``symmetric`` (training with image swap),
-        the statistics are those of the nodes and their swapped copies."""
-        if self.inputs != "flow":
-            raise ValueError(f"Expected an encoder with inputs='flow' (got {self.inputs!r})")
+        training set (``inputs="flow"`` or ``"flow2"``). With ``symmetric`` (training with
+        image swap), the statistics are those of the nodes and their swapped copies."""
+        if self.inputs == "paper":
+            raise ValueError(f"Expected an encoder with inputs='flow' or 'flow2' (got "
+                             f"{self.inputs!r})")
         if coords.dim() != 2 or coords.shape[1] != 4 or coords.shape[0] < 2 \
                 or not bool(torch.isfinite(coords).all()):
             raise ValueError(f"Expected finite [N >= 2, 4] coordinates "
                              f"(got {tuple(coords.shape)})")
         if symmetric:
             coords = torch.cat([coords, coords[:, [2, 3, 0, 1]]])
-        f = flow_features(coords.double())
+        f = flow_features(coords.double(), self._order)
         self.feature_mean.copy_(f.mean(0))
         self.feature_std.copy_(f.std(0).clamp_min(1e-6))
 
     def forward(self, x: Tensor) -> Tensor:
-        if self.inputs == "flow":
-            x = (flow_features(x) - self.feature_mean.to(x)) / self.feature_std.to(x)
+        if self.inputs != "paper":
+            x = (flow_features(x, self._order) - self.feature_mean.to(x)) \
+                / self.feature_std.to(x)
         return self.mlp(x)
+
+    @property
+    def _order(self) -> int:
+        return 2 if self.inputs == "flow2" else 1
 
     def __repr__(self) -> str:
         return f"{self.__class__.__name__}({self.out_channels}, inputs={self.inputs!r})"

@@ -379,7 +379,7 @@ def _datasets(cfg: TrainConfig, model: StrLPose, datasets: Sequence[Any] | None,
                          f"validates every {cfg.val_every} steps and at the end")
     if len(train_ds):
         check_graph_channels(model.config, cfg.patch_size, train_ds[0])
-    if model.config.inputs == "flow" and fit and len(train_ds):
+    if model.config.inputs != "paper" and fit and len(train_ds):
         fit_input_statistics(model, train_ds, cfg.swap_prob > 0)
     return train_ds, val_ds
 
