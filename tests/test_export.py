@@ -96,3 +96,24 @@ def test_a_failed_export_leaves_no_file(model, graph, tmp_path, monkeypatch):
         export_onnx(model, tmp_path / "m.onnx", example=graph)
     assert list(tmp_path.iterdir()) == []
     assert not model.training
+
+
+@pytest.mark.parametrize("inputs", ["flow", "flow2"])
+def test_onnxruntime_equals_pytorch_for_the_flow_inputs(inputs, tmp_path):
+    """The flow inputs' products and standardisation are part of the exported graph."""
+    ort = pytest.importorskip("onnxruntime")
+    pytest.importorskip("onnx")
+    from strl_pyg.model.strl_pose import StrLPoseConfig
+
+    torch.manual_seed(0)
+    m = StrLPose(StrLPoseConfig.ablation("full", hidden=16, layers=1, heads=2, inputs=inputs,
+                                         patch_features=1)).eval()
+    g = prepare_graph(generate_pair(7).matches, m)
+    path = export_onnx(m, tmp_path / "m.onnx", example=g)
+    other = prepare_graph(generate_pair(11).matches, m)
+    ref = forward_pose(m, other)
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    outs = sess.run(None, {n: x.numpy() for n, x in zip(INPUT_NAMES, onnx_inputs(m, other),
+                                                        strict=True)})
+    for o, r in zip(outs, (ref.quaternion, ref.translation, ref.log_var), strict=True):
+        np.testing.assert_allclose(o, r.numpy(), atol=1e-4)
