@@ -358,7 +358,14 @@ def motion_table(result: dict) -> str:
     return "\n".join(lines)
 
 
+def _variant(name: str) -> str:
+    head, _, seed = name.rpartition("-s")
+    return head if head and seed.isdigit() else name
+
+
 def plot_by_motion(result: dict, path: Path) -> None:
+    """One bar per variant (runs ``<variant>-s<seed>`` pooled: the mean over seeds of each
+    seed's mean error, whiskers from the best to the worst seed) and motion."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -367,17 +374,26 @@ def plot_by_motion(result: dict, path: Path) -> None:
 
     kinds, table = _by_motion(result)
     groups = ["all", *kinds]
+    variants: dict[str, list] = {}
+    for name, cell in table.items():
+        variants.setdefault(_variant(name), []).append([cell[g][1] for g in groups])
     fig, ax = plt.subplots(figsize=(11, 4.6))
-    width = 0.8 / len(table)
-    for j, (name, cell) in enumerate(table.items()):
-        ax.bar(np.arange(len(groups)) + j * width, [cell[g][1] for g in groups], width,
-               label=name)
+    width = 0.8 / len(variants)
+    for j, (name, rows) in enumerate(variants.items()):
+        v = np.array(rows)
+        mean = v.mean(0)
+        x = np.arange(len(groups)) + j * width
+        ax.bar(x, mean, width, label=name if len(rows) == 1 else f"{name} ({len(rows)} seeds)")
+        if len(rows) > 1:
+            ax.errorbar(x, mean, yerr=[mean - v.min(0), v.max(0) - mean], fmt="none",
+                        ecolor="black", capsize=2, lw=0.8)
     first = next(iter(table.values()))
     ax.set_xticks(np.arange(len(groups)) + 0.4 - width / 2)
     ax.set_xticklabels([f"{g}\n({first[g][0]} pairs)" for g in groups])
     ax.set_ylabel("mean translation-direction error (deg)")
     ax.set_xlabel("the generator's motion of the validation pair")
-    ax.set_title("Validation translation error by motion (same front-end matches)")
+    ax.set_title("Validation translation error by motion (same front-end matches; "
+                 "whiskers: seeds' range)")
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()

@@ -56,3 +56,9 @@ def test_compare_pools_the_common_seeds_pairwise():
     assert "| driving | 0.50 [0.50, 0.50], 3 | 0.50 [0.50, 0.50], 3 |" in text
     with pytest.raises(SystemExit, match="common seed"):
         spr.compare_table(runs, "t3-x", "t3-z")
+
+
+def test_seeds_of_a_variant_share_a_bar():
+    assert spr._variant("cos1e-3-s2") == "cos1e-3"
+    assert spr._variant("PoseLib") == "PoseLib"
+    assert spr._variant("run-seed") == "run-seed"
