@@ -63,7 +63,7 @@ class TrainConfig:
     model_overrides: dict[str, Any] = field(default_factory=dict)  # other StrLPoseConfig fields
     lr: float = 1e-4  # Adam, as the paper (the peak rate under a schedule)
     # "constant" (the paper) | "cosine": half a cosine from lr down to 0 at `steps`, after the
-    # warm-up; learning_rate(cfg, step) is the rate of every step
+    # warm-up; self.learning_rate(step) is the rate of every step
     lr_schedule: str = "constant"
     warmup_steps: int = 0  # linear warm-up from lr / warmup_steps to lr (0: none)
     batch_size: int = 16  # global batch (split over DDP ranks), as the paper
