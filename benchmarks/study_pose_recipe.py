@@ -237,13 +237,19 @@ def cmd_score(args: argparse.Namespace) -> int:
 
 
 # ----------------------------------------------------------------------------- paired
+def split_seed(name: str) -> tuple[str, int | None]:
+    """``"<variant>-s<seed>"`` -> ``(variant, seed)``; another name -> ``(name, None)``."""
+    head, _, seed = name.rpartition("-s")
+    return (head, int(seed)) if head and seed.isdigit() else (name, None)
+
+
 def pooled_errors(runs: dict[str, dict], prefix: str) -> dict[int, dict[str, list]]:
     """``{seed: errors}`` of the scored runs named ``<prefix>-s<seed>``."""
     out = {}
     for name, r in runs.items():
-        head, _, seed = name.rpartition("-s")
-        if head == prefix and seed.isdigit():
-            out[int(seed)] = r["errors"]
+        variant, seed = split_seed(name)
+        if variant == prefix and seed is not None:
+            out[seed] = r["errors"]
     return out
 
 
@@ -290,10 +296,10 @@ def validation_pairs(run: Path) -> list[tuple[str, object, object]]:
     from strl_pyg.training.loop import load_checkpoint
 
     cfg = TrainConfig.from_dict(load_checkpoint(run / "last.pt")["train_config"])
-    _, val = build_datasets(cfg, progress=False)
     if cfg.matches != "frontend":
         raise SystemExit(f"error: expected a run on front-end matches (got '{run}': "
                          f"{cfg.matches})")
+    _, val = build_datasets(cfg, progress=False)
     out = []
     for i in range(len(val)):
         m = val.load_matches(i)
@@ -314,8 +320,8 @@ def cmd_motion(args: argparse.Namespace) -> int:
     motions = [mo for mo, _, _ in pairs]
     sets = {"val": [(f"val/{i}", m, T) for i, (_, m, T) in enumerate(pairs)]}
     rows = {"PoseLib": ae.poselib_errors(sets)["val"]}
-    for run in runs:
-        if [mo for mo, _, _ in validation_pairs(run)] != motions:
+    for k, run in enumerate(runs):
+        if k and [mo for mo, _, _ in validation_pairs(run)] != motions:
             raise SystemExit(f"error: expected runs with the same validation pairs (got "
                              f"'{run}' against '{runs[0]}')")
         rows[run.name] = eval_errors(run, sets)["val"]
@@ -358,11 +364,6 @@ def motion_table(result: dict) -> str:
     return "\n".join(lines)
 
 
-def _variant(name: str) -> str:
-    head, _, seed = name.rpartition("-s")
-    return head if head and seed.isdigit() else name
-
-
 def plot_by_motion(result: dict, path: Path) -> None:
     """One bar per variant (runs ``<variant>-s<seed>`` pooled: the mean over seeds of each
     seed's mean error, whiskers from the best to the worst seed) and motion."""
@@ -376,7 +377,7 @@ def plot_by_motion(result: dict, path: Path) -> None:
     groups = ["all", *kinds]
     variants: dict[str, list] = {}
     for name, cell in table.items():
-        variants.setdefault(_variant(name), []).append([cell[g][1] for g in groups])
+        variants.setdefault(split_seed(name)[0], []).append([cell[g][1] for g in groups])
     fig, ax = plt.subplots(figsize=(11, 4.6))
     width = 0.8 / len(variants)
     for j, (name, rows) in enumerate(variants.items()):

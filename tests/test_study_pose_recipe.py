@@ -59,6 +59,6 @@ def test_compare_pools_the_common_seeds_pairwise():
 
 
 def test_seeds_of_a_variant_share_a_bar():
-    assert spr._variant("cos1e-3-s2") == "cos1e-3"
-    assert spr._variant("PoseLib") == "PoseLib"
-    assert spr._variant("run-seed") == "run-seed"
+    assert spr.split_seed("cos1e-3-s2") == ("cos1e-3", 2)
+    assert spr.split_seed("PoseLib") == ("PoseLib", None)
+    assert spr.split_seed("run-seed") == ("run-seed", None)

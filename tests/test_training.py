@@ -259,6 +259,7 @@ def test_curves_show_the_training_loss_beside_validation(tmp_path):
 
 def test_learning_rate_schedules():
     """--lr-schedule / --warmup-steps: the rate of every step from the config alone."""
+    import itertools
     import math
 
     const = TrainConfig(lr=1e-3, steps=10)
@@ -272,7 +273,7 @@ def test_learning_rate_schedules():
     assert cos.learning_rate(54) == pytest.approx(5e-4)  # half-way down
     assert cos.learning_rate(103) == pytest.approx(1e-3 * 0.5 * (1 + math.cos(math.pi * 0.99)))
     rates = [cos.learning_rate(s) for s in range(4, 104)]
-    assert all(a > b for a, b in zip(rates, rates[1:]))
+    assert all(a > b for a, b in itertools.pairwise(rates))
     with pytest.raises(ValueError, match="lr_schedule"):
         TrainConfig(lr_schedule="step")
     with pytest.raises(ValueError, match=r"warmup_steps an integer in \[0, steps=10\)"):
