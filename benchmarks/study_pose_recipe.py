@@ -74,6 +74,11 @@ VARIANTS = {
     # products that a rotation about x / y leaves (A(x)^T u), on the cosine-1e-3 recipe
     "flow2-cos1e-3": (["--set", "inputs=flow2", "--loss", "balanced", "--lr-schedule",
                        "cosine", "--warmup-steps", "100", "--lr", "1e-3"]),
+    # the dino's views are rolled by 90 deg (its orbit moves along the image's y; generated
+    # cameras are upright, their orbits move along x): both cameras rolled by U(-180, 180) deg
+    "both-cos1e-3-roll": (["--set", "inputs=flow", "--loss", "balanced", "--lr-schedule",
+                           "cosine", "--warmup-steps", "100", "--lr", "1e-3",
+                           "--roll-augment", "180"]),
 }
 COMMON = ["--model", "baseline", "--scene-mix", "lines_small", "--data-seed", "0",
           "--val-pairs", "100", "--val-every", "250", "--batch-size", "16", "--lr", "3e-4",

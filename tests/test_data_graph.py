@@ -271,3 +271,119 @@ def test_transforms_leave_their_input_untouched():
     assert all(torch.equal(g[nt][k], v) for (nt, k), v in before.items())
     assert torch.equal(g[K.T_0TO1], T) and K.SWAPPED not in g
     assert g[K.LINE_EDGE].edge_index.shape[1] == 20
+
+
+def _scene_pair(seed=0, n=40, lines=6, size=96, f=60.0):
+    """Matches of a real two-view scene (points and segments in front of both cameras, inside
+    a disk about the principal point so that any roll keeps them in the image) and its pose."""
+    from strl_pyg.geometry import Pose
+
+    rng = np.random.default_rng(seed)
+    c = size / 2
+    Km = np.array([[f, 0, c], [0, f, c], [0, 0, 1.0]])
+    T = Pose.from_quaternion(torch.tensor([0.99, 0.03, -0.05, 0.04]),
+                             torch.tensor([0.3, -0.2, 0.1])).matrix().double().numpy()
+
+    def project(X, Tm):
+        Xc = X @ Tm[:3, :3].T + Tm[:3, 3]
+        return Xc[:, :2] / Xc[:, 2:] * f + c
+
+    X = []
+    while len(X) < n + 2 * lines:
+        cand = rng.uniform([-1, -1, 4], [1, 1, 6], (3,))
+        ok = all(np.hypot(*(project(cand[None], Tm)[0] - c)) < 0.45 * size
+                 for Tm in (np.eye(4), T))
+        if ok:
+            X.append(cand)
+    X = np.array(X)
+    p0, p1 = project(X, np.eye(4)), project(X, T)
+    m = PairMatches(p0[:n], p1[:n], p0[n:].reshape(-1, 2, 2), p1[n:].reshape(-1, 2, 2),
+                    image_size0=(size, size), image_size1=(size, size), K0=Km, K1=Km)
+    return m, T, c
+
+
+def _rotate_pixels(xy, angle, c):
+    R = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    return (np.asarray(xy) - c) @ R.T + c
+
+
+def test_roll_cameras_equals_building_from_rolled_images():
+    """A roll of both cameras by 0.7 rad is the graph of the images rotated about the principal
+    point (square pixels), with the pose (Rz R Rz^T, Rz t); the appearance stays."""
+    from dataclasses import replace
+
+    from strl_pyg.data import roll_cameras
+
+    m, T, c = _scene_pair()
+    a = 0.7
+    g = build_pair_graph(m, T_0to1=T)
+    rolled = roll_cameras(g, a)
+    rot = {k: _rotate_pixels(getattr(m, k), a, c) for k in ("points0", "points1",
+                                                            "lines0", "lines1")}
+    ref = build_pair_graph(replace(m, **rot), T_0to1=T)
+    for nt in K.NODE_TYPES:
+        for key in (K.POS0, K.POS1):
+            torch.testing.assert_close(rolled[nt][key], ref[nt][key], atol=1e-5, rtol=0)
+        assert torch.equal(rolled[nt][K.KPTS0], g[nt][K.KPTS0])  # appearance: unchanged
+    torch.testing.assert_close(rolled[K.ENDPOINT][K.LINE_FEAT], ref[K.ENDPOINT][K.LINE_FEAT],
+                               atol=1e-5, rtol=0)
+    Rz = torch.tensor([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    T0 = g[K.T_0TO1].reshape(4, 4).double()
+    T1 = rolled[K.T_0TO1].reshape(4, 4).double()
+    torch.testing.assert_close(T1[:3, :3], Rz @ T0[:3, :3] @ Rz.T, atol=1e-6, rtol=0)
+    torch.testing.assert_close(T1[:3, 3], Rz @ T0[:3, 3], atol=1e-6, rtol=0)
+    # the rolled pose explains the rolled coordinates: the epipolar residual stays ~0 ...
+    def residual(graph, pose):
+        x0 = torch.cat([graph[K.POINT][K.POS0].double(), torch.ones(40, 1)], 1)
+        x1 = torch.cat([graph[K.POINT][K.POS1].double(), torch.ones(40, 1)], 1)
+        t = pose[:3, 3]
+        tx = torch.tensor([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
+        return ((x1 @ (tx @ pose[:3, :3])) * x0).sum(1).abs().max()
+
+    assert residual(rolled, T1) < 1e-5
+    assert residual(rolled, T0) > 1e-2  # ... which the unrolled pose does not
+    # roll and unroll: the graph back
+    back = roll_cameras(rolled, -a)
+    torch.testing.assert_close(back[K.POINT][K.POS1], g[K.POINT][K.POS1], atol=1e-6, rtol=0)
+    torch.testing.assert_close(back[K.T_0TO1], g[K.T_0TO1], atol=1e-6, rtol=0)
+
+
+def test_roll_cameras_refuses_what_it_cannot_roll():
+    from torch_geometric.data import Batch
+
+    from strl_pyg.data import RandomRoll, roll_cameras
+
+    no_K = build_pair_graph(make(6, 2), T_0to1=np.eye(4))
+    with pytest.raises(ValueError, match="intrinsics K0 and K1"):
+        roll_cameras(no_K, 0.1)
+    m, T, _ = _scene_pair()
+    g = build_pair_graph(m, T_0to1=T)
+    with pytest.raises(ValueError, match="Batch"):
+        roll_cameras(Batch.from_data_list([g, g]), 0.1)
+    with pytest.raises(ValueError, match="finite roll angle"):
+        roll_cameras(g, float("nan"))
+    with pytest.raises(ValueError, match=r"max_degrees in \[0, 180\]"):
+        RandomRoll(200)
+
+
+def test_random_roll_draws_within_its_range_by_seed():
+    from strl_pyg.data import RandomRoll
+
+    m, T, _ = _scene_pair()
+    g = build_pair_graph(m, T_0to1=T)
+    p = g[K.POINT][K.POS0][0].double()
+
+    def angles(t, n=200):
+        out = []
+        for _ in range(n):
+            q = t(g)[K.POINT][K.POS0][0].double()
+            out.append(np.degrees(float(torch.atan2(p[0] * q[1] - p[1] * q[0], p @ q))))
+        return np.array(out)
+
+    a = angles(RandomRoll(30, seed=4))
+    assert np.abs(a).max() <= 30 + 1e-3 and a.min() < -20 and a.max() > 20
+    np.testing.assert_array_equal(a, angles(RandomRoll(30, seed=4)))
+    full = angles(RandomRoll(180, seed=5))
+    assert full.min() < -150 and full.max() > 150
+    assert np.abs(angles(RandomRoll(0, seed=0), 5)).max() < 1e-4
+    assert K.T_0TO1 in g and torch.equal(build_pair_graph(m, T_0to1=T)[K.T_0TO1], g[K.T_0TO1])

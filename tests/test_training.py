@@ -316,3 +316,50 @@ def test_a_cosine_run_logs_its_rates_and_resumes_on_the_same_schedule(tmp_path, 
     # a cosine run is not extended by resuming with more steps: its schedule has ended
     with pytest.raises(ValueError, match="Expected --steps 4 to resume: a cosine"):
         train(tiny_config(tmp_path / "full", steps=8, **kw), resume=True, progress=False)
+
+
+def test_roll_augment_rolls_training_pairs_and_their_statistics(tmp_path):
+    """--roll-augment: each training pair's cameras are rolled by an angle within the range
+    (coordinates and pose together, the appearance untouched), the validation pairs are not,
+    and the flow inputs' standardisation is fitted on rolled pairs."""
+    import argparse
+    import json
+    import math
+
+    from strl_pyg.data import keys as K
+    from strl_pyg.data.transforms import roll_cameras
+    from strl_pyg.training.config import add_train_arguments
+    from strl_pyg.training.data import _Resampled, build_datasets
+
+    args = add_train_arguments(argparse.ArgumentParser()).parse_args(["--roll-augment", "45"])
+    assert args.roll_augment == 45.0
+    with pytest.raises(ValueError, match=r"roll_augment in \[0, 180\]"):
+        TrainConfig(roll_augment=-1)
+    cfg = tiny_config(tmp_path / "run", roll_augment=90.0, swap_prob=0.0,
+                      model_overrides={"hidden": 16, "layers": 1, "heads": 2,
+                                       "patch_features": 1, "inputs": "flow"})
+    train_ds, _ = build_datasets(cfg, progress=False)
+    plain = _Resampled(train_ds, 32, 16, seed=0)
+    rolled = _Resampled(train_ds, 32, 16, seed=0, roll_max=90.0)
+    angles = []
+    for key in [(i, 0, i) for i in range(6)]:
+        a, b = plain[key], rolled[key]
+        assert torch.equal(a[K.POINT][K.KPTS1], b[K.POINT][K.KPTS1])
+        p, q = a[K.POINT][K.POS0][0].double(), b[K.POINT][K.POS0][0].double()
+        angle = math.atan2(float(p[0] * q[1] - p[1] * q[0]), float(p @ q))
+        assert abs(angle) <= math.pi / 2 + 1e-4
+        ref = roll_cameras(a, angle)  # the same roll, applied by hand
+        torch.testing.assert_close(b[K.T_0TO1], ref[K.T_0TO1], atol=1e-5, rtol=0)
+        torch.testing.assert_close(b[K.ENDPOINT][K.LINE_FEAT], ref[K.ENDPOINT][K.LINE_FEAT],
+                                   atol=1e-5, rtol=0)
+        angles.append(angle)
+    assert len({round(a, 4) for a in angles}) == 6  # one angle per item
+    res = train(cfg, progress=False)
+    assert res["step"] == 4
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["roll_augment"] == 90.0
+    # upright 96 x 256 images: x spreads ~2.7x as far as y; rolled up to 90 deg, far less
+    std = res["model"].sce.feature_std
+    unrolled = train(replace(cfg, roll_augment=0.0, steps=1, val_every=1,
+                             out_dir=str(tmp_path / "plain")), progress=False)
+    std0 = unrolled["model"].sce.feature_std
+    assert std0[0] / std0[1] > 2.0 and 0.5 < std[0] / std[1] < 1.6

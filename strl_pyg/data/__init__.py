@@ -34,7 +34,9 @@ __all__ = [
     "load_graph",
     "FixedSizeResample",
     "MaterializeCompleteEdges",
+    "RandomRoll",
     "RandomSwap",
+    "roll_cameras",
     "swap_images",
 ]
 
@@ -58,7 +60,9 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "load_graph": _GRAPH,
     "FixedSizeResample": _TRANSFORMS,
     "MaterializeCompleteEdges": _TRANSFORMS,
+    "RandomRoll": _TRANSFORMS,
     "RandomSwap": _TRANSFORMS,
+    "roll_cameras": _TRANSFORMS,
     "swap_images": _TRANSFORMS,
 }, globals())
 
@@ -86,6 +90,8 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
     from strl_pyg.data.transforms import (
         FixedSizeResample,
         MaterializeCompleteEdges,
+        RandomRoll,
         RandomSwap,
+        roll_cameras,
         swap_images,
     )

@@ -19,8 +19,10 @@ from strl_pyg.data.build import (
 __all__ = [
     "FixedSizeResample",
     "MaterializeCompleteEdges",
+    "RandomRoll",
     "RandomSwap",
     "resample_indices",
+    "roll_cameras",
     "swap_images",
 ]
 
@@ -175,3 +177,82 @@ class RandomSwap(BaseTransform):
 
     def __repr__(self) -> str:
         return f"{self.__class__.__name__}(p={self.p}, seed={self.seed})"
+
+
+def _rotate_pairs(x: Tensor, c: float, s: float) -> Tensor:
+    """Rotates the consecutive coordinate pairs ``(x, y)`` of the last dimension by the angle
+    whose cosine and sine are ``c`` and ``s``."""
+    xy = x.reshape(*x.shape[:-1], -1, 2)
+    out = torch.stack([c * xy[..., 0] - s * xy[..., 1], s * xy[..., 0] + c * xy[..., 1]], -1)
+    return out.reshape(x.shape).to(x.dtype)
+
+
+def roll_cameras(data: HeteroData, angle: float) -> HeteroData:
+    """The pair graph of both cameras rolled by ``angle`` (radians) about their optical axes
+    (a new object): a training augmentation that is exact in the intrinsics-normalised
+    coordinates.
+
+    A roll :math:`R_z` maps a normalised ray :math:`(x, y, 1)` to :math:`(R_z (x, y), 1)`, so
+    ``pos0`` / ``pos1`` of every node and the four 2-vectors of ``line_feat`` rotate by
+    ``angle``, and ``T_0to1`` becomes :math:`(R_z R R_z^\top, R_z t)`. The appearance
+    (``patch*``, ``kpts*``, ``image*``) and ``K`` stay: they describe the same points.
+
+    Raises ``ValueError`` for a graph without ``K0`` and ``K1`` (its coordinates are
+    normalised by the image size, where a roll is not a rotation of the coordinates), and for
+    a batch (roll each graph before collating).
+    """
+    if isinstance(data, Batch):
+        raise ValueError("Expected one pair graph (got a Batch): roll each graph before "
+                         "collating")
+    if keys_.K0 not in data or keys_.K1 not in data:
+        raise ValueError("Expected a graph with intrinsics K0 and K1 (coordinates normalised "
+                         "by K) to roll its cameras (got a graph without them)")
+    angle = float(angle)
+    if not torch.isfinite(torch.tensor(angle)):
+        raise ValueError(f"Expected a finite roll angle (got {angle!r})")
+    c, s = torch.cos(torch.tensor(angle, dtype=torch.float64)).item(), \
+        torch.sin(torch.tensor(angle, dtype=torch.float64)).item()
+    data = copy.copy(data)  # attributes are reassigned below, never modified in place
+    for node_type in keys_.NODE_TYPES:
+        if node_type not in data.node_types:
+            continue
+        store = data[node_type]
+        for key in (keys_.POS0, keys_.POS1, keys_.LINE_FEAT):
+            if key in store:
+                store[key] = _rotate_pairs(store[key], c, s)
+    if keys_.T_0TO1 in data:
+        T = data[keys_.T_0TO1]
+        Rz = torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], dtype=torch.float64)
+        out = T.clone()
+        out[..., :3, :3] = (Rz @ T[..., :3, :3].double() @ Rz.T).to(T.dtype)
+        out[..., :3, 3] = (T[..., :3, 3].double() @ Rz.T).to(T.dtype)
+        data[keys_.T_0TO1] = out
+    return data
+
+
+class RandomRoll(BaseTransform):
+    """Rolls both cameras of a pair by an angle drawn uniformly from
+    ``[-max_degrees, max_degrees]`` (:func:`roll_cameras`): a training augmentation for
+    data whose cameras are always upright (generated scenes, driving), so that a network does
+    not learn "an orbit moves sideways" and fail on a pair filmed with the camera on its side
+    (the Middlebury dino's views are rolled by 90 degrees).
+
+    Args:
+        max_degrees: The largest roll, in ``[0, 180]`` (``180``: every orientation).
+        seed: Seed of the transform's own generator (``None``: torch's global generator).
+    """
+
+    def __init__(self, max_degrees: float = 180.0, seed: int | None = None) -> None:
+        if not 0.0 <= max_degrees <= 180.0:
+            raise ValueError(f"Expected max_degrees in [0, 180] (got {max_degrees!r})")
+        self.max_degrees = float(max_degrees)
+        self.seed = seed
+        self.generator = None if seed is None else torch.Generator().manual_seed(seed)
+
+    def forward(self, data: HeteroData) -> HeteroData:
+        u = float(torch.rand(1, generator=self.generator, dtype=torch.float64))
+        angle = (2.0 * u - 1.0) * self.max_degrees
+        return roll_cameras(data, angle * torch.pi / 180.0)
+
+    def __repr__(self) -> str:
+        return f"{self.__class__.__name__}(max_degrees={self.max_degrees}, seed={self.seed})"

@@ -73,6 +73,9 @@ class TrainConfig:
     num_lines: int = 192
     patch_size: int = 1  # the paper's single pixel
     swap_prob: float = 0.5  # training pairs have their images exchanged with this probability
+    # both cameras of a training pair rolled about their optical axes by U(-roll, roll) degrees
+    # (strl_pyg.data.RandomRoll; 0: off, the paper): generated scenes are always upright
+    roll_augment: float = 0.0
     init_from: str | None = None  # start from these weights (model.pt or last.pt); fine-tuning
     grad_clip: float | None = 10.0  # max gradient norm (None: off)
     # pose loss (strl_pyg.training.loss.LOSS_FORMS): "balanced" (beta-NLL, w's variance on a
@@ -134,6 +137,9 @@ class TrainConfig:
                 raise ValueError(f"Expected a positive integer '{name}' (got {value!r})")
         if not 0.0 <= self.swap_prob <= 1.0:
             raise ValueError(f"Expected swap_prob in [0, 1] (got {self.swap_prob!r})")
+        if not 0.0 <= self.roll_augment <= 180.0:
+            raise ValueError(f"Expected roll_augment in [0, 180] degrees "
+                             f"(got {self.roll_augment!r})")
         if not self.lr > 0:
             raise ValueError(f"Expected a positive learning rate (got {self.lr!r})")
         if self.lr_schedule not in LR_SCHEDULES:
@@ -245,6 +251,9 @@ def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     ap.add_argument("--patch-size", type=int, default=d.patch_size)
     ap.add_argument("--swap-prob", type=float, default=d.swap_prob,
                     help="probability of exchanging the two images of a training pair")
+    ap.add_argument("--roll-augment", type=float, default=d.roll_augment, metavar="DEG",
+                    help="roll both cameras of a training pair by up to this many degrees "
+                         "(0: off; 180: any orientation)")
     ap.add_argument("--init-from", default=None,
                     help="start from these weights (model.pt or last.pt), e.g. to fine-tune")
     ap.add_argument("--seed", type=int, default=d.seed,

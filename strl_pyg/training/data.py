@@ -16,7 +16,7 @@ from torch.utils.data import ConcatDataset, Dataset, Sampler
 from torch_geometric.data import HeteroData
 
 from strl_pyg.data import keys as keys_
-from strl_pyg.data.transforms import FixedSizeResample, RandomSwap
+from strl_pyg.data.transforms import FixedSizeResample, RandomRoll, RandomSwap
 from strl_pyg.geometry import Pose
 from strl_pyg.training.config import TrainConfig
 
@@ -42,14 +42,16 @@ class _InMemory(Dataset):
 
 
 class _Resampled(Dataset):
-    """Applies :class:`FixedSizeResample` and :class:`RandomSwap`, seeded by the key
+    """Applies :class:`FixedSizeResample`, :class:`RandomSwap`, the outlier shuffle and
+    :class:`RandomRoll` (each when asked for), seeded by the key
     ``(index, step, position)``."""
 
     def __init__(self, base: Dataset, num_points: int, num_lines: int, seed: int,
-                 swap_prob: float = 0.0, outlier_max: float = 0.0) -> None:
+                 swap_prob: float = 0.0, outlier_max: float = 0.0, roll_max: float = 0.0) -> None:
         self.base, self.num_points, self.num_lines, self.seed = base, num_points, num_lines, seed
         self.swap_prob = swap_prob
         self.outlier_max = outlier_max
+        self.roll_max = roll_max
 
     def __len__(self) -> int:
         return len(self.base)
@@ -62,6 +64,8 @@ class _Resampled(Dataset):
             data = RandomSwap(self.swap_prob, seed=seed + 1)(data)
         if self.outlier_max > 0:
             data = shuffle_point_matches(data, self.outlier_max, seed + 2)
+        if self.roll_max > 0:
+            data = RandomRoll(self.roll_max, seed=seed + 3)(data)
         return data
 
 

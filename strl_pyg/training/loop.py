@@ -41,6 +41,7 @@ from torch_geometric.loader.dataloader import Collater
 from tqdm.auto import tqdm
 
 from strl_pyg.data import keys as keys_
+from strl_pyg.data.transforms import RandomRoll
 from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.training.checkpoints import (
     CHECKPOINT_VERSION,
@@ -358,7 +359,7 @@ def _loaders(cfg: TrainConfig, model_cfg: Any, train_ds: Any, val_ds: Any, start
     sampler = StepBatchSampler(len(train_ds), cfg.batch_size, start_step, cfg.steps, data_seed,
                                rank, world)
     loader = DataLoader(_Resampled(train_ds, cfg.num_points, cfg.num_lines, data_seed,
-                                   cfg.swap_prob, cfg.outlier_augment),
+                                   cfg.swap_prob, cfg.outlier_augment, cfg.roll_augment),
                         batch_sampler=sampler, collate_fn=collate, num_workers=cfg.num_workers)
     val_keys = [(i, -1, i) for i in range(len(val_ds))]
     val_loader = DataLoader(_Resampled(val_ds, cfg.num_points, cfg.num_lines, data_seed + 1),
@@ -380,7 +381,7 @@ def _datasets(cfg: TrainConfig, model: StrLPose, datasets: Sequence[Any] | None,
     if len(train_ds):
         check_graph_channels(model.config, cfg.patch_size, train_ds[0])
     if model.config.inputs != "paper" and fit and len(train_ds):
-        fit_input_statistics(model, train_ds, cfg.swap_prob > 0)
+        fit_input_statistics(model, train_ds, cfg.swap_prob > 0, roll=cfg.roll_augment)
     return train_ds, val_ds
 
 
@@ -551,13 +552,17 @@ def _losses(cfg: TrainConfig, model_cfg: Any) -> tuple[PoseLoss, GeometricLoss |
 
 
 def fit_input_statistics(model: StrLPose, dataset: Any, symmetric: bool,
-                         max_pairs: int = 128) -> None:
+                         max_pairs: int = 128, roll: float = 0.0) -> None:
     """Sets the flow inputs' standardisation (``model.sce``) from the node coordinates of the
-    first ``max_pairs`` training pairs (with their swapped copies when ``symmetric``); they
-    are buffers, so the checkpoint keeps them."""
+    first ``max_pairs`` training pairs (with their swapped copies when ``symmetric``, and each
+    pair rolled as training rolls it (:class:`~strl_pyg.data.RandomRoll`, a fixed seed) when
+    ``roll`` > 0); they are buffers, so the checkpoint keeps them."""
+    roller = RandomRoll(roll, seed=0) if roll > 0 else None
     coords = []
     for i in range(min(max_pairs, len(dataset))):
         g = dataset[i]
+        if roller is not None:
+            g = roller(g)
         for t in (keys_.POINT, keys_.ENDPOINT):
             if t in g.node_types and keys_.POS0 in g[t] and g[t][keys_.POS0].shape[0]:
                 coords.append(torch.cat([g[t][keys_.POS0], g[t][keys_.POS1]], -1).float())
@@ -594,7 +599,7 @@ def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> T
         limit=args.limit, model=args.model, model_overrides=pairs(args.set), lr=args.lr,
         batch_size=args.batch_size, steps=args.steps, val_every=args.val_every,
         num_points=args.num_points, num_lines=args.num_lines, patch_size=args.patch_size,
-        swap_prob=args.swap_prob, init_from=args.init_from,
+        swap_prob=args.swap_prob, roll_augment=args.roll_augment, init_from=args.init_from,
         seed=args.seed, out_dir=args.out, num_workers=args.workers, device=args.device,
         tensorboard=not args.no_tensorboard, scene_mix=args.scene_mix,
         matches=args.matches, outlier_augment=args.outlier_augment,
