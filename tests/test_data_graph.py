@@ -366,6 +366,23 @@ def test_roll_cameras_refuses_what_it_cannot_roll():
         RandomRoll(200)
 
 
+def test_roll_cameras_of_a_pair_without_lines():
+    """A pair with no line matches (no endpoint nodes) rolls; it used to raise in reshape
+    (a training pair of the Table 3 cache has none)."""
+    from dataclasses import replace
+
+    from strl_pyg.data import roll_cameras
+
+    m, T, _ = _scene_pair()
+    m = replace(m, lines0=np.zeros((0, 2, 2)), lines1=np.zeros((0, 2, 2)))
+    g = build_pair_graph(m, T_0to1=T)
+    assert g[K.ENDPOINT][K.POS0].shape == (0, 2)
+    out = roll_cameras(g, 0.5)
+    assert out[K.ENDPOINT][K.POS0].shape == (0, 2)
+    assert out[K.ENDPOINT][K.LINE_FEAT].shape == (0, 8)
+    assert not torch.allclose(out[K.POINT][K.POS0], g[K.POINT][K.POS0])
+
+
 def test_random_roll_draws_within_its_range_by_seed():
     from strl_pyg.data import RandomRoll
 

@@ -182,7 +182,7 @@ class RandomSwap(BaseTransform):
 def _rotate_pairs(x: Tensor, c: float, s: float) -> Tensor:
     """Rotates the consecutive coordinate pairs ``(x, y)`` of the last dimension by the angle
     whose cosine and sine are ``c`` and ``s``."""
-    xy = x.reshape(*x.shape[:-1], -1, 2)
+    xy = x.reshape(*x.shape[:-1], x.shape[-1] // 2, 2)  # also for 0 nodes
     out = torch.stack([c * xy[..., 0] - s * xy[..., 1], s * xy[..., 0] + c * xy[..., 1]], -1)
     return out.reshape(x.shape).to(x.dtype)
 
