@@ -1,0 +1,176 @@
+"""Diagnostic (not a fit): how a network's regressed translation depends on the cameras' roll.
+
+Each pair is evaluated as it is and with both cameras rolled about their optical axes by 90,
+-90 and 180 degrees (:func:`strl_pyg.data.roll_cameras`: exact in the K-normalised
+coordinates, pose rolled with them). A network trained on upright cameras only has learnt the
+direction of an orbit from its training data: rolled by 90 degrees, a pair it solves is lost,
+and a pair filmed with the camera on its side is solved once it is rolled back.
+
+Sets: 30 held-out generated ``object`` pairs (orbits, focal 5-6 W as the dino's 5.2 W, the
+generator's matches), the Middlebury dino's consecutive pairs and KITTI 06 (i, i+1) (front-end
+matches, ``--cache``; skipped where the data is absent). Median / mean translation-direction
+error (deg) of the regression head, per set and roll.
+
+    python benchmarks/diag_roll.py                          # the shipped weights
+    python benchmarks/diag_roll.py --checkpoint RUN/model.pt --label candidate
+    python benchmarks/diag_roll.py --report                 # the table and figure of all JSONs
+
+Writes ``results_roll/<label>.json``; ``--report`` writes ``results_roll.md`` and
+``figures/roll.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results_roll"
+ROLLS = (0, 90, -90, 180)
+GENERATED = 30
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    c = float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def graphs(cache: Path, patch_size: int) -> dict[str, list]:
+    import bench_pose as bp
+
+    from strl_pyg import PairMatches
+    from strl_pyg.data import build_pair_graph
+    from strl_pyg.synthetic import generate_pair
+    from strl_pyg.synthetic.distributions import eval_distribution
+
+    dist = eval_distribution("object", object_focal_range=(5.0, 6.0))
+    gen = []
+    for seed in range(2_000_000, 2_000_000 + GENERATED):
+        p = generate_pair(seed, dist.config(seed))
+        m = p.matches
+        pm = PairMatches(m.points0, m.points1, m.lines0, m.lines1, K0=p.K, K1=p.K,
+                         image0=p.image0, image1=p.image1)
+        gen.append(build_pair_graph(pm, T_0to1=np.asarray(p.T_0to1), patch_size=patch_size))
+    out = {"generated object, f 5-6 W": gen}
+    for name, pairs in (("Middlebury dino", bp.dino_pairs(cache)),
+                        ("KITTI 06 (i, i+1)", bp.kitti_pairs(1, cache))):
+        if pairs:
+            out[name] = [build_pair_graph(m, T_0to1=T, patch_size=patch_size)
+                         for _, m, T in pairs if m is not None]
+    return out
+
+
+def measure(model, sets: dict[str, list]) -> dict[str, dict[str, list[float]]]:
+    import torch
+
+    from strl_pyg.data import keys as K
+    from strl_pyg.data import roll_cameras
+
+    res: dict[str, dict[str, list[float]]] = {}
+    for name, items in sets.items():
+        res[name] = {}
+        for roll in ROLLS:
+            errs = []
+            for g in items:
+                h = roll_cameras(g, np.radians(roll))
+                with torch.no_grad():
+                    out = model(h)
+                t = out.translation[0].double().numpy()
+                T = h[K.T_0TO1].reshape(4, 4).double().numpy()
+                errs.append(_angle(t, T[:3, 3]))
+            res[name][str(roll)] = errs
+            print(f"{name}, roll {roll:4d}: median {np.median(errs):6.1f}, mean "
+                  f"{np.mean(errs):6.1f} deg ({len(errs)} pairs)", flush=True)
+    return res
+
+
+def report() -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from common import banner
+
+    runs = {p.stem: json.loads(p.read_text()) for p in sorted(RESULTS.glob("*.json"))}
+    if not runs:
+        raise SystemExit(f"error: expected measured runs in {RESULTS} (got none)")
+    lines = ["# The regression's translation under a camera roll", "",
+             "`python benchmarks/diag_roll.py --report` (runs measured with `diag_roll.py "
+             "--checkpoint ... --label ...`; see its docstring). Median / mean "
+             "translation-direction error (deg) of the regression head; both cameras rolled "
+             "by the same angle about their optical axes (exact in K-normalised coordinates).",
+             ""]
+    sets = list(next(iter(runs.values()))["errors"])
+    lines += ["| weights | set | " + " | ".join(f"roll {r}" for r in ROLLS) + " |",
+              "|---|---|" + "---|" * len(ROLLS)]
+    for label, run in runs.items():
+        for s in sets:
+            e = run["errors"].get(s)
+            if e is None:
+                continue
+            cells = [f"{np.median(e[str(r)]):.1f} / {np.mean(e[str(r)]):.1f}" for r in ROLLS]
+            lines.append(f"| {label} | {s} ({len(e['0'])}) | " + " | ".join(cells) + " |")
+    lines += ["", "```", banner().strip(), "```", "", "![roll](figures/roll.png)", ""]
+    notes = HERE / "results_roll" / "notes.md"
+    if notes.exists():
+        lines += [notes.read_text()]
+    (HERE / "results_roll.md").write_text("\n".join(lines))
+    fig, axes = plt.subplots(1, len(sets), figsize=(4.2 * len(sets), 3.6), squeeze=False)
+    width = 0.8 / len(runs)
+    for ax, s in zip(axes[0], sets, strict=True):
+        for k, (label, run) in enumerate(runs.items()):
+            e = run["errors"].get(s)
+            if e is None:
+                continue
+            med = [np.median(e[str(r)]) for r in ROLLS]
+            ax.bar(np.arange(len(ROLLS)) + k * width, med, width, label=label)
+        ax.set_xticks(np.arange(len(ROLLS)) + 0.4 - width / 2, [f"{r}" for r in ROLLS])
+        ax.set_xlabel("roll of both cameras (deg)")
+        ax.set_ylabel("median translation error (deg)")
+        ax.set_title(s, fontsize=10)
+        ax.legend(fontsize=8)
+    fig.suptitle("Regression head: translation error against the cameras' roll")
+    fig.tight_layout()
+    (HERE / "figures").mkdir(exist_ok=True)
+    fig.savefig(HERE / "figures" / "roll.png", dpi=110)
+    print(f"-> {HERE / 'results_roll.md'}, {HERE / 'figures' / 'roll.png'}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--checkpoint", default=None, help="model.pt (default: the shipped model)")
+    ap.add_argument("--label", default="shipped")
+    ap.add_argument("--cache", default=str(Path.home() / ".cache" / "strl-pyg" / "eval_cache"))
+    ap.add_argument("--report", action="store_true")
+    args = ap.parse_args(argv)
+    if args.report:
+        return report()
+    import torch
+    from common import banner
+
+    from strl_pyg.model.strl_pose import StrLPose
+
+    torch.set_num_threads(1)
+    print(banner())
+    model = StrLPose.load(args.checkpoint) if args.checkpoint else StrLPose.from_pretrained()
+    model.eval()
+    sets = graphs(Path(args.cache), int(model.metadata.get("patch_size") or 1))
+    res = measure(model, sets)
+    RESULTS.mkdir(exist_ok=True)
+    path = RESULTS / f"{args.label}.json"
+    path.write_text(json.dumps({"checkpoint": args.checkpoint or "shipped",
+                                "errors": res}, indent=1))
+    print(f"-> {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
