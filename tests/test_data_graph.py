@@ -346,6 +346,7 @@ def test_roll_cameras_equals_building_from_rolled_images():
     back = roll_cameras(rolled, -a)
     torch.testing.assert_close(back[K.POINT][K.POS1], g[K.POINT][K.POS1], atol=1e-6, rtol=0)
     torch.testing.assert_close(back[K.T_0TO1], g[K.T_0TO1], atol=1e-6, rtol=0)
+    assert K.ROLL not in g and float(rolled[K.ROLL]) == a and abs(float(back[K.ROLL])) < 1e-12
 
 
 def test_roll_cameras_refuses_what_it_cannot_roll():

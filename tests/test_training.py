@@ -354,6 +354,19 @@ def test_roll_augment_rolls_training_pairs_and_their_statistics(tmp_path):
                                    atol=1e-5, rtol=0)
         angles.append(angle)
     assert len({round(a, 4) for a in angles}) == 6  # one angle per item
+    # the mean pose is of the data as it comes: roll and swap undone (the first roll runs
+    # collected rolled poses)
+    from torch_geometric.data import Batch
+
+    from strl_pyg.training.data import unaugmented_poses
+
+    both = _Resampled(train_ds, 32, 16, seed=0, swap_prob=0.5, roll_max=180.0)
+    keys = [(i, 0, i) for i in range(6)]
+    batch = Batch.from_data_list([both[k] for k in keys])
+    assert 0 < int(batch[K.SWAPPED].sum()) < 6 and bool((batch[K.ROLL].abs() > 0.01).all())
+    truth = torch.stack([train_ds[i][K.T_0TO1].reshape(4, 4) for i in range(6)])
+    assert not torch.allclose(batch[K.T_0TO1], truth, atol=1e-3)
+    torch.testing.assert_close(unaugmented_poses(batch), truth, atol=1e-5, rtol=0)
     res = train(cfg, progress=False)
     assert res["step"] == 4
     assert json.loads((tmp_path / "run" / "config.json").read_text())["roll_augment"] == 90.0

@@ -78,6 +78,7 @@ T_0TO1 = "T_0to1"
 PAIR_ID = "pair_id"  # str, collates to a list: e.g. "kitti/06/000010-000011"
 SUBSET = "subset"  # str: dataset subset (e.g. "mvs", "sun3d", "kitti/06") for per-subset tables
 SWAPPED = "swapped"  # [1] bool, set by swap_images / RandomSwap: images 0 and 1 exchanged
+ROLL = "roll"  # [1] float64, set by roll_cameras / RandomRoll: the cameras' roll (radians)
 IMAGE0 = "image0"  # [1, C, H, W] float in [0, 1], only with keep_images=True
 IMAGE1 = "image1"
 

@@ -227,6 +227,8 @@ def roll_cameras(data: HeteroData, angle: float) -> HeteroData:
         out[..., :3, :3] = (Rz @ T[..., :3, :3].double() @ Rz.T).to(T.dtype)
         out[..., :3, 3] = (T[..., :3, 3].double() @ Rz.T).to(T.dtype)
         data[keys_.T_0TO1] = out
+    prev = data[keys_.ROLL] if keys_.ROLL in data else torch.zeros(1, dtype=torch.float64)
+    data[keys_.ROLL] = prev + angle
     return data
 
 

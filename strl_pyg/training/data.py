@@ -284,11 +284,25 @@ def _mixed_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
 
 
 def unaugmented_poses(batch: HeteroData) -> Tensor:
-    """Ground-truth poses with the swap augmentation undone (the trivial predictor is the mean
-    pose of the data as it comes, not of the augmented data)."""
+    """Ground-truth poses with the roll and swap augmentations undone (the trivial predictor
+    is the mean pose of the data as it comes, not of the augmented data)."""
     T = batch[keys_.T_0TO1].detach()
+    if keys_.ROLL in batch:  # applied last (_Resampled), undone first
+        a = batch[keys_.ROLL].reshape(-1).to(device=T.device, dtype=torch.float64)
+        c, s = torch.cos(a), torch.sin(a)
+        Rz = torch.zeros(a.shape[0], 3, 3, dtype=torch.float64, device=T.device)
+        Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1] = c, -s, s, c
+        Rz[:, 2, 2] = 1.0
+        T = T.clone()
+        Td = T.double()
+        T[:, :3, :3] = (Rz.transpose(1, 2) @ Td[:, :3, :3] @ Rz).to(T.dtype)
+        T[:, :3, 3] = (Rz.transpose(1, 2) @ Td[:, :3, 3:4]).squeeze(-1).to(T.dtype)
     if keys_.SWAPPED not in batch:
         return T
+    swapped = batch[keys_.SWAPPED].bool()
+    T = T.clone()
+    T[swapped] = Pose.from_matrix(T[swapped]).inv().matrix().to(T)
+    return T
     swapped = batch[keys_.SWAPPED].bool()
     T = T.clone()
     T[swapped] = Pose.from_matrix(T[swapped]).inv().matrix().to(T)
