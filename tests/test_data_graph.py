@@ -405,3 +405,21 @@ def test_random_roll_draws_within_its_range_by_seed():
     assert full.min() < -150 and full.max() > 150
     assert np.abs(angles(RandomRoll(0, seed=0), 5)).max() < 1e-4
     assert K.T_0TO1 in g and torch.equal(build_pair_graph(m, T_0to1=T)[K.T_0TO1], g[K.T_0TO1])
+
+
+def test_roll_pose_per_pose_angles_equal_one_at_a_time_and_undo():
+    from strl_pyg.data import roll_pose
+    from strl_pyg.geometry import Pose
+
+    T = torch.stack([Pose.from_quaternion(torch.tensor(q), torch.tensor(t)).matrix()
+                     for q, t in (([0.9, 0.1, -0.2, 0.3], [0.1, 0.2, 1.0]),
+                                  ([0.8, -0.3, 0.1, 0.2], [1.0, -0.5, 0.2]))]).double()
+    a = torch.tensor([0.4, -2.0], dtype=torch.float64)
+    both = roll_pose(T, a)
+    for i in range(2):
+        torch.testing.assert_close(both[i], roll_pose(T[i], float(a[i])), atol=1e-12, rtol=0)
+    torch.testing.assert_close(roll_pose(both, -a), T, atol=1e-12, rtol=0)
+    # a quarter turn sends the translation's x to y
+    quarter = roll_pose(T[1], np.pi / 2)
+    torch.testing.assert_close(quarter[:3, 3], torch.stack([-T[1, 1, 3], T[1, 0, 3], T[1, 2, 3]]),
+                               atol=1e-12, rtol=0)

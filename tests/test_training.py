@@ -376,3 +376,17 @@ def test_roll_augment_rolls_training_pairs_and_their_statistics(tmp_path):
                              out_dir=str(tmp_path / "plain")), progress=False)
     std0 = unrolled["model"].sce.feature_std
     assert std0[0] / std0[1] > 2.0 and 0.5 < std[0] / std[1] < 1.6
+
+
+def test_roll_augment_on_pairs_without_intrinsics_is_refused_before_training(tmp_path):
+    from strl_pyg.data import keys as K
+    from strl_pyg.training.data import build_datasets
+
+    cfg = tiny_config(tmp_path / "run", roll_augment=30.0)
+    train_ds, val_ds = build_datasets(cfg, progress=False)
+    strip = [g.clone() for g in train_ds]
+    for g in strip:
+        del g[K.K0], g[K.K1]
+    with pytest.raises(ValueError, match="Expected training pairs with intrinsics K0 and K1"):
+        train(cfg, datasets=(strip, list(val_ds)), progress=False)
+    assert not (tmp_path / "run" / "last.pt").exists()

@@ -37,6 +37,7 @@ __all__ = [
     "RandomRoll",
     "RandomSwap",
     "roll_cameras",
+    "roll_pose",
     "swap_images",
 ]
 
@@ -63,6 +64,7 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "RandomRoll": _TRANSFORMS,
     "RandomSwap": _TRANSFORMS,
     "roll_cameras": _TRANSFORMS,
+    "roll_pose": _TRANSFORMS,
     "swap_images": _TRANSFORMS,
 }, globals())
 
@@ -93,5 +95,6 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
         RandomRoll,
         RandomSwap,
         roll_cameras,
+        roll_pose,
         swap_images,
     )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import math
 
 import torch
 from torch import Tensor
@@ -15,6 +16,7 @@ from strl_pyg.data.build import (
     line_edge_index,
     materialize_complete_edges,
 )
+from strl_pyg.geometry.manifold import so3_exp
 
 __all__ = [
     "FixedSizeResample",
@@ -23,6 +25,7 @@ __all__ = [
     "RandomSwap",
     "resample_indices",
     "roll_cameras",
+    "roll_pose",
     "swap_images",
 ]
 
@@ -187,6 +190,19 @@ def _rotate_pairs(x: Tensor, c: float, s: float) -> Tensor:
     return out.reshape(x.shape).to(x.dtype)
 
 
+def roll_pose(T: Tensor, angle: float | Tensor) -> Tensor:
+    """``T_0to1`` of two cameras both rolled by ``angle`` (radians) about their optical axes:
+    :math:`(R_z R R_z^\\top, R_z t)`. ``T`` is ``[..., 4, 4]``; ``angle`` a number (one roll
+    for all) or ``[B]`` (one per pose of a ``[B, 4, 4]`` batch); ``-angle`` undoes it."""
+    a = torch.as_tensor(angle, dtype=torch.float64, device=T.device)
+    Rz = so3_exp(torch.stack([torch.zeros_like(a), torch.zeros_like(a), a], dim=-1))
+    Td = T.double()
+    out = T.clone()
+    out[..., :3, :3] = (Rz @ Td[..., :3, :3] @ Rz.transpose(-1, -2)).to(T.dtype)
+    out[..., :3, 3] = (Rz @ Td[..., :3, 3:4]).squeeze(-1).to(T.dtype)
+    return out
+
+
 def roll_cameras(data: HeteroData, angle: float) -> HeteroData:
     """The pair graph of both cameras rolled by ``angle`` (radians) about their optical axes
     (a new object): a training augmentation that is exact in the intrinsics-normalised
@@ -194,7 +210,7 @@ def roll_cameras(data: HeteroData, angle: float) -> HeteroData:
 
     A roll :math:`R_z` maps a normalised ray :math:`(x, y, 1)` to :math:`(R_z (x, y), 1)`, so
     ``pos0`` / ``pos1`` of every node and the four 2-vectors of ``line_feat`` rotate by
-    ``angle``, and ``T_0to1`` becomes :math:`(R_z R R_z^\top, R_z t)`. The appearance
+    ``angle``, and ``T_0to1`` becomes :math:`(R_z R R_z^\\top, R_z t)`. The appearance
     (``patch*``, ``kpts*``, ``image*``) and ``K`` stay: they describe the same points.
 
     Raises ``ValueError`` for a graph without ``K0`` and ``K1`` (its coordinates are
@@ -208,10 +224,9 @@ def roll_cameras(data: HeteroData, angle: float) -> HeteroData:
         raise ValueError("Expected a graph with intrinsics K0 and K1 (coordinates normalised "
                          "by K) to roll its cameras (got a graph without them)")
     angle = float(angle)
-    if not torch.isfinite(torch.tensor(angle)):
+    if not math.isfinite(angle):
         raise ValueError(f"Expected a finite roll angle (got {angle!r})")
-    c, s = torch.cos(torch.tensor(angle, dtype=torch.float64)).item(), \
-        torch.sin(torch.tensor(angle, dtype=torch.float64)).item()
+    c, s = math.cos(angle), math.sin(angle)
     data = copy.copy(data)  # attributes are reassigned below, never modified in place
     for node_type in keys_.NODE_TYPES:
         if node_type not in data.node_types:
@@ -221,12 +236,7 @@ def roll_cameras(data: HeteroData, angle: float) -> HeteroData:
             if key in store:
                 store[key] = _rotate_pairs(store[key], c, s)
     if keys_.T_0TO1 in data:
-        T = data[keys_.T_0TO1]
-        Rz = torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], dtype=torch.float64)
-        out = T.clone()
-        out[..., :3, :3] = (Rz @ T[..., :3, :3].double() @ Rz.T).to(T.dtype)
-        out[..., :3, 3] = (T[..., :3, 3].double() @ Rz.T).to(T.dtype)
-        data[keys_.T_0TO1] = out
+        data[keys_.T_0TO1] = roll_pose(data[keys_.T_0TO1], angle)
     prev = data[keys_.ROLL] if keys_.ROLL in data else torch.zeros(1, dtype=torch.float64)
     data[keys_.ROLL] = prev + angle
     return data

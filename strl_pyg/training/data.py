@@ -16,7 +16,7 @@ from torch.utils.data import ConcatDataset, Dataset, Sampler
 from torch_geometric.data import HeteroData
 
 from strl_pyg.data import keys as keys_
-from strl_pyg.data.transforms import FixedSizeResample, RandomRoll, RandomSwap
+from strl_pyg.data.transforms import FixedSizeResample, RandomRoll, RandomSwap, roll_pose
 from strl_pyg.geometry import Pose
 from strl_pyg.training.config import TrainConfig
 
@@ -288,21 +288,9 @@ def unaugmented_poses(batch: HeteroData) -> Tensor:
     is the mean pose of the data as it comes, not of the augmented data)."""
     T = batch[keys_.T_0TO1].detach()
     if keys_.ROLL in batch:  # applied last (_Resampled), undone first
-        a = batch[keys_.ROLL].reshape(-1).to(device=T.device, dtype=torch.float64)
-        c, s = torch.cos(a), torch.sin(a)
-        Rz = torch.zeros(a.shape[0], 3, 3, dtype=torch.float64, device=T.device)
-        Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1] = c, -s, s, c
-        Rz[:, 2, 2] = 1.0
-        T = T.clone()
-        Td = T.double()
-        T[:, :3, :3] = (Rz.transpose(1, 2) @ Td[:, :3, :3] @ Rz).to(T.dtype)
-        T[:, :3, 3] = (Rz.transpose(1, 2) @ Td[:, :3, 3:4]).squeeze(-1).to(T.dtype)
+        T = roll_pose(T, -batch[keys_.ROLL].reshape(-1))
     if keys_.SWAPPED not in batch:
         return T
-    swapped = batch[keys_.SWAPPED].bool()
-    T = T.clone()
-    T[swapped] = Pose.from_matrix(T[swapped]).inv().matrix().to(T)
-    return T
     swapped = batch[keys_.SWAPPED].bool()
     T = T.clone()
     T[swapped] = Pose.from_matrix(T[swapped]).inv().matrix().to(T)

@@ -380,6 +380,9 @@ def _datasets(cfg: TrainConfig, model: StrLPose, datasets: Sequence[Any] | None,
                          f"validates every {cfg.val_every} steps and at the end")
     if len(train_ds):
         check_graph_channels(model.config, cfg.patch_size, train_ds[0])
+        if cfg.roll_augment > 0 and not (keys_.K0 in train_ds[0] and keys_.K1 in train_ds[0]):
+            raise ValueError("Expected training pairs with intrinsics K0 and K1 for "
+                             "--roll-augment (got pairs without them)")
     if model.config.inputs != "paper" and fit and len(train_ds):
         fit_input_statistics(model, train_ds, cfg.swap_prob > 0, roll=cfg.roll_augment)
     return train_ds, val_ds
