@@ -80,6 +80,8 @@ def test_config_validation():
         TrainConfig.from_dict({"steps": 3, "epochs": 2})
     with pytest.raises(ValueError, match="Expected rot_weight > 0"):
         TrainConfig(rot_weight=0.0)
+    with pytest.raises(ValueError, match=r"Expected beta in \[0, 1\] \(got 1.5\)"):
+        TrainConfig(beta=1.5)
 
 
 def test_the_rotation_weight_reaches_the_pose_loss():
@@ -110,6 +112,39 @@ def test_the_rotation_weight_reaches_the_pose_loss():
     torch.testing.assert_close(three["loss_rot"], one["loss_rot"])
     assert float(one["loss_rot"]) != 0.0
     torch.testing.assert_close(three["loss"] - one["loss"], 2.0 * one["loss_rot"])
+
+
+def test_beta_reaches_the_pose_loss():
+    """--beta sets beta-NLL's beta; with log-variances of log 4 (sigma^2 = 4) the weight is
+    sigma^(2 beta): beta 1 gives 4x the beta-0 loss's variance-weighted terms, beta 0.5 gives 2x.
+    A config stored before it existed reads as 0.5 (the loss's own default)."""
+    import argparse
+    import math
+
+    import torch
+
+    from strl_pyg.model.config import PoseOutput
+    from strl_pyg.training.config import add_train_arguments
+    from strl_pyg.training.loop import _losses, config_from_args
+
+    ap = add_train_arguments(argparse.ArgumentParser())
+    cfg = config_from_args(ap.parse_args(["--beta", "1"]), ap)
+    assert cfg.beta == 1.0
+    assert TrainConfig.from_dict({"steps": 3, "loss": "balanced"}).beta == 0.5
+    g = torch.Generator().manual_seed(0)
+    q = torch.nn.functional.normalize(torch.randn(4, 4, generator=g), dim=-1)
+    t = torch.nn.functional.normalize(torch.randn(4, 3, generator=g), dim=-1)
+    log_var = torch.full((4, 7), math.log(4.0))
+    out = PoseOutput(quaternion=q, translation=t, log_var=log_var, geometric=None)
+    T = torch.eye(4).repeat(4, 1, 1)
+    T[:, :3, 3] = torch.tensor([0.0, 0.0, 1.0])
+    model_cfg = cfg.model_config()
+    losses = {b: _losses(TrainConfig(beta=b, angle_weight=0.0), model_cfg)[0](out, T)
+              for b in (0.0, 0.5, 1.0)}
+    assert float(losses[0.0]["loss_rot"]) > 0.0
+    torch.testing.assert_close(losses[0.5]["loss_rot"], 2.0 * losses[0.0]["loss_rot"])
+    torch.testing.assert_close(losses[1.0]["loss_rot"], 4.0 * losses[0.0]["loss_rot"])
+    torch.testing.assert_close(losses[1.0]["loss_trans"], 4.0 * losses[0.0]["loss_trans"])
 
 
 def test_step_sampler_is_a_function_of_step_and_shards_the_batch():

@@ -83,6 +83,7 @@ class TrainConfig:
     # config stored without this key predates it: "paper" loss on "paper" inputs (from_dict)
     loss: str = "balanced"
     angle_weight: float = 1.0  # "balanced": weight of the angular translation term (radians)
+    beta: float = 0.5  # "balanced": beta of beta-NLL (0: the aleatoric loss's weighting, 1: MSE's)
     rot_weight: float = 1.0  # weight of the pose loss's rotation terms (both loss forms)
     seed: int = 0  # model initialisation (and, unless data_seed is set, the data below)
     # pairs, batch order and resampling (None: ``seed``); rows of an ablation share it so they
@@ -119,6 +120,8 @@ class TrainConfig:
                                  f"(got {self.scene_mix!r})")
         if not self.angle_weight >= 0:
             raise ValueError(f"Expected angle_weight >= 0 (got {self.angle_weight!r})")
+        if not 0.0 <= self.beta <= 1.0:
+            raise ValueError(f"Expected beta in [0, 1] (got {self.beta!r})")
         if not self.rot_weight > 0:
             raise ValueError(f"Expected rot_weight > 0 (got {self.rot_weight!r})")
         if self.loss not in ("paper", "balanced"):
@@ -223,6 +226,9 @@ def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
                          "is the paper's recipe")
     ap.add_argument("--angle-weight", type=float, default=d.angle_weight,
                     help="--loss balanced: weight of the angular translation term")
+    ap.add_argument("--beta", type=float, default=d.beta,
+                    help="--loss balanced: beta of beta-NLL, in [0, 1] (0: the aleatoric "
+                         "weighting, 1: the gradient of a plain MSE)")
     ap.add_argument("--rot-weight", type=float, default=d.rot_weight,
                     help="weight of the pose loss's rotation terms (translation's: 1)")
     ap.add_argument("--grad-clip", type=float, default=d.grad_clip,

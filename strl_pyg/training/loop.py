@@ -548,7 +548,8 @@ def _train_step(cfg: TrainConfig, ddp_model: torch.nn.Module, model: StrLPose,
 def _losses(cfg: TrainConfig, model_cfg: Any) -> tuple[PoseLoss, GeometricLoss | None]:
     """The run's pose loss and, with the geometric head, its loss."""
     pose = PoseLoss(translation=model_cfg.translation, form=cfg.loss,
-                    angle_weight=cfg.angle_weight, rot_weight=cfg.rot_weight)
+                    angle_weight=cfg.angle_weight, rot_weight=cfg.rot_weight,
+                    beta=cfg.beta)
     geo = GeometricLoss(cfg.geo_threshold_px, cfg.geo_cls_weight,
                         cfg.geo_ess_weight) if model_cfg.geometric else None
     return pose, geo
@@ -609,7 +610,7 @@ def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> T
         geo_ess_start=args.geo_ess_start, data_seed=args.data_seed,
         checkpoint_every=args.checkpoint_every, checkpoint_minutes=args.checkpoint_minutes,
         loss=args.loss, grad_clip=args.grad_clip if args.grad_clip > 0 else None,
-        angle_weight=args.angle_weight, rot_weight=args.rot_weight,
+        angle_weight=args.angle_weight, rot_weight=args.rot_weight, beta=args.beta,
         lr_schedule=args.lr_schedule, warmup_steps=args.warmup_steps,
     )
 
