@@ -121,7 +121,7 @@ def report() -> int:
     if notes.exists():
         lines += [notes.read_text()]
     (HERE / "results_roll.md").write_text("\n".join(lines))
-    fig, axes = plt.subplots(1, len(sets), figsize=(4.2 * len(sets), 3.6), squeeze=False)
+    fig, axes = plt.subplots(1, len(sets), figsize=(4.2 * len(sets), 4.0), squeeze=False)
     width = 0.8 / len(runs)
     for ax, s in zip(axes[0], sets, strict=True):
         for k, (label, run) in enumerate(runs.items()):
@@ -134,9 +134,11 @@ def report() -> int:
         ax.set_xlabel("roll of both cameras (deg)")
         ax.set_ylabel("median translation error (deg)")
         ax.set_title(s, fontsize=10)
-        ax.legend(fontsize=8)
+    # one legend for all panels, below them (inside a panel it covered the bars)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False)
     fig.suptitle("Regression head: translation error against the cameras' roll")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
     (HERE / "figures").mkdir(exist_ok=True)
     fig.savefig(HERE / "figures" / "roll.png", dpi=110)
     print(f"-> {HERE / 'results_roll.md'}, {HERE / 'figures' / 'roll.png'}")
