@@ -92,6 +92,11 @@ VARIANTS = {
                             "cosine", "--warmup-steps", "100", "--lr", "1e-3", "--beta", "0.25"]),
     "both-cos2e-3": (["--set", "inputs=flow", "--loss", "balanced", "--lr-schedule",
                       "cosine", "--warmup-steps", "100", "--lr", "2e-3"]),
+    # handheld pairs (a small translation beside a rotation) stay unresolved with any recipe:
+    # each node's motion parallax against its image neighbours, which cancels the rotation
+    # (`parallax_features`), on the cosine-1e-3 recipe
+    "parallax-cos1e-3": (["--set", "inputs=parallax", "--loss", "balanced", "--lr-schedule",
+                          "cosine", "--warmup-steps", "100", "--lr", "1e-3"]),
 }
 COMMON = ["--model", "baseline", "--scene-mix", "lines_small", "--data-seed", "0",
           "--val-pairs", "100", "--val-every", "250", "--batch-size", "16", "--lr", "3e-4",

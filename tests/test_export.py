@@ -98,7 +98,7 @@ def test_a_failed_export_leaves_no_file(model, graph, tmp_path, monkeypatch):
     assert not model.training
 
 
-@pytest.mark.parametrize("inputs", ["flow", "flow2"])
+@pytest.mark.parametrize("inputs", ["flow", "flow2", "parallax"])
 def test_onnxruntime_equals_pytorch_for_the_flow_inputs(inputs, tmp_path):
     """The flow inputs' products and standardisation are part of the exported graph."""
     ort = pytest.importorskip("onnxruntime")

@@ -66,7 +66,9 @@ class StrLPoseConfig:
     translation: str = "direction"  # "direction" (unit vector, scale-free data) | "metric"
     # node inputs of the SCE: "flow" (beyond the paper: coordinates, displacement and its
     # divergence / curl products, standardised) | "flow2" ("flow" and two second-order
-    # rotation products) | "paper" (the four coordinates); a checkpoint
+    # rotation products) | "parallax" ("flow" and each node's motion parallax against its
+    # image neighbours with the epipole's least-squares products) | "paper" (the four
+    # coordinates); a checkpoint
     # saved without this key was trained with "paper" (from_dict)
     inputs: str = "flow"
     dropout: float = 0.0  # attention-weight dropout

@@ -11,6 +11,7 @@ from strl_pyg.nn.encoders import (
     PixelEncoder,
     SpatialCoordinateEncoder,
     flow_features,
+    parallax_features,
     sample_at_pixels,
 )
 from strl_pyg.nn.feature_fusion import WeightedFusion
@@ -27,6 +28,7 @@ __all__ = [
     "DualGraphLayer",
     "SpatialCoordinateEncoder",
     "flow_features",
+    "parallax_features",
     "INPUT_MODES",
     "LineSegmentEncoder",
     "PixelEncoder",

@@ -12,6 +12,7 @@ from strl_pyg.nn.mlp import mlp, reset_mlp
 __all__ = [
     "SpatialCoordinateEncoder",
     "flow_features",
+    "parallax_features",
     "INPUT_MODES",
     "LineSegmentEncoder",
     "PixelEncoder",
@@ -46,8 +47,14 @@ class _MLPEncoder(nn.Module):
 #: forward motion) and ``x0 x u`` (curl: rotation about the optical axis), each feature
 #: standardised with fixed per-feature statistics (buffers, stored in the checkpoint);
 #: ``"flow2"``, the ``"flow"`` features plus two second-order products that a small rotation
-#: about the x and y axes leaves in the flow (:func:`flow_features` with ``order=2``).
-INPUT_MODES = ("paper", "flow", "flow2")
+#: about the x and y axes leaves in the flow (:func:`flow_features` with ``order=2``);
+#: ``"parallax"``, the ``"flow"`` features plus the motion parallax of each node against its
+#: image neighbours and the products whose mean is the epipole's least-squares system
+#: (:func:`parallax_features`).
+INPUT_MODES = ("paper", "flow", "flow2", "parallax")
+#: Neighbours of a node in image 0 whose median displacement :func:`parallax_features`
+#: subtracts.
+PARALLAX_NEIGHBOURS = 8
 
 #: Per-feature ``(mean, std)`` of the ``"flow"`` inputs before a training set's own statistics
 #: are fitted (:meth:`SpatialCoordinateEncoder.fit_standardisation`, which training does): the
@@ -60,6 +67,9 @@ FLOW_DEFAULT_STATS = (
 #: The same for the two more features of ``"flow2"`` (fitted likewise: the first 128 training
 #: pairs of the Table 3 protocol, 2026-12-04).
 FLOW2_EXTRA_STATS = ((0.0, 0.0), (0.080, 0.171))
+#: Placeholders for the eight more features of ``"parallax"`` (zero mean, unit scale) until a
+#: training set's statistics are fitted, which training always does.
+PARALLAX_EXTRA_STATS = ((0.0,) * 8, (1.0,) * 8)
 
 
 def flow_features(coords: Tensor, order: int = 1) -> Tensor:
@@ -87,6 +97,69 @@ def flow_features(coords: Tensor, order: int = 1) -> Tensor:
     return torch.cat(parts, dim=-1)
 
 
+def parallax_features(coords: Tensor, batch: Tensor | None = None,
+                      k: int = PARALLAX_NEIGHBOURS) -> Tensor:
+    r"""Motion parallax of each node against its neighbours in image 0, and the products
+    whose mean over the nodes is the epipole's least-squares system; ``[N, 8]`` of ``[N, 4]``
+    normalised coordinates ``[x0, y0, x1, y1]`` (``batch``: the graph of each node, ``None``
+    for one graph).
+
+    Under a small motion a point moves by :math:`\mathbf{u} = \rho\,(\mathbf{x} t_z -
+    \mathbf{t}_{xy}) + A(\mathbf{x})\boldsymbol\omega` (:math:`\rho` its inverse depth). The
+    rotation's part varies slowly across the image, so the difference
+    :math:`\mathbf{d}` between a node's displacement and the median displacement of its ``k``
+    nearest neighbours in image 0 keeps the translation's part alone: it is parallel to
+    :math:`\mathbf{x} t_z - \mathbf{t}_{xy}` (Rieger and Lawton, 1985), i.e.
+    :math:`\mathbf{a}^\top \mathbf{t} = 0` with :math:`\mathbf{a} = (d_y, -d_x, y d_x - x
+    d_y)`. The features are :math:`(d_x, d_y)` and the six products :math:`a_i a_j, i \le j`:
+    their mean over the nodes is :math:`\sum \mathbf{a}\mathbf{a}^\top`, whose smallest
+    eigenvector is the translation's direction (up to sign), whatever the rotation. The
+    handheld pairs that the flow inputs leave unresolved (a small translation beside a
+    rotation) are what it is for.
+
+    A graph of ``k`` or fewer nodes uses all its other nodes; a single node gets zeros. Per
+    graph the distances are a dense ``[n, n]`` block (nodes of one pair, not edges)."""
+    if coords.dim() != 2 or coords.shape[1] != 4:
+        raise ValueError(f"Expected [N, 4] coordinates (got {tuple(coords.shape)})")
+    x0 = coords[:, :2]
+    u = coords[:, 2:] - x0
+    if batch is None:
+        dense_x, dense_u = x0[None], u[None]
+        mask = torch.ones(1, x0.shape[0], dtype=torch.bool, device=x0.device)
+    else:
+        from torch_geometric.utils import to_dense_batch
+
+        dense_x, mask = to_dense_batch(x0, batch)
+        dense_u, _ = to_dense_batch(u, batch)
+    n = dense_x.shape[1]
+    kk = min(k, n - 1)
+    if kk < 1:
+        d = torch.zeros_like(u)
+    else:
+        dist = torch.cdist(dense_x, dense_x)  # [B, n, n], one pair's nodes per block
+        idx = torch.arange(n, device=dist.device)
+        eye = (idx[:, None] == idx[None, :])[None]  # (a bool eye has no ONNX Runtime kernel)
+        dist = dist.masked_fill(eye | ~mask[:, None, :], float("inf"))
+        nbr = dist.topk(kk, dim=-1, largest=False).indices  # [B, n, kk]
+        valid = torch.gather(torch.isfinite(dist), -1, nbr)  # neighbours that exist
+        B = dense_u.shape[0]
+        nu = torch.gather(dense_u[:, None].expand(B, n, n, 2), 2,
+                          nbr[..., None].expand(B, n, kk, 2))  # [B, n, kk, 2]
+        # median over the existing neighbours: missing ones sorted to the end, then the
+        # middle of the valid count (a graph with fewer than k + 1 nodes)
+        big = torch.finfo(nu.dtype).max
+        nu = torch.where(valid[..., None], nu, torch.full_like(nu, big)).sort(dim=2).values
+        cnt = valid.sum(-1).clamp_min(1)  # [B, n]
+        lo = ((cnt - 1) // 2)[..., None, None].expand(B, n, 1, 2)
+        hi = (cnt // 2)[..., None, None].expand(B, n, 1, 2)
+        med = 0.5 * (torch.gather(nu, 2, lo) + torch.gather(nu, 2, hi))[:, :, 0]
+        d = (dense_u - med)[mask]
+        d = torch.where(valid.any(-1)[mask][:, None], d, torch.zeros_like(d))
+    a = torch.stack([d[:, 1], -d[:, 0], x0[:, 1] * d[:, 0] - x0[:, 0] * d[:, 1]], -1)
+    i, j = torch.triu_indices(3, 3, device=a.device)
+    return torch.cat([d, a[:, i] * a[:, j]], dim=-1)
+
+
 class SpatialCoordinateEncoder(_MLPEncoder):
     r"""Spatial Coordinate Encoder (SCE): :math:`\mathbf{f}^0_{i,N} =
     \mathrm{MLP}([x_0 \Vert y_0 \Vert x_1 \Vert y_1])` on the normalised coordinates of a match
@@ -103,11 +176,13 @@ class SpatialCoordinateEncoder(_MLPEncoder):
 
     Args:
         out_channels (int): Output size :math:`C`.
-        inputs (str, optional): ``"paper"``, ``"flow"`` or ``"flow2"`` (``"flow"`` and the
-            two rotation products of :func:`flow_features`). (default: :obj:`"paper"`)
+        inputs (str, optional): ``"paper"``, ``"flow"``, ``"flow2"`` (``"flow"`` and the
+            two rotation products of :func:`flow_features`) or ``"parallax"`` (``"flow"`` and
+            :func:`parallax_features`, which needs each node's graph). (default: :obj:`"paper"`)
 
     Shapes:
-        - **input:** :math:`(N, 4)` ``[pos0 || pos1]``, normalised coordinates
+        - **input:** :math:`(N, 4)` ``[pos0 || pos1]``, normalised coordinates; ``batch``
+          :math:`(N,)` (``"parallax"`` only; ``None``: one graph)
         - **output:** :math:`(N, C)`
     """
 
@@ -115,11 +190,12 @@ class SpatialCoordinateEncoder(_MLPEncoder):
         if inputs not in INPUT_MODES:
             raise ValueError(f"Expected inputs in {INPUT_MODES} (got {inputs!r})")
         self.inputs = inputs
-        super().__init__({"paper": 4, "flow": 8, "flow2": 10}[inputs], out_channels,
-                         [out_channels // 2, out_channels])
+        super().__init__({"paper": 4, "flow": 8, "flow2": 10, "parallax": 16}[inputs],
+                         out_channels, [out_channels // 2, out_channels])
         if inputs != "paper":
-            stats = FLOW_DEFAULT_STATS if inputs == "flow" else tuple(
-                a + b for a, b in zip(FLOW_DEFAULT_STATS, FLOW2_EXTRA_STATS, strict=True))
+            extra = {"flow": ((), ()), "flow2": FLOW2_EXTRA_STATS,
+                     "parallax": PARALLAX_EXTRA_STATS}[inputs]
+            stats = tuple(a + b for a, b in zip(FLOW_DEFAULT_STATS, extra, strict=True))
             mean, std = (torch.tensor(v, dtype=torch.float32) for v in stats)
             self.register_buffer("feature_mean", mean)
             self.register_buffer("feature_std", std)
@@ -127,27 +203,42 @@ class SpatialCoordinateEncoder(_MLPEncoder):
             self.feature_mean = self.feature_std = None
 
     @torch.no_grad()
-    def fit_standardisation(self, coords: Tensor, symmetric: bool = True) -> None:
+    def fit_standardisation(self, coords: Tensor, symmetric: bool = True,
+                            batch: Tensor | None = None) -> None:
         """Sets ``feature_mean`` / ``feature_std`` from ``[N, 4]`` node coordinates of a
-        training set (``inputs="flow"`` or ``"flow2"``). With ``symmetric`` (training with
-        image swap), the statistics are those of the nodes and their swapped copies."""
+        training set (``inputs="flow"``, ``"flow2"`` or ``"parallax"``; ``batch``: the pair of
+        each node, which ``"parallax"`` needs). With ``symmetric`` (training with image swap),
+        the statistics are those of the nodes and their swapped copies."""
         if self.inputs == "paper":
-            raise ValueError(f"Expected an encoder with inputs='flow' or 'flow2' (got "
-                             f"{self.inputs!r})")
+            raise ValueError(f"Expected an encoder with inputs='flow', 'flow2' or 'parallax' "
+                             f"(got {self.inputs!r})")
         if coords.dim() != 2 or coords.shape[1] != 4 or coords.shape[0] < 2 \
                 or not bool(torch.isfinite(coords).all()):
             raise ValueError(f"Expected finite [N >= 2, 4] coordinates "
                              f"(got {tuple(coords.shape)})")
+        if batch is not None and tuple(batch.shape) != (coords.shape[0],):
+            raise ValueError(f"Expected a batch vector of {coords.shape[0]} entries "
+                             f"(got {tuple(batch.shape)})")
         if symmetric:
             coords = torch.cat([coords, coords[:, [2, 3, 0, 1]]])
-        f = flow_features(coords.double(), self._order)
+            if batch is not None:  # the swapped copy of a pair is a pair of its own
+                batch = torch.cat([batch, batch + int(batch.max()) + 1])
+        f = self.features(coords.double(), batch)
         self.feature_mean.copy_(f.mean(0))
         self.feature_std.copy_(f.std(0).clamp_min(1e-6))
 
-    def forward(self, x: Tensor) -> Tensor:
+    def features(self, x: Tensor, batch: Tensor | None = None) -> Tensor:
+        """The encoder's input features before standardisation (``[N, 4]`` for ``"paper"``)."""
+        if self.inputs == "paper":
+            return x
+        f = flow_features(x, self._order)
+        if self.inputs == "parallax":
+            f = torch.cat([f, parallax_features(x, batch)], dim=-1)
+        return f
+
+    def forward(self, x: Tensor, batch: Tensor | None = None) -> Tensor:
         if self.inputs != "paper":
-            x = (flow_features(x, self._order) - self.feature_mean.to(x)) \
-                / self.feature_std.to(x)
+            x = (self.features(x, batch) - self.feature_mean.to(x)) / self.feature_std.to(x)
         return self.mlp(x)
 
     @property

@@ -562,7 +562,7 @@ def fit_input_statistics(model: StrLPose, dataset: Any, symmetric: bool,
     pair rolled as training rolls it (:class:`~strl_pyg.data.RandomRoll`, a fixed seed) when
     ``roll`` > 0); they are buffers, so the checkpoint keeps them."""
     roller = RandomRoll(roll, seed=0) if roll > 0 else None
-    coords = []
+    coords, batch = [], []
     for i in range(min(max_pairs, len(dataset))):
         g = dataset[i]
         if roller is not None:
@@ -570,8 +570,10 @@ def fit_input_statistics(model: StrLPose, dataset: Any, symmetric: bool,
         for t in (keys_.POINT, keys_.ENDPOINT):
             if t in g.node_types and keys_.POS0 in g[t] and g[t][keys_.POS0].shape[0]:
                 coords.append(torch.cat([g[t][keys_.POS0], g[t][keys_.POS1]], -1).float())
+                batch.append(torch.full((coords[-1].shape[0],), i, dtype=torch.long))
     if coords:
-        model.sce.fit_standardisation(torch.cat(coords).cpu(), symmetric=symmetric)
+        model.sce.fit_standardisation(torch.cat(coords).cpu(), symmetric=symmetric,
+                                      batch=torch.cat(batch))
         model.sce.to(next(model.parameters()).device)
 
 
