@@ -78,6 +78,18 @@ def test_parallax_is_per_graph_and_follows_the_node_order():
     torch.testing.assert_close(parallax_features(a[perm]), parallax_features(a)[perm])
 
 
+def test_repeated_nodes_are_not_their_own_neighbours():
+    """The fixed-size resampling repeats matches of a sparse pair: with every node twice, each
+    copy's 8 neighbours are 4 other positions twice, so the features equal those of the
+    single graph with k = 4 (a copy among its own neighbours would pull d towards 0)."""
+    c = _small_motion(torch.tensor([0.02, 0.01, 0.01], dtype=torch.float64),
+                      torch.tensor([0.0, 0.01, 0.0], dtype=torch.float64), n=40, seed=6)
+    doubled = parallax_features(torch.cat([c, c]), k=8)
+    torch.testing.assert_close(doubled[:40], parallax_features(c, k=4))
+    torch.testing.assert_close(doubled[40:], doubled[:40])
+    assert float(doubled[:, :2].abs().min(1).values.max()) > 0
+
+
 def test_parallax_on_tiny_graphs():
     """A graph of k or fewer nodes uses all its other nodes; a single node gets zeros, also
     inside a batch; bad shapes are refused."""
@@ -128,3 +140,27 @@ def test_parallax_model_batched_equals_one_graph_at_a_time():
     for k, o in enumerate(one):
         torch.testing.assert_close(both.translation[k], o.translation[0], atol=1e-5, rtol=0)
         torch.testing.assert_close(both.quaternion[k], o.quaternion[0], atol=1e-5, rtol=0)
+
+
+def test_training_fits_the_parallax_statistics_on_pairs_resampled_as_it_trains():
+    """A neighbour's distance depends on the density, so the fit resamples each pair to the
+    training size first (parallax only: the flow inputs' fit is unchanged)."""
+    from strl_pyg.data import keys
+    from strl_pyg.data.transforms import FixedSizeResample
+    from strl_pyg.training.loop import fit_input_statistics
+
+    m = StrLPose(StrLPoseConfig.ablation("baseline", hidden=16, layers=1, inputs="parallax"))
+    pairs = [prepare_graph(generate_pair(s).matches, m) for s in (1, 2)]
+    fit_input_statistics(m, pairs, symmetric=False, resample=(64, 0))
+    coords, batch = [], []
+    for i, g in enumerate(pairs):
+        g = FixedSizeResample(64, 0, seed=i)(g)
+        for t in (keys.POINT, keys.ENDPOINT):
+            if t in g.node_types and g[t][keys.POS0].shape[0]:
+                coords.append(torch.cat([g[t][keys.POS0], g[t][keys.POS1]], -1))
+                batch.append(torch.full((coords[-1].shape[0],), i))
+    ref = SpatialCoordinateEncoder(16, inputs="parallax")
+    ref.fit_standardisation(torch.cat(coords), symmetric=False, batch=torch.cat(batch))
+    torch.testing.assert_close(m.sce.feature_std, ref.feature_std)
+    fit_input_statistics(m, pairs, symmetric=False)  # without: all nodes, another density
+    assert not torch.allclose(m.sce.feature_std[8:], ref.feature_std[8:])

@@ -117,8 +117,9 @@ def parallax_features(coords: Tensor, batch: Tensor | None = None,
     handheld pairs that the flow inputs leave unresolved (a small translation beside a
     rotation) are what it is for.
 
-    A graph of ``k`` or fewer nodes uses all its other nodes; a single node gets zeros. Per
-    graph the distances are a dense ``[n, n]`` block (nodes of one pair, not edges)."""
+    Nodes at the same image-0 position (a node's copies) are not its neighbours. A graph of
+    ``k`` or fewer other positions uses them all; a node with none gets zeros. Per graph the
+    distances are a dense ``[n, n]`` block (nodes of one pair, not edges)."""
     if coords.dim() != 2 or coords.shape[1] != 4:
         raise ValueError(f"Expected [N, 4] coordinates (got {tuple(coords.shape)})")
     x0 = coords[:, :2]
@@ -136,10 +137,11 @@ def parallax_features(coords: Tensor, batch: Tensor | None = None,
     if kk < 1:
         d = torch.zeros_like(u)
     else:
-        dist = torch.cdist(dense_x, dense_x)  # [B, n, n], one pair's nodes per block
-        idx = torch.arange(n, device=dist.device)
-        eye = (idx[:, None] == idx[None, :])[None]  # (a bool eye has no ONNX Runtime kernel)
-        dist = dist.masked_fill(eye | ~mask[:, None, :], float("inf"))
+        # [B, n, n], one pair's nodes per block; computed directly (not by a matrix product),
+        # so a node and its copies are exactly 0 apart: a node repeated by the fixed-size
+        # resampling is never its own neighbour (it would pull its parallax to 0)
+        dist = torch.cdist(dense_x, dense_x, compute_mode="donot_use_mm_for_euclid_dist")
+        dist = dist.masked_fill((dist == 0) | ~mask[:, None, :], float("inf"))
         nbr = dist.topk(kk, dim=-1, largest=False).indices  # [B, n, kk]
         valid = torch.gather(torch.isfinite(dist), -1, nbr)  # neighbours that exist
         B = dense_u.shape[0]

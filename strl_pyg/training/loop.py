@@ -41,7 +41,7 @@ from torch_geometric.loader.dataloader import Collater
 from tqdm.auto import tqdm
 
 from strl_pyg.data import keys as keys_
-from strl_pyg.data.transforms import RandomRoll
+from strl_pyg.data.transforms import FixedSizeResample, RandomRoll
 from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.training.checkpoints import (
     CHECKPOINT_VERSION,
@@ -384,7 +384,8 @@ def _datasets(cfg: TrainConfig, model: StrLPose, datasets: Sequence[Any] | None,
             raise ValueError("Expected training pairs with intrinsics K0 and K1 for "
                              "--roll-augment (got pairs without them)")
     if model.config.inputs != "paper" and fit and len(train_ds):
-        fit_input_statistics(model, train_ds, cfg.swap_prob > 0, roll=cfg.roll_augment)
+        fit_input_statistics(model, train_ds, cfg.swap_prob > 0, roll=cfg.roll_augment,
+                             resample=(cfg.num_points, cfg.num_lines))
     return train_ds, val_ds
 
 
@@ -556,15 +557,21 @@ def _losses(cfg: TrainConfig, model_cfg: Any) -> tuple[PoseLoss, GeometricLoss |
 
 
 def fit_input_statistics(model: StrLPose, dataset: Any, symmetric: bool,
-                         max_pairs: int = 128, roll: float = 0.0) -> None:
+                         max_pairs: int = 128, roll: float = 0.0,
+                         resample: tuple[int, int] | None = None) -> None:
     """Sets the flow inputs' standardisation (``model.sce``) from the node coordinates of the
     first ``max_pairs`` training pairs (with their swapped copies when ``symmetric``, and each
     pair rolled as training rolls it (:class:`~strl_pyg.data.RandomRoll`, a fixed seed) when
-    ``roll`` > 0); they are buffers, so the checkpoint keeps them."""
+    ``roll`` > 0); they are buffers, so the checkpoint keeps them. With ``inputs="parallax"``
+    each pair is first resampled to ``resample = (points, lines)`` as training resamples it
+    (a neighbour's distance depends on the density)."""
     roller = RandomRoll(roll, seed=0) if roll > 0 else None
+    thin = model.config.inputs == "parallax" and resample is not None
     coords, batch = [], []
     for i in range(min(max_pairs, len(dataset))):
         g = dataset[i]
+        if thin:
+            g = FixedSizeResample(*resample, seed=i)(g)
         if roller is not None:
             g = roller(g)
         for t in (keys_.POINT, keys_.ENDPOINT):
