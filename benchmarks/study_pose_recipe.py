@@ -355,6 +355,47 @@ def cmd_motion(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_parallax(args: argparse.Namespace) -> int:
+    """How much the ``"parallax"`` inputs can tell, without a network: on a run's own
+    validation pairs (front-end matches, K-normalised, 384 points drawn as training draws
+    them), the translation axis of the summed parallax products' smallest eigenvector
+    (:func:`strl_pyg.nn.parallax_features`; the axis, so at most 90 deg), by motion. Writes
+    ``results_pose_recipe/parallax_oracle.json``."""
+    import ablation_eval as ae
+    import numpy as np
+    import torch
+
+    from strl_pyg.nn import parallax_features
+
+    torch.set_num_threads(1)
+    rows: dict[str, list[float]] = {}
+    for k, (motion, m, T) in enumerate(validation_pairs(Path(args.run))):
+        xs = []
+        for pts, K_ in ((m.points0, m.K0), (m.points1, m.K1)):
+            h = np.c_[np.asarray(pts, float), np.ones(len(pts))] @ np.linalg.inv(K_).T
+            xs.append(h[:, :2])
+        if len(xs[0]) < 2:
+            continue
+        rng = np.random.default_rng(k)
+        idx = rng.choice(len(xs[0]), 384, replace=len(xs[0]) < 384)
+        f = parallax_features(torch.tensor(np.c_[xs[0], xs[1]][idx]))
+        i, j = torch.triu_indices(3, 3)
+        M = torch.zeros(3, 3, dtype=f.dtype)
+        M[i, j] = f[:, 2:].sum(0)
+        M[j, i] = f[:, 2:].sum(0)
+        e = torch.linalg.eigh(M).eigenvectors[:, 0].numpy()
+        t = T[:3, 3] / max(np.linalg.norm(T[:3, 3]), 1e-12)
+        rows.setdefault(motion, []).append(float(np.degrees(np.arccos(min(1.0, abs(e @ t))))))
+    rows["all"] = [e for v in rows.values() for e in v]
+    ae.save_json(RESULTS / "parallax_oracle.json", {"run": Path(args.run).name, "errors": rows})
+    print("Translation axis of the parallax products' least squares (no network), deg:\n")
+    print("| motion | pairs | mean | median |\n|---|---|---|---|")
+    for mo in sorted(rows):
+        v = rows[mo]
+        print(f"| {mo} | {len(v)} | {np.mean(v):.1f} | {np.median(v):.1f} |")
+    return 0
+
+
 def _by_motion(result: dict) -> tuple[list[str], dict[str, dict[str, tuple]]]:
     """``(motions, {method: {motion or 'all': (n, mean, median, share > 90 deg)}})`` of the
     translation errors (a pair without a pose counts as 90 deg)."""
@@ -531,6 +572,9 @@ def main(argv: list[str] | None = None) -> int:
     m = sub.add_parser("motion", help="validation errors by motion: runs (folders with "
                        "last.pt and model.pt, the same validation pairs) and PoseLib")
     m.add_argument("runs", nargs="+")
+    p = sub.add_parser("parallax", help="what the parallax inputs tell without a network "
+                       "(their least-squares translation axis) on a run's validation pairs")
+    p.add_argument("run")
     c = sub.add_parser("compare", help="paired median ratios of two scored variants, e.g. "
                        "t3-both-cos1e-3 t3-both (seeds pooled)")
     c.add_argument("a")
@@ -539,7 +583,7 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--out", default=str(HERE / "results_pose_recipe.md"))
     args = ap.parse_args(argv)
     return {"train": cmd_train, "score": cmd_score, "motion": cmd_motion,
-            "compare": cmd_compare,
+            "compare": cmd_compare, "parallax": cmd_parallax,
             "report": cmd_report}[args.cmd](args)
 
 

@@ -62,3 +62,31 @@ def test_seeds_of_a_variant_share_a_bar():
     assert spr.split_seed("cos1e-3-s2") == ("cos1e-3", 2)
     assert spr.split_seed("PoseLib") == ("PoseLib", None)
     assert spr.split_seed("run-seed") == ("run-seed", None)
+
+
+def test_parallax_oracle_finds_a_known_translation(tmp_path, monkeypatch, capsys):
+    """`parallax RUN`: pixel matches of a known small motion (K with f = 500) give back the
+    translation's axis; the JSON and the table name the motion."""
+    import argparse
+    import json
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    g = np.random.default_rng(0)
+    X = (g.random((300, 2)) - 0.5) * 0.8
+    rho = 1.0 / (2.0 + 4.0 * g.random(300))
+    t = np.array([0.02, 0.005, 0.01])
+    u = rho[:, None] * (t[:2] - X * t[2])  # x1 = (X + t) / z1, to first order
+    K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
+    pix = lambda x: x * 500.0 + [320.0, 240.0]  # noqa: E731
+    m = SimpleNamespace(points0=pix(X), points1=pix(X + u), K0=K, K1=K)
+    T = np.eye(4)
+    T[:3, 3] = t
+    monkeypatch.setattr(spr, "validation_pairs", lambda run: [("lateral", m, T)])
+    monkeypatch.setattr(spr, "RESULTS", tmp_path)
+    assert spr.cmd_parallax(argparse.Namespace(run="runs/x")) == 0
+    out = json.loads((tmp_path / "parallax_oracle.json").read_text())
+    assert out["run"] == "x" and len(out["errors"]["lateral"]) == 1
+    assert out["errors"]["lateral"][0] < 3.0
+    assert "| lateral | 1 |" in capsys.readouterr().out
