@@ -84,6 +84,20 @@ def test_config_validation():
         TrainConfig(beta=1.5)
 
 
+def _random_poses(log_var):
+    """Four random predicted poses with these log-variances, and a forward ground truth."""
+    import torch
+
+    from strl_pyg.model.config import PoseOutput
+
+    g = torch.Generator().manual_seed(0)
+    q = torch.nn.functional.normalize(torch.randn(4, 4, generator=g), dim=-1)
+    t = torch.nn.functional.normalize(torch.randn(4, 3, generator=g), dim=-1)
+    T = torch.eye(4).repeat(4, 1, 1)
+    T[:, :3, 3] = torch.tensor([0.0, 0.0, 1.0])
+    return PoseOutput(quaternion=q, translation=t, log_var=log_var, geometric=None), T
+
+
 def test_the_rotation_weight_reaches_the_pose_loss():
     """--rot-weight (the next single change of issue 30's study) multiplies the rotation terms;
     a config stored before it existed reads as 1."""
@@ -91,7 +105,6 @@ def test_the_rotation_weight_reaches_the_pose_loss():
 
     import torch
 
-    from strl_pyg.model.config import PoseOutput
     from strl_pyg.training.config import add_train_arguments
     from strl_pyg.training.loop import _losses, config_from_args
 
@@ -99,12 +112,7 @@ def test_the_rotation_weight_reaches_the_pose_loss():
     cfg = config_from_args(ap.parse_args(["--rot-weight", "3"]), ap)
     assert cfg.rot_weight == 3.0
     assert TrainConfig.from_dict({"steps": 3, "loss": "balanced"}).rot_weight == 1.0
-    g = torch.Generator().manual_seed(0)
-    q = torch.nn.functional.normalize(torch.randn(4, 4, generator=g), dim=-1)
-    t = torch.nn.functional.normalize(torch.randn(4, 3, generator=g), dim=-1)
-    out = PoseOutput(quaternion=q, translation=t, log_var=torch.zeros(4, 7), geometric=None)
-    T = torch.eye(4).repeat(4, 1, 1)
-    T[:, :3, 3] = torch.tensor([0.0, 0.0, 1.0])
+    out, T = _random_poses(torch.zeros(4, 7))
     model_cfg = cfg.model_config()
     one = _losses(TrainConfig(), model_cfg)[0](out, T)
     three = _losses(cfg, model_cfg)[0](out, T)
@@ -123,7 +131,6 @@ def test_beta_reaches_the_pose_loss():
 
     import torch
 
-    from strl_pyg.model.config import PoseOutput
     from strl_pyg.training.config import add_train_arguments
     from strl_pyg.training.loop import _losses, config_from_args
 
@@ -131,13 +138,7 @@ def test_beta_reaches_the_pose_loss():
     cfg = config_from_args(ap.parse_args(["--beta", "1"]), ap)
     assert cfg.beta == 1.0
     assert TrainConfig.from_dict({"steps": 3, "loss": "balanced"}).beta == 0.5
-    g = torch.Generator().manual_seed(0)
-    q = torch.nn.functional.normalize(torch.randn(4, 4, generator=g), dim=-1)
-    t = torch.nn.functional.normalize(torch.randn(4, 3, generator=g), dim=-1)
-    log_var = torch.full((4, 7), math.log(4.0))
-    out = PoseOutput(quaternion=q, translation=t, log_var=log_var, geometric=None)
-    T = torch.eye(4).repeat(4, 1, 1)
-    T[:, :3, 3] = torch.tensor([0.0, 0.0, 1.0])
+    out, T = _random_poses(torch.full((4, 7), math.log(4.0)))
     model_cfg = cfg.model_config()
     losses = {b: _losses(TrainConfig(beta=b, angle_weight=0.0), model_cfg)[0](out, T)
               for b in (0.0, 0.5, 1.0)}
