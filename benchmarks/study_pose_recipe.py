@@ -528,29 +528,44 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def plot(runs: dict[str, dict], path: Path) -> None:
+    """One line per variant (the mean over its seeds at the steps they share; a band: the
+    seeds' range), a legend below the panels (one per run made them unreadable at 40 runs)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import numpy as np
 
-    fig, axes = plt.subplots(1, 2, figsize=(13, 4.6), sharex=True)
-    colours = plt.get_cmap("tab20").colors  # one colour per run (the default cycle has 10)
-    for i, (name, r) in enumerate(runs.items()):
-        steps = [h["step"] for h in r["history"]]
-        style = "--" if name.startswith("gt") else "-"
+    variants: dict[str, list[dict]] = {}
+    for name, r in runs.items():
+        variants.setdefault(split_seed(name)[0], []).append(r)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 4.2 + 0.16 * len(variants)), sharex=True)
+    colours = plt.get_cmap("tab20").colors
+    for i, (variant, rs) in enumerate(variants.items()):
+        steps = sorted(set.intersection(*({h["step"] for h in r["history"]} for r in rs)))
+        style = "--" if variant.startswith("gt") else "-"
+        colour = colours[i % len(colours)]
+        marker = "osD^v"[(i // len(colours)) % 5]
+        label = f"{variant} ({len(rs)} seeds)" if len(rs) > 1 else variant
         for ax, key in zip(axes, ("trans_err_deg", "trans_err_med"), strict=True):
-            ax.plot(steps, [h[key] for h in r["history"]], style, marker="o", ms=3,
-                    color=colours[i % len(colours)], label=name)
+            v = np.array([[next(h[key] for h in r["history"] if h["step"] == st)
+                           for st in steps] for r in rs])
+            ax.plot(steps, v.mean(0), style, marker=marker, ms=3, color=colour, label=label)
+            if len(rs) > 1:
+                ax.fill_between(steps, v.min(0), v.max(0), color=colour, alpha=0.12, lw=0)
     for ax, title in zip(axes, ("mean", "median"), strict=True):
         ax.set_title(f"validation translation-direction error, {title}")
         ax.set_xlabel("training step")
         ax.set_ylabel("degrees")
         ax.grid(alpha=0.3)
-    axes[1].legend(fontsize=7, title="matches-variant-seed", title_fontsize=7,
-                   loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=7, frameon=False,
+               title="matches-variant (mean over seeds; band: the seeds' range)",
+               title_fontsize=7)
     fig.suptitle("Training recipe study (baseline row; solid: front-end matches, "
                  "dashed: generator's matches)")
-    fig.tight_layout()
+    rows = -(-len(variants) // 4)
+    fig.tight_layout(rect=(0, min(0.5, (0.35 + 0.16 * rows) / fig.get_figheight()), 1, 1))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -90,3 +90,35 @@ def test_parallax_oracle_finds_a_known_translation(tmp_path, monkeypatch, capsys
     assert out["run"] == "x" and len(out["errors"]["lateral"]) == 1
     assert out["errors"]["lateral"][0] < 3.0
     assert "| lateral | 1 |" in capsys.readouterr().out
+
+
+def test_curves_pool_the_seeds_of_a_variant(tmp_path):
+    """One line per variant over the steps its seeds share (a run cut short does not break
+    it), written as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    def run(steps, v):
+        return {"history": [{"step": s, "trans_err_deg": v + s, "trans_err_med": v}
+                            for s in steps]}
+
+    runs = {"t3-x-s0": run([250, 500], 10.0), "t3-x-s1": run([250], 20.0),
+            "gt-y-s0": run([250, 500], 5.0)}
+    seen = {}
+    real_savefig = plt.Figure.savefig
+
+    def spy(fig, path, **kw):
+        seen["lines"] = {ln.get_label(): (list(ln.get_xdata()), list(ln.get_ydata()))
+                         for ln in fig.axes[0].get_lines()}
+        return real_savefig(fig, path, **kw)
+
+    plt.Figure.savefig = spy
+    try:
+        spr.plot(runs, tmp_path / "c.png")
+    finally:
+        plt.Figure.savefig = real_savefig
+    assert (tmp_path / "c.png").read_bytes()[:4] == b"\x89PNG"
+    assert seen["lines"]["t3-x (2 seeds)"] == ([250], [265.0])  # mean of 260 and 270
+    assert seen["lines"]["gt-y"] == ([250, 500], [255.0, 505.0])
