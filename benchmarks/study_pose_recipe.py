@@ -365,6 +365,7 @@ def cmd_parallax(args: argparse.Namespace) -> int:
     import numpy as np
     import torch
 
+    from strl_pyg.data.transforms import resample_indices
     from strl_pyg.nn import parallax_features
 
     torch.set_num_threads(1)
@@ -376,9 +377,8 @@ def cmd_parallax(args: argparse.Namespace) -> int:
             xs.append(h[:, :2])
         if len(xs[0]) < 2:
             continue
-        rng = np.random.default_rng(k)
-        idx = rng.choice(len(xs[0]), 384, replace=len(xs[0]) < 384)
-        f = parallax_features(torch.tensor(np.c_[xs[0], xs[1]][idx]))
+        idx = resample_indices(len(xs[0]), 384, torch.Generator().manual_seed(k))
+        f = parallax_features(torch.tensor(np.c_[xs[0], xs[1]])[idx])
         i, j = torch.triu_indices(3, 3)
         M = torch.zeros(3, 3, dtype=f.dtype)
         M[i, j] = f[:, 2:].sum(0)

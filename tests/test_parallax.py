@@ -144,18 +144,19 @@ def test_parallax_model_batched_equals_one_graph_at_a_time():
 
 def test_training_fits_the_parallax_statistics_on_pairs_resampled_as_it_trains():
     """A neighbour's distance depends on the density, so the fit resamples each pair to the
-    training size first (parallax only: the flow inputs' fit is unchanged)."""
+    training size first and reads only the nodes the model reads (parallax only: the flow
+    inputs' fit is unchanged)."""
     from strl_pyg.data import keys
     from strl_pyg.data.transforms import FixedSizeResample
     from strl_pyg.training.loop import fit_input_statistics
 
     m = StrLPose(StrLPoseConfig.ablation("baseline", hidden=16, layers=1, inputs="parallax"))
     pairs = [prepare_graph(generate_pair(s).matches, m) for s in (1, 2)]
-    fit_input_statistics(m, pairs, symmetric=False, resample=(64, 0))
+    fit_input_statistics(m, pairs, symmetric=False, resample=(64, 16))
     coords, batch = [], []
     for i, g in enumerate(pairs):
-        g = FixedSizeResample(64, 0, seed=i)(g)
-        for t in (keys.POINT, keys.ENDPOINT):
+        g = FixedSizeResample(64, 16, seed=i)(g)
+        for t in (keys.POINT,):  # the points-only row reads no line endpoints
             if t in g.node_types and g[t][keys.POS0].shape[0]:
                 coords.append(torch.cat([g[t][keys.POS0], g[t][keys.POS1]], -1))
                 batch.append(torch.full((coords[-1].shape[0],), i))
@@ -164,3 +165,62 @@ def test_training_fits_the_parallax_statistics_on_pairs_resampled_as_it_trains()
     torch.testing.assert_close(m.sce.feature_std, ref.feature_std)
     fit_input_statistics(m, pairs, symmetric=False)  # without: all nodes, another density
     assert not torch.allclose(m.sce.feature_std[8:], ref.feature_std[8:])
+
+
+def _reference(c, batch, k=8):
+    """One node at a time, in numpy: the median displacement of the k nearest other
+    positions (copies of the node itself excluded), then the products."""
+    import numpy as np
+
+    c = c.numpy()
+    out = np.zeros((len(c), 8))
+    for i in range(len(c)):
+        others = [j for j in range(len(c)) if batch[j] == batch[i] and not (c[j] == c[i]).all()]
+        if not others:
+            continue
+        dist = np.array([np.hypot(*(c[j, :2] - c[i, :2])) for j in others])
+        near = [others[j] for j in np.argsort(dist, kind="stable")[:k]]
+        u = c[near, 2:] - c[near, :2]
+        d = (c[i, 2:] - c[i, :2]) - np.median(u, axis=0)
+        x, y = c[i, :2]
+        a = np.array([d[1], -d[0], y * d[0] - x * d[1]])
+        out[i] = np.r_[d, [a[p] * a[q] for p in range(3) for q in range(p, 3)]]
+    return torch.from_numpy(out)
+
+
+def test_parallax_equals_a_node_by_node_reference():
+    """The dense gather / masked median path against a plain loop: uneven graphs of 1-13
+    nodes, with copies of a node and a distinct match sharing its image-0 point."""
+    g = torch.Generator().manual_seed(8)
+    sizes = [1, 5, 13, 9, 2]
+    c = torch.rand(sum(sizes), 4, generator=g, dtype=torch.float64)
+    c[5] = c[4]  # a copy inside graph 1
+    c[2, :2] = c[3, :2]  # distinct matches sharing an image-0 point: still neighbours
+    # (in graph 1, which has fewer than k others: where such a tie fell at the k-th place,
+    # which of the two is kept is topk's choice)
+    batch = torch.repeat_interleave(torch.arange(len(sizes)), torch.tensor(sizes))
+    torch.testing.assert_close(parallax_features(c, batch), _reference(c, batch))
+
+
+def test_parallax_refuses_what_it_cannot_answer():
+    c = torch.rand(6, 4)
+    with pytest.raises(ValueError, match="Expected a sorted batch vector of 6 entries"):
+        parallax_features(c, torch.tensor([0, 1, 0, 1, 0, 1]))
+    enc = SpatialCoordinateEncoder(16, inputs="parallax")
+    with pytest.raises(ValueError, match=r"Expected the pair \(batch vector\) of each node"):
+        enc.fit_standardisation(c)
+
+
+def test_parallax_in_half_precision_is_computed_in_float32():
+    c = _small_motion(torch.tensor([0.02, 0.0, 0.01], dtype=torch.float64),
+                      torch.tensor([0.0, 0.01, 0.0], dtype=torch.float64), n=60, seed=9)
+    half = c.float().to(torch.bfloat16)
+    out = parallax_features(half)
+    assert out.dtype == torch.bfloat16
+    # float32 arithmetic on the rounded inputs (bfloat16's 8 bits already blur a displacement
+    # of ~0.01 at coordinates of ~0.3: the mode is not meant for half precision)
+    torch.testing.assert_close(out, parallax_features(half.float()).to(torch.bfloat16))
+    m = StrLPose(StrLPoseConfig.ablation("baseline", hidden=16, layers=1, inputs="parallax"))
+    g = prepare_graph(generate_pair(7).matches, m)
+    with torch.no_grad():
+        assert torch.isfinite(m.to(torch.bfloat16)(g).translation.float()).all()

@@ -117,31 +117,48 @@ def parallax_features(coords: Tensor, batch: Tensor | None = None,
     handheld pairs that the flow inputs leave unresolved (a small translation beside a
     rotation) are what it is for.
 
-    Nodes at the same image-0 position (a node's copies) are not its neighbours. A graph of
-    ``k`` or fewer other positions uses them all; a node with none gets zeros. Per graph the
-    distances are a dense ``[n, n]`` block (nodes of one pair, not edges)."""
+    A node's copies (all four coordinates equal: the fixed-size resampling repeats a sparse
+    pair's matches) are not its neighbours, but the copies of other nodes are, so on a pair
+    sparser than the resampling the ``k`` slots hold fewer distinct positions, weighted by
+    their repetitions. A graph with ``k`` or fewer others uses them all; a node with none
+    gets zeros. Equal distances at the ``k``-th place are broken by ``topk`` (positions on a
+    pixel lattice can tie). ``k`` is fixed for the mode (:data:`PARALLAX_NEIGHBOURS`; not
+    stored in checkpoints). Per graph the distances are dense ``[n, n]`` blocks (nodes of
+    one pair, not edges: ~n^2 floats, 0.4 GB at 10k matches), read from the host through
+    ``to_dense_batch`` (this option is not free of host synchronisation, unlike the default
+    inputs). Half precision is computed in float32. ``batch`` must be sorted, as PyG's."""
     if coords.dim() != 2 or coords.shape[1] != 4:
         raise ValueError(f"Expected [N, 4] coordinates (got {tuple(coords.shape)})")
+    if batch is not None and (tuple(batch.shape) != (coords.shape[0],)
+                              or bool((batch[1:] < batch[:-1]).any())):
+        raise ValueError(f"Expected a sorted batch vector of {coords.shape[0]} entries "
+                         f"(got shape {tuple(batch.shape)}"
+                         f"{', unsorted' if batch.dim() == 1 else ''})")
+    out_dtype = coords.dtype
+    if coords.dtype in (torch.float16, torch.bfloat16):  # no half cdist; near points would tie
+        coords = coords.float()
     x0 = coords[:, :2]
     u = coords[:, 2:] - x0
     if batch is None:
-        dense_x, dense_u = x0[None], u[None]
+        dense_c = coords[None]
         mask = torch.ones(1, x0.shape[0], dtype=torch.bool, device=x0.device)
     else:
         from torch_geometric.utils import to_dense_batch
 
-        dense_x, mask = to_dense_batch(x0, batch)
-        dense_u, _ = to_dense_batch(u, batch)
+        dense_c, mask = to_dense_batch(coords, batch)
+    dense_x, dense_u = dense_c[..., :2], dense_c[..., 2:] - dense_c[..., :2]
     n = dense_x.shape[1]
     kk = min(k, n - 1)
     if kk < 1:
         d = torch.zeros_like(u)
     else:
         # [B, n, n], one pair's nodes per block; computed directly (not by a matrix product),
-        # so a node and its copies are exactly 0 apart: a node repeated by the fixed-size
-        # resampling is never its own neighbour (it would pull its parallax to 0)
+        # so a node and its copies are exactly 0 apart. A copy (the same match repeated by the
+        # fixed-size resampling: all four coordinates equal) is never a neighbour: it would
+        # pull the parallax to 0. Distinct matches sharing an image-0 point stay neighbours.
         dist = torch.cdist(dense_x, dense_x, compute_mode="donot_use_mm_for_euclid_dist")
-        dist = dist.masked_fill((dist == 0) | ~mask[:, None, :], float("inf"))
+        copy = torch.cdist(dense_c, dense_c, compute_mode="donot_use_mm_for_euclid_dist") == 0
+        dist = dist.masked_fill(copy | ~mask[:, None, :], float("inf"))
         nbr = dist.topk(kk, dim=-1, largest=False).indices  # [B, n, kk]
         valid = torch.gather(torch.isfinite(dist), -1, nbr)  # neighbours that exist
         B = dense_u.shape[0]
@@ -159,7 +176,7 @@ def parallax_features(coords: Tensor, batch: Tensor | None = None,
         d = torch.where(valid.any(-1)[mask][:, None], d, torch.zeros_like(d))
     a = torch.stack([d[:, 1], -d[:, 0], x0[:, 1] * d[:, 0] - x0[:, 0] * d[:, 1]], -1)
     i, j = torch.triu_indices(3, 3, device=a.device)
-    return torch.cat([d, a[:, i] * a[:, j]], dim=-1)
+    return torch.cat([d, a[:, i] * a[:, j]], dim=-1).to(out_dtype)
 
 
 class SpatialCoordinateEncoder(_MLPEncoder):
@@ -221,6 +238,9 @@ class SpatialCoordinateEncoder(_MLPEncoder):
         if batch is not None and tuple(batch.shape) != (coords.shape[0],):
             raise ValueError(f"Expected a batch vector of {coords.shape[0]} entries "
                              f"(got {tuple(batch.shape)})")
+        if batch is None and self.inputs == "parallax":
+            raise ValueError("Expected the pair (batch vector) of each node for "
+                             "inputs='parallax' (got None): neighbours must not cross pairs")
         if symmetric:
             coords = torch.cat([coords, coords[:, [2, 3, 0, 1]]])
             if batch is not None:  # the swapped copy of a pair is a pair of its own

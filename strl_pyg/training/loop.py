@@ -574,7 +574,11 @@ def fit_input_statistics(model: StrLPose, dataset: Any, symmetric: bool,
             g = FixedSizeResample(*resample, seed=i)(g)
         if roller is not None:
             g = roller(g)
-        for t in (keys_.POINT, keys_.ENDPOINT):
+        # the parallax fit reads the nodes the model reads (its neighbours are those nodes);
+        # the flow inputs' fit keeps reading both kinds, as the runs already trained did
+        types = (keys_.POINT, keys_.ENDPOINT) if not thin or model.config.use_lines \
+            else (keys_.POINT,)
+        for t in types:
             if t in g.node_types and keys_.POS0 in g[t] and g[t][keys_.POS0].shape[0]:
                 coords.append(torch.cat([g[t][keys_.POS0], g[t][keys_.POS1]], -1).float())
                 batch.append(torch.full((coords[-1].shape[0],), i, dtype=torch.long))
