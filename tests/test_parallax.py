@@ -202,13 +202,20 @@ def test_parallax_equals_a_node_by_node_reference():
     torch.testing.assert_close(parallax_features(c, batch), _reference(c, batch))
 
 
-def test_parallax_refuses_what_it_cannot_answer():
-    c = torch.rand(6, 4)
-    with pytest.raises(ValueError, match="Expected a sorted batch vector of 6 entries"):
-        parallax_features(c, torch.tensor([0, 1, 0, 1, 0, 1]))
+def test_parallax_reads_nodes_in_any_order_and_refuses_what_it_cannot_answer():
+    """Nodes of a batch need not be sorted by graph (the model's layout allows any order);
+    graph ids that are not long integers, or a fit without them, are refused."""
+    g = torch.Generator().manual_seed(10)
+    c = torch.rand(12, 4, generator=g, dtype=torch.float64)
+    batch = torch.tensor([0] * 5 + [1] * 7)
+    perm = torch.randperm(12, generator=g)
+    torch.testing.assert_close(parallax_features(c[perm], batch[perm]),
+                               parallax_features(c, batch)[perm])
+    with pytest.raises(TypeError, match="Expected graph ids as a 1-D long tensor"):
+        parallax_features(c, batch.float())
     enc = SpatialCoordinateEncoder(16, inputs="parallax")
     with pytest.raises(ValueError, match=r"Expected the pair \(batch vector\) of each node"):
-        enc.fit_standardisation(c)
+        enc.fit_standardisation(c.float())
 
 
 def test_parallax_in_half_precision_is_computed_in_float32():

@@ -148,7 +148,7 @@ class StrLPose(CheckpointIO, nn.Module):
         elif dense:  # read here, in forward's own frame: one graph break under torch.compile
             counts, index = inp.block
             layout = DenseLayout.from_counts(inp.batch, index, counts, int(counts.max()))
-        g = self.sce(inp.coords, inp.batch)
+        g = self.sce(inp.coords, inp.batch, layout)  # the layout: read by parallax inputs
 
         line_full = None
         if self.lse is not None and inp.line_feat is not None and inp.line_edges is not None:

@@ -98,7 +98,7 @@ def flow_features(coords: Tensor, order: int = 1) -> Tensor:
 
 
 def parallax_features(coords: Tensor, batch: Tensor | None = None,
-                      k: int = PARALLAX_NEIGHBOURS) -> Tensor:
+                      k: int = PARALLAX_NEIGHBOURS, layout: DenseLayout | None = None) -> Tensor:
     r"""Motion parallax of each node against its neighbours in image 0, and the products
     whose mean over the nodes is the epipole's least-squares system; ``[N, 8]`` of ``[N, 4]``
     normalised coordinates ``[x0, y0, x1, y1]`` (``batch``: the graph of each node, ``None``
@@ -124,33 +124,24 @@ def parallax_features(coords: Tensor, batch: Tensor | None = None,
     gets zeros. Equal distances at the ``k``-th place are broken by ``topk`` (positions on a
     pixel lattice can tie). ``k`` is fixed for the mode (:data:`PARALLAX_NEIGHBOURS`; not
     stored in checkpoints). Per graph the distances are dense ``[n, n]`` blocks (nodes of
-    one pair, not edges: ~n^2 floats, 0.4 GB at 10k matches), read from the host through
-    ``to_dense_batch`` (this option is not free of host synchronisation, unlike the default
-    inputs). Half precision is computed in float32. ``batch`` must be sorted, as PyG's."""
+    one pair, not edges: ~n^2 floats, 0.4 GB at 10k matches), in the model's
+    :class:`~strl_pyg.nn.layout.DenseLayout` (``layout``; built from ``batch`` when not given,
+    one host read; nodes in any order). Half precision is computed in float32."""
     if coords.dim() != 2 or coords.shape[1] != 4:
         raise ValueError(f"Expected [N, 4] coordinates (got {tuple(coords.shape)})")
-    if batch is not None and (tuple(batch.shape) != (coords.shape[0],)
-                              or bool((batch[1:] < batch[:-1]).any())):
-        raise ValueError(f"Expected a sorted batch vector of {coords.shape[0]} entries "
-                         f"(got shape {tuple(batch.shape)}"
-                         f"{', unsorted' if batch.dim() == 1 else ''})")
+    if layout is None:
+        layout = DenseLayout.from_batch(batch, coords.shape[0])
     out_dtype = coords.dtype
     if coords.dtype in (torch.float16, torch.bfloat16):  # no half cdist; near points would tie
         coords = coords.float()
-    x0 = coords[:, :2]
-    u = coords[:, 2:] - x0
-    if batch is None:
-        dense_c = coords[None]
-        mask = torch.ones(1, x0.shape[0], dtype=torch.bool, device=x0.device)
-    else:
-        from torch_geometric.utils import to_dense_batch
-
-        dense_c, mask = to_dense_batch(coords, batch)
+    dense_c = layout.to_dense(coords)  # [B, n, 4]
+    mask = layout.mask if layout.mask is not None else \
+        torch.ones(1, coords.shape[0], dtype=torch.bool, device=coords.device)
     dense_x, dense_u = dense_c[..., :2], dense_c[..., 2:] - dense_c[..., :2]
-    n = dense_x.shape[1]
+    B, n = dense_x.shape[:2]
     kk = min(k, n - 1)
     if kk < 1:
-        d = torch.zeros_like(u)
+        d = coords.new_zeros(coords.shape[0], 2)
     else:
         # [B, n, n], one pair's nodes per block; computed directly (not by a matrix product),
         # so a node and its copies are exactly 0 apart. A copy (the same match repeated by the
@@ -161,7 +152,6 @@ def parallax_features(coords: Tensor, batch: Tensor | None = None,
         dist = dist.masked_fill(copy | ~mask[:, None, :], float("inf"))
         nbr = dist.topk(kk, dim=-1, largest=False).indices  # [B, n, kk]
         valid = torch.gather(torch.isfinite(dist), -1, nbr)  # neighbours that exist
-        B = dense_u.shape[0]
         nu = torch.gather(dense_u[:, None].expand(B, n, n, 2), 2,
                           nbr[..., None].expand(B, n, kk, 2))  # [B, n, kk, 2]
         # median over the existing neighbours: missing ones sorted to the end, then the
@@ -172,8 +162,9 @@ def parallax_features(coords: Tensor, batch: Tensor | None = None,
         lo = ((cnt - 1) // 2)[..., None, None].expand(B, n, 1, 2)
         hi = (cnt // 2)[..., None, None].expand(B, n, 1, 2)
         med = 0.5 * (torch.gather(nu, 2, lo) + torch.gather(nu, 2, hi))[:, :, 0]
-        d = (dense_u - med)[mask]
-        d = torch.where(valid.any(-1)[mask][:, None], d, torch.zeros_like(d))
+        d = torch.where(valid.any(-1)[..., None], dense_u - med, torch.zeros_like(med))
+        d = layout.from_dense(d)
+    x0 = coords[:, :2]
     a = torch.stack([d[:, 1], -d[:, 0], x0[:, 1] * d[:, 0] - x0[:, 0] * d[:, 1]], -1)
     i, j = torch.triu_indices(3, 3, device=a.device)
     return torch.cat([d, a[:, i] * a[:, j]], dim=-1).to(out_dtype)
@@ -201,7 +192,7 @@ class SpatialCoordinateEncoder(_MLPEncoder):
 
     Shapes:
         - **input:** :math:`(N, 4)` ``[pos0 || pos1]``, normalised coordinates; ``batch``
-          :math:`(N,)` (``"parallax"`` only; ``None``: one graph)
+          :math:`(N,)` or the model's ``layout`` (``"parallax"`` only; neither: one graph)
         - **output:** :math:`(N, C)`
     """
 
@@ -249,18 +240,22 @@ class SpatialCoordinateEncoder(_MLPEncoder):
         self.feature_mean.copy_(f.mean(0))
         self.feature_std.copy_(f.std(0).clamp_min(1e-6))
 
-    def features(self, x: Tensor, batch: Tensor | None = None) -> Tensor:
-        """The encoder's input features before standardisation (``[N, 4]`` for ``"paper"``)."""
+    def features(self, x: Tensor, batch: Tensor | None = None,
+                 layout: DenseLayout | None = None) -> Tensor:
+        """The encoder's input features before standardisation (``[N, 4]`` for ``"paper"``;
+        ``batch`` / ``layout``: the nodes' graphs, read by ``"parallax"`` only)."""
         if self.inputs == "paper":
             return x
         f = flow_features(x, self._order)
         if self.inputs == "parallax":
-            f = torch.cat([f, parallax_features(x, batch)], dim=-1)
+            f = torch.cat([f, parallax_features(x, batch, layout=layout)], dim=-1)
         return f
 
-    def forward(self, x: Tensor, batch: Tensor | None = None) -> Tensor:
+    def forward(self, x: Tensor, batch: Tensor | None = None,
+                layout: DenseLayout | None = None) -> Tensor:
         if self.inputs != "paper":
-            x = (self.features(x, batch) - self.feature_mean.to(x)) / self.feature_std.to(x)
+            x = (self.features(x, batch, layout) - self.feature_mean.to(x)) \
+                / self.feature_std.to(x)
         return self.mlp(x)
 
     @property

@@ -566,18 +566,19 @@ def fit_input_statistics(model: StrLPose, dataset: Any, symmetric: bool,
     each pair is first resampled to ``resample = (points, lines)`` as training resamples it
     (a neighbour's distance depends on the density)."""
     roller = RandomRoll(roll, seed=0) if roll > 0 else None
-    thin = model.config.inputs == "parallax" and resample is not None
+    parallax = model.config.inputs == "parallax"
+    # the parallax fit reads the nodes the model reads, at the density it trains on (its
+    # neighbours are those nodes); the flow inputs' fit keeps reading every node of every
+    # pair, as the runs already trained did
+    types = (keys_.POINT, keys_.ENDPOINT) if not parallax or model.config.use_lines \
+        else (keys_.POINT,)
     coords, batch = [], []
     for i in range(min(max_pairs, len(dataset))):
         g = dataset[i]
-        if thin:
+        if parallax and resample is not None:
             g = FixedSizeResample(*resample, seed=i)(g)
         if roller is not None:
             g = roller(g)
-        # the parallax fit reads the nodes the model reads (its neighbours are those nodes);
-        # the flow inputs' fit keeps reading both kinds, as the runs already trained did
-        types = (keys_.POINT, keys_.ENDPOINT) if not thin or model.config.use_lines \
-            else (keys_.POINT,)
         for t in types:
             if t in g.node_types and keys_.POS0 in g[t] and g[t][keys_.POS0].shape[0]:
                 coords.append(torch.cat([g[t][keys_.POS0], g[t][keys_.POS1]], -1).float())
