@@ -1,8 +1,8 @@
 """A short controlled study of the network's training recipe (issue "A network that learns its
 pose"): which of the paper's choices keeps the regression head from learning the translation.
 
-Every run is the ablation's ``baseline`` row on the ablation's protocol (width 64, 3 layers,
-4 heads, batch 16, Adam 3e-4 constant, swap 0.5, clip 10, ``lines_small`` pairs, data seed 0),
+Every run is the ablation's ``baseline`` row (``train --row`` picks another) on the
+ablation's protocol (width 64, 3 layers, 4 heads, batch 16, Adam 3e-4 constant, swap 0.5, clip 10, ``lines_small`` pairs, data seed 0),
 cut to :data:`STEPS` steps; runs differ in one thing at a time:
 
 =========  ==========================  =======================================================
@@ -98,7 +98,7 @@ VARIANTS = {
     "parallax-cos1e-3": (["--set", "inputs=parallax", "--loss", "balanced", "--lr-schedule",
                           "cosine", "--warmup-steps", "100", "--lr", "1e-3"]),
 }
-COMMON = ["--model", "baseline", "--scene-mix", "lines_small", "--data-seed", "0",
+COMMON = ["--scene-mix", "lines_small", "--data-seed", "0",
           "--val-pairs", "100", "--val-every", "250", "--batch-size", "16", "--lr", "3e-4",
           "--set", "hidden=64", "--set", "layers=3", "--set", "heads=4",
           "--checkpoint-minutes", "3", "--no-progress", "--no-tensorboard"]
@@ -109,8 +109,9 @@ MATCHES = {
 EVAL_SETS = ("driving", "kitti06", "dino")
 
 
-def run_id(matches: str, variant: str, seed: int) -> str:
-    return f"{matches}-{variant}-s{seed}"
+def run_id(matches: str, variant: str, seed: int, row: str = "baseline") -> str:
+    """``fe-both-s0``; another Table 3 row than ``baseline`` is named: ``fe-LP-both-s0``."""
+    return f"{matches}-{variant}-s{seed}" if row == "baseline" else f"{matches}-{row}-{variant}-s{seed}"
 
 
 def parse_run(spec: str) -> tuple[str, str, int]:
@@ -123,12 +124,16 @@ def parse_run(spec: str) -> tuple[str, str, int]:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
+    from strl_pyg.model.config import ABLATIONS
+
+    if args.row not in ABLATIONS:
+        raise SystemExit(f"error: expected --row in {tuple(ABLATIONS)} (got {args.row!r})")
     root = Path(args.root)
     for spec in args.runs:
         matches, variant, seed = parse_run(spec)
-        out = root / "runs" / run_id(matches, variant, seed)
-        cmd = [sys.executable, str(TRAIN_SCRIPT), *COMMON, *MATCHES[matches],
-               *VARIANTS[variant], "--seed", str(seed), "--steps", str(args.steps),
+        out = root / "runs" / run_id(matches, variant, seed, args.row)
+        cmd = [sys.executable, str(TRAIN_SCRIPT), *COMMON, "--model", args.row,
+               *MATCHES[matches], *VARIANTS[variant], "--seed", str(seed), "--steps", str(args.steps),
                "--cache-dir", str(Path(args.ablation_root) / "cache"), "--out", str(out)]
         if (out / "last.pt").exists():
             cmd.append("--resume")
@@ -582,6 +587,8 @@ def main(argv: list[str] | None = None) -> int:
     t = sub.add_parser("train", help="train runs MATCHES:VARIANT[:SEED], one after another")
     t.add_argument("runs", nargs="+")
     t.add_argument("--steps", type=int, default=STEPS)
+    t.add_argument("--row", default="baseline", help="the Table 3 row (an ABLATIONS name) the "
+                   "recipe is trained on; the run's name carries it unless it is baseline")
     s = sub.add_parser("score", help="score the finished runs into results_pose_recipe/")
     s.add_argument("--again", action="store_true", help="re-score runs already scored")
     m = sub.add_parser("motion", help="validation errors by motion: runs (folders with "
