@@ -297,3 +297,52 @@ def test_the_layout_path_does_not_break_a_compiled_graph():
         slow = torch._dynamo.explain(conv)((x, x), None, batch, query=g, complete=True)
     assert fast.graph_break_count == 0 and fast.graph_count == 1
     assert slow.graph_break_count >= 1
+
+
+def test_another_aggregation_is_refused_not_computed_two_ways():
+    # reproduction: aggr="mean" was accepted; the explicit path averaged the softmax-weighted
+    # messages while complete attention summed them (outputs 0.27 apart), and asking for the
+    # attention weights switched paths and so changed the output
+    for aggr in ("mean", "max", "min"):
+        with pytest.raises(ValueError, match="Expected aggr='add'"):
+            AttentionConv(16, aggr=aggr)
+    assert AttentionConv(16, aggr="add").aggr == "add"
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"heads": 0}, "Expected heads as a positive int"),
+    ({"heads": 2.0}, "Expected heads as a positive int"),
+    ({"dropout": 1.5}, r"Expected dropout in \[0, 1\)"),
+    ({"dropout": -0.1}, r"Expected dropout in \[0, 1\)"),
+    ({"mlp_ratio": 0}, "Expected mlp_ratio as a positive int"),
+    ({"node_dim": -2}, "Expected no node_dim"),
+])
+def test_bad_construction_is_a_one_line_error(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        AttentionConv(16, **kwargs)
+
+
+def test_feature_widths_are_checked_with_the_expected_shape():
+    conv = AttentionConv(16, heads=4)
+    ei = torch.tensor([[0, 1], [1, 0]])
+    with pytest.raises(ValueError, match=r"Expected target features of shape \[N, 16\].*"
+                                         r"\(got \(2, 8\)\)"):
+        conv(torch.randn(2, 8), ei)
+    lazy = AttentionConv((-1, 16), heads=4)
+    out = lazy((torch.randn(3, 5), torch.randn(2, 16)), torch.tensor([[0, 2], [1, 0]]))
+    assert out.shape == (2, 16)
+    with pytest.raises(ValueError, match=r"Expected target features of shape \[N, 16\]"):
+        lazy(torch.randn(3, 8), ei)  # homogeneous 8-wide input: the residual needs 16
+    with pytest.raises(ValueError, match=r"Expected query features of shape \[N, 16\]"):
+        conv(torch.randn(2, 16), ei, query=torch.randn(2, 4))
+
+
+def test_complete_edges_marker_moves_like_a_tensor():
+    b = torch.tensor([0, 0, 1])
+    m = CompleteEdges(b, torch.tensor([0, 1]))
+    moved = m.to("cpu")
+    assert isinstance(moved, CompleteEdges) and moved is not m
+    assert torch.equal(moved.batch_src, b) and torch.equal(moved.batch_dst, torch.tensor([0, 1]))
+    assert CompleteEdges().to(torch.device("cpu")).batch_src is None
+    edges = {("a", "to", "a"): m, ("a", "near", "a"): torch.tensor([[0], [1]])}
+    assert set({k: v.to("cpu") for k, v in edges.items()}) == set(edges)

@@ -55,3 +55,20 @@ def test_bipartite_and_validation():
     torch.testing.assert_close(out[0], x_dst[0])
     with pytest.raises(ValueError, match="Expected one line feature per source node"):
         conv((x_src, x_dst), ei, f0[:3])
+
+
+def test_widths_are_checked_at_construction_and_call():
+    # reproduction: (-1, 16) built a Linear for width -1 + 16 + 4 that no input could match,
+    # and 0 channels were accepted
+    for bad in ((-1, 16), -1, 0, (8, 0)):
+        with pytest.raises(ValueError, match="Expected .*channels as a positive int"):
+            LineEndpointConv(bad, 4)
+    with pytest.raises(ValueError, match="Expected line_channels as a positive int"):
+        LineEndpointConv(8, 0)
+    conv = LineEndpointConv(8, 4)
+    ei = torch.tensor([[0, 1], [1, 0]])
+    with pytest.raises(ValueError, match=r"Expected source features of shape \[N, 8\] "
+                                         r"\(got \(2, 7\)\)"):
+        conv(torch.randn(2, 7), ei, torch.randn(2, 4))
+    with pytest.raises(ValueError, match=r"Expected line features of shape \[N, 4\]"):
+        conv(torch.randn(2, 8), ei, torch.randn(2, 5))

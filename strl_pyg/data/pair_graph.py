@@ -79,6 +79,14 @@ class CompleteEdges:
         self.batch_src = batch_src
         self.batch_dst = batch_src if batch_dst is None else batch_dst
 
+    def to(self, device: torch.device | str, non_blocking: bool = False) -> CompleteEdges:
+        """The marker with its graph ids on ``device`` (a new marker; ``None`` stays), so that
+        ``{k: v.to(device) for k, v in edge_index_dict.items()}`` works as for tensors."""
+        def move(b):
+            return None if b is None else b.to(device, non_blocking=non_blocking)
+
+        return CompleteEdges(move(self.batch_src), move(self.batch_dst))
+
     def __repr__(self) -> str:
         def n(b):
             return "None" if b is None else f"[{b.numel()}]"

@@ -123,7 +123,10 @@ class AttentionConv(MessagePassing):
             ``(src_channels, dst_channels)`` for bipartite inputs of different widths;
             ``src_channels=-1`` infers the source width at the first call (lazy, as PyG's
             layers), e.g. ``(-1, 64)`` under :func:`~torch_geometric.nn.to_hetero`. The
-            target width is the output width and must be given.
+            target width is the output width and must be given; the target (and query)
+            features must already have it (there is no ``out_channels``: put a
+            :class:`~torch_geometric.nn.Linear` ``(-1, C)`` in front of node types of other
+            widths).
         heads (int, optional): Number of attention heads :math:`H`; must divide the target
             channels. (default: :obj:`4`)
         mlp_ratio (int, optional): Hidden width of :math:`F` as a multiple of the target
@@ -135,7 +138,10 @@ class AttentionConv(MessagePassing):
             ``TransformerConv``): :math:`\mathbf{k}^h_{ij} = \mathbf{W}^h_k \mathbf{f}_j +
             \mathbf{W}^h_e \mathbf{e}_{ij}`. Explicit edges only. (default: :obj:`None`)
         **kwargs (optional): Additional arguments of
-            :class:`torch_geometric.nn.conv.MessagePassing`.
+            :class:`torch_geometric.nn.conv.MessagePassing` (``flow``, ``decomposed_layers``,
+            ...). ``aggr`` can only be ``"add"``: the messages are softmax-weighted, their sum
+            is the attention (another aggregation is refused, since the complete-attention
+            path computes the sum). ``node_dim`` is fixed (0).
 
     Shapes:
         - **input:**
@@ -161,7 +167,22 @@ class AttentionConv(MessagePassing):
         edge_dim: int | None = None,
         **kwargs,
     ) -> None:
-        kwargs.setdefault("aggr", "add")
+        # the messages are softmax-weighted, so their sum is the attention's output; another
+        # aggregation is a different layer, and the dense path computes the sum only
+        aggr = kwargs.setdefault("aggr", "add")
+        if aggr not in ("add", "sum"):
+            raise ValueError(f"Expected aggr='add' (attention sums its softmax-weighted "
+                             f"messages; the complete-attention path computes that sum only) "
+                             f"(got aggr={aggr!r})")
+        if "node_dim" in kwargs:
+            raise ValueError(f"Expected no node_dim (nodes are on dimension 0, with the heads "
+                             f"after them) (got node_dim={kwargs['node_dim']!r})")
+        if not isinstance(heads, int) or isinstance(heads, bool) or heads < 1:
+            raise ValueError(f"Expected heads as a positive int (got {heads!r})")
+        if not isinstance(mlp_ratio, int) or isinstance(mlp_ratio, bool) or mlp_ratio < 1:
+            raise ValueError(f"Expected mlp_ratio as a positive int (got {mlp_ratio!r})")
+        if not 0.0 <= float(dropout) < 1.0:
+            raise ValueError(f"Expected dropout in [0, 1) (got {dropout!r})")
         super().__init__(node_dim=0, **kwargs)
         src_channels, dst_channels = as_pair(channels)
         if not isinstance(dst_channels, int) or dst_channels < 1:
@@ -239,7 +260,19 @@ class AttentionConv(MessagePassing):
             raise ValueError("Expected a layout only with complete attention (got explicit "
                              "edge_index)")
         x_src, x_dst = as_pair(x)
+        src_channels, dst_channels = as_pair(self.channels)
+        if x_dst.dim() != 2 or x_dst.shape[-1] != dst_channels:
+            raise ValueError(f"Expected target features of shape [N, {dst_channels}] (the "
+                             f"layer's output width: the residual adds them; project wider or "
+                             f"narrower inputs first) (got {tuple(x_dst.shape)})")
+        if x_src.dim() != 2 or (src_channels != -1 and x_src.shape[-1] != src_channels):
+            width = "C" if src_channels == -1 else src_channels
+            raise ValueError(f"Expected source features of shape [N, {width}] (got "
+                             f"{tuple(x_src.shape)})")
         g = x_dst if query is None else query
+        if g.dim() != 2 or g.shape[-1] != dst_channels:
+            raise ValueError(f"Expected query features of shape [N, {dst_channels}] (got "
+                             f"{tuple(g.shape)})")
         if g.shape[0] != x_dst.shape[0]:
             raise ValueError(
                 f"Expected one query row per target node (got {g.shape[0]} and {x_dst.shape[0]})"

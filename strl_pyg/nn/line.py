@@ -28,7 +28,7 @@ class LineEndpointConv(MessagePassing):
     Args:
         channels (int or tuple): Size of each source and target node feature; a tuple
             ``(src_channels, dst_channels)`` for bipartite inputs. The output has the target
-            size.
+            size. Widths are fixed at construction (no lazy ``-1``).
         line_channels (int): Size of the line-segment feature :math:`\mathbf{f}^0_{L}`.
         mlp_ratio (int, optional): Hidden width of :math:`F_L` as a multiple of the target
             channels. (default: :obj:`2`)
@@ -48,8 +48,15 @@ class LineEndpointConv(MessagePassing):
         self, channels: int | tuple[int, int], line_channels: int, mlp_ratio: int = 2, **kwargs
     ) -> None:
         kwargs.setdefault("aggr", "mean")
-        super().__init__(**kwargs)
         src_channels, dst_channels = as_pair(channels)
+        for name, value in (("source channels", src_channels),
+                            ("target channels", dst_channels),
+                            ("line_channels", line_channels), ("mlp_ratio", mlp_ratio)):
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"Expected {name} as a positive int (no lazy -1: the MLP "
+                                 f"reads the widths together) (got channels={channels!r}, "
+                                 f"line_channels={line_channels!r}, mlp_ratio={mlp_ratio!r})")
+        super().__init__(**kwargs)
         self.channels = channels
         self.line_channels = line_channels
         self.mlp_ratio = mlp_ratio
@@ -65,6 +72,12 @@ class LineEndpointConv(MessagePassing):
     def forward(self, x: Tensor | tuple[Tensor, Tensor], edge_index: Tensor,
                 line_feat: Tensor) -> Tensor:
         x_src, x_dst = as_pair(x)
+        src_channels, dst_channels = as_pair(self.channels)
+        for what, t, c in (("source", x_src, src_channels), ("target", x_dst, dst_channels),
+                           ("line", line_feat, self.line_channels)):
+            if t.dim() != 2 or t.shape[-1] != c:
+                raise ValueError(f"Expected {what} features of shape [N, {c}] (got "
+                                 f"{tuple(t.shape)})")
         if line_feat.shape[0] != x_src.shape[0]:
             raise ValueError(
                 "Expected one line feature per source node "
