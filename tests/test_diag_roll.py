@@ -52,6 +52,44 @@ def test_a_fixed_answer_is_lost_by_the_roll_and_the_truth_is_not():
     assert max(max(v) for v in oracle.values()) < 1e-3
 
 
+def _consistent_graph():
+    """Matches that are exact projections under the pair's pose (a sideways move and a small
+    yaw), so the true pose has zero Sampson distance."""
+    rng = np.random.default_rng(1)
+    Km = np.array([[100.0, 0, 64], [0, 100, 64], [0, 0, 1]])
+    X = np.c_[rng.uniform(-1, 1, (20, 2)), rng.uniform(3, 6, 20)]
+    a = np.radians(5.0)
+    R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    t = np.array([0.6, 0.1, 0.05])
+    X1 = X @ R.T + t
+    p0 = (X[:, :2] / X[:, 2:]) * 100 + 64
+    p1 = (X1[:, :2] / X1[:, 2:]) * 100 + 64
+    m = PairMatches(p0, p1, np.zeros((0, 2, 2)), np.zeros((0, 2, 2)),
+                    image_size0=(128, 128), image_size1=(128, 128), K0=Km, K1=Km)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    return build_pair_graph(m, T_0to1=T)
+
+
+class _RightOnlyRolled:
+    """The truth when the graph was rolled by 90 deg, a wrong pose (another translation, no
+    rotation) under every other roll: a network that knows only one camera orientation."""
+
+    def __call__(self, g):
+        T = g[K.T_0TO1].reshape(4, 4).double()
+        if abs(float(g[K.ROLL].reshape(-1)[0]) - np.pi / 2) < 1e-9:
+            return SimpleNamespace(R=T[:3, :3][None], translation=T[:3, 3][None])
+        return SimpleNamespace(R=torch.eye(3, dtype=torch.float64)[None],
+                               translation=torch.tensor([[0.0, 0.0, 1.0]], dtype=torch.float64))
+
+
+def test_verify_keeps_the_roll_whose_pose_fits_the_matches():
+    res = diag_roll.verify(_RightOnlyRolled(), {"one": [_consistent_graph()]})["one"]
+    assert res["picked"] == [90]
+    assert res["verified"][0] < 1e-4 and res["best"][0] < 1e-4
+    assert res["as_is"][0] > 30.0  # unrolled, the wrong answer
+
+
 def test_report_writes_the_table_and_figure(tmp_path, monkeypatch):
     monkeypatch.setattr(diag_roll, "HERE", tmp_path)
     monkeypatch.setattr(diag_roll, "RESULTS", tmp_path / "results_roll")
@@ -63,3 +101,12 @@ def test_report_writes_the_table_and_figure(tmp_path, monkeypatch):
     text = (tmp_path / "results_roll.md").read_text()
     assert "| a | set (2) | 1.0 / 1.0 | 91.0 / 91.0 | 91.0 / 91.0 | 181.0 / 181.0 |" in text
     assert (tmp_path / "figures" / "roll.png").read_bytes()[:4] == b"\x89PNG"
+    assert "Roll hypotheses" not in text
+    (tmp_path / "results_roll" / "verify").mkdir()
+    ver = {"as_is": [90.0, 92.0], "verified": [10.0, 14.0], "best": [9.0, 11.0],
+           "picked": [90, -90]}
+    (tmp_path / "results_roll" / "verify" / "a.json").write_text(
+        __import__("json").dumps({"checkpoint": "x", "errors": {"set": ver}}))
+    assert diag_roll.main(["--report"]) == 0
+    text = (tmp_path / "results_roll.md").read_text()
+    assert "| a | set (2) | 91.0 / 91.0 | 12.0 / 12.0 | 10.0 / 10.0 | 0 / 1 / 1 / 0 |" in text
