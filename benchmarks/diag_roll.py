@@ -143,7 +143,8 @@ def report() -> int:
     import matplotlib.pyplot as plt
     from common import banner
 
-    runs = {p.stem: json.loads(p.read_text()) for p in sorted(RESULTS.glob("*.json"))}  # not verify/
+    # the measured runs (verify/ holds the --verify ones)
+    runs = {p.stem: json.loads(p.read_text()) for p in sorted(RESULTS.glob("*.json"))}
     if not runs:
         raise SystemExit(f"error: expected measured runs in {RESULTS} (got none)")
     lines = ["# The regression's translation under a camera roll", "",

@@ -24,7 +24,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from strl_pyg.cli.commands import check_train_files, run_guarded
+from strl_pyg.cli.commands import check_train_files
+from strl_pyg.cli.guard import OneLineArgumentParser, run_guarded
 from strl_pyg.training.config import add_train_arguments
 
 
@@ -36,10 +37,11 @@ def _run(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = OneLineArgumentParser(description=__doc__,
+                               formatter_class=argparse.RawDescriptionHelpFormatter)
     add_train_arguments(ap)
-    return run_guarded(_run, ap.parse_args(argv), ap)
+    # parsed under the guard: a bad flag or value is one error line, as in `strl-pose train`
+    return run_guarded(lambda: _run(ap.parse_args(argv), ap))
 
 
 if __name__ == "__main__":

@@ -190,3 +190,33 @@ def _one_graph():
     from strl_pyg.synthetic import generate_pair
 
     return FixedSizeResample(32, 16, seed=0)(build_pair_graph(generate_pair(0).matches))
+
+
+def test_a_damaged_copy_is_refused_not_loaded_with_changed_weights(tmp_path):
+    # reproduction: one flipped bit in a weight tensor's bytes loaded silently (torch.load does
+    # not check the archive's CRC-32), and predict gave an `ok` pose from changed weights
+    import zipfile
+
+    path = tmp_path / "model.pt"
+    tiny_model().save(path)
+    StrLPose.load(path)  # the intact file loads
+    with zipfile.ZipFile(path) as z:
+        info = max(z.infolist(), key=lambda i: i.file_size)  # the largest tensor record
+        assert info.compress_type == zipfile.ZIP_STORED
+        start = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra)
+    raw = bytearray(path.read_bytes())
+    raw[start + info.file_size // 2] ^= 0x01
+    bad = tmp_path / "damaged.pt"
+    bad.write_bytes(bytes(raw))
+    with pytest.raises(ValueError, match=r"damaged file: record '.*' fails its checksum") as exc:
+        StrLPose.load(bad)
+    assert "\n" not in str(exc.value)
+    with pytest.raises(ValueError, match=r"fails its checksum"):
+        safe_torch_load(bad)
+
+
+def test_an_empty_file_is_named_as_such(tmp_path):
+    path = tmp_path / "model.pt"
+    path.write_bytes(b"")
+    with pytest.raises(ValueError, match=r"got an empty file, 0 bytes"):
+        StrLPose.load(path)

@@ -381,3 +381,15 @@ def test_readme_training_command_runs_on_defaults(tmp_path):
     result = json.loads(proc.stdout.strip().splitlines()[-1])
     assert result["step"] == 3 and np.isfinite(result["rot_err_deg"])
     assert (tmp_path / "run" / "last.pt").is_file() and (tmp_path / "run" / "model.pt").is_file()
+
+
+def test_predict_says_when_the_given_checkpoint_was_not_run(checkpoint, kitti_pair, capsys):
+    # reproduction: `predict ... --checkpoint MY_RUN/model.pt` printed PoseLib's pose alone and
+    # nothing said the user's network had not been run
+    img0, img1, calib, _ = kitti_pair
+    assert cli.main(["predict", img0, img1, "--K", calib, "--checkpoint", checkpoint]) == 0
+    out = capsys.readouterr().out
+    assert "note: the recommended pose did not need the network" in out and checkpoint in out
+    assert cli.main(["predict", img0, img1, "--K", calib, "--checkpoint", checkpoint,
+                     "--methods", "regression"]) in (0, 3)
+    assert "note:" not in capsys.readouterr().out

@@ -242,3 +242,14 @@ def test_a_failing_swap_pass_leaves_the_regression_with_a_warning(monkeypatch):
     assert rec.status == "ok" and "swap_disagreement_deg" not in rec.info
     assert any("raised RuntimeError: out of memory)" in w for w in rec.warnings)
     np.testing.assert_array_equal(rec.covariance, off.covariance)
+
+
+def test_methods_all_and_comma_separated_as_the_cli_takes_them():
+    # reproduction: PoseEstimator(methods="all") raised "Expected methods from ... (got
+    # ['all'])" although `strl-pose predict --methods all` is the documented way
+    from strl_pyg.inference.estimator import _checked_names
+
+    assert PoseEstimator(methods="all").method_names == _checked_names(None)
+    assert PoseEstimator(methods="opencv, poselib").method_names == ("opencv", "poselib")
+    with pytest.raises(ValueError, match=r"'all' or 'recommended' \(got \['opencv', 'nope'\]\)"):
+        PoseEstimator(methods="opencv,nope")

@@ -299,3 +299,15 @@ def test_command_line_takes_comma_separated_registry_names(tiny_checkpoint, caps
     out = capsys.readouterr().out
     for name in ("geometric", "guided", "opencv"):
         assert f"| {name} |" in out
+
+
+def test_sequences_take_commas_as_train_sequences_do(tiny_checkpoint):
+    # reproduction: `--sequences 06,07` looked for a KITTI sequence named '06,07' and found no
+    # pairs, while train.py's --train-sequences takes the comma-separated form
+    from strl_pyg.evaluation import run
+
+    for given in (["06,07"], ["06", "07"], ["06,", "07"]):
+        args = run.build_parser(None).parse_args(
+            ["--checkpoint", str(tiny_checkpoint), "--sequences", *given])
+        run._checked(args)
+        assert args.sequences == ["06", "07"], given

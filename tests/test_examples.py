@@ -135,3 +135,18 @@ def test_pose_from_matches_matched_file_with_per_image_sizes(generated_pair_file
                     "--size1", "96", "128") == 0
     out = capsys.readouterr().out
     assert "classical methods only" in out and "T_0to1 (PoseLib)" in out
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--stpes", "3"], "did you mean --steps?"),
+    (["--model", "Full"], "invalid choice: 'Full'"),
+    (["--set", "hidden"], "Expected --set KEY=VALUE (got 'hidden')"),
+    (["--lr", "abc"], "invalid float value: 'abc'"),
+])
+def test_train_example_bad_flags_are_one_line_like_strl_pose_train(argv, needle, capsys):
+    # reproduction: examples/train.py printed argparse's usage block before its error line,
+    # where docs/bad_input.md promises one line (strl-pose train already gave one)
+    assert load("train").main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("error: Expected") and needle in err
+    assert "usage:" not in err

@@ -84,6 +84,21 @@ def test_config_validation():
         TrainConfig(beta=1.5)
 
 
+@pytest.mark.parametrize("kwargs, message", [
+    # reproduction: a string learning rate (as from a YAML file) raised "TypeError: '>' not
+    # supported between instances of 'str' and 'int'"
+    ({"lr": "1e-3"}, r"Expected a finite number 'lr' \(got '1e-3', str\)"),
+    ({"steps": 10.0}, r"Expected an integer 'steps' \(got 10.0, float\)"),
+    ({"grad_clip": float("nan")}, r"Expected a finite number 'grad_clip' \(got nan, float\)"),
+    ({"tensorboard": "no"}, r"Expected a bool 'tensorboard' \(got 'no', str\)"),
+    ({"beta": True}, r"Expected a finite number 'beta' \(got True, bool\)"),
+])
+def test_config_names_a_value_of_the_wrong_type(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        TrainConfig(**kwargs)
+    TrainConfig(lr=1e-3, steps=10, grad_clip=None, tensorboard=False, beta=1)  # numbers are fine
+
+
 def _random_poses(log_var):
     """Four random predicted poses with these log-variances, and a forward ground truth."""
     import torch

@@ -9,6 +9,7 @@ from strl_pyg.utils.lazy import lazy_exports
 
 __all__ = [
     "run_guarded",
+    "OneLineArgumentParser",
     "read_intrinsics",
     "read_image_file",
     "default_checkpoint",
@@ -30,6 +31,7 @@ __all__ = [
 # 0.2 code read other names of the module this folder was: they resolve too
 __getattr__, __dir__ = lazy_exports(__name__, {
     "run_guarded": "strl_pyg.cli.guard",
+    "OneLineArgumentParser": "strl_pyg.cli.guard",
     "DEFAULT_WEIGHTS": "strl_pyg.training.checkpoints",
     "read_intrinsics": "strl_pyg.cli.readers",
     "read_image_file": "strl_pyg.cli.readers",

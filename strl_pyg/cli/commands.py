@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from strl_pyg.cli.guard import run_guarded
+from strl_pyg.cli.guard import OneLineArgumentParser, run_guarded
 from strl_pyg.cli.readers import (  # noqa: F401  (re-exported: the readers' public home)
     MAX_SIDE,
     PairInputs,
@@ -347,6 +347,14 @@ def cmd_predict(args) -> int:
         return code
     print(f"matches: {est.num_points} points, {est.num_lines} lines")
     _print_estimate(est)
+    if args.checkpoint and methods == "recommended":
+        from strl_pyg.inference.estimator import METHODS
+
+        if not any(METHODS[n].uses_network for n in est.methods if n in METHODS):
+            # a user's own weights that nothing read: say so rather than let them think
+            # the printed pose is their network's
+            print(f"note: the recommended pose did not need the network, so --checkpoint "
+                  f"{args.checkpoint} was not run; --methods all (or regression) shows its pose")
     return code
 
 
@@ -479,40 +487,7 @@ def _add_pair_args(p: argparse.ArgumentParser, optional_images: bool = False) ->
                         f"alike (default {MAX_SIDE}; 0: full resolution)")
 
 
-class _Parser(argparse.ArgumentParser):
-    """Reports a bad command line as one line (``UsageError``, exit code 2 in :func:`main`)
-    instead of argparse's usage block."""
-
-    def error(self, message: str):
-        hint = _did_you_mean(self, message)
-        raise UsageError(f"Expected valid arguments (got {message}){hint}; see "
-                         f"'{self.prog} --help'")
-
-
-def _did_you_mean(parser: argparse.ArgumentParser, message: str) -> str:
-    """``", did you mean --K?"`` for an unrecognised flag close to one of the parser's or of
-    its commands' (case first: ``--k`` is ``--K``)."""
-    import difflib
-
-    if "unrecognized arguments:" not in message:
-        return ""
-    options = set(parser._option_string_actions)
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            for sub in action.choices.values():
-                options |= set(sub._option_string_actions)
-    hints = []
-    for token in message.split("unrecognized arguments:", 1)[1].split():
-        flag = token.split("=", 1)[0]
-        if not flag.startswith("-"):
-            continue
-        same_case = [o for o in options if o.lower() == flag.lower()]
-        close = same_case or difflib.get_close_matches(flag, sorted(options), n=1, cutoff=0.75)
-        if close:
-            hints.append((flag, close[0]))
-    if len(hints) == 1:
-        return f"; did you mean {hints[0][1]}?"
-    return "; did you mean " + ", ".join(f"{c} for {f}" for f, c in hints) + "?" if hints else ""
+_Parser = OneLineArgumentParser  # the name earlier code used
 
 
 def build_parser() -> argparse.ArgumentParser:

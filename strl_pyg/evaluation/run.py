@@ -270,7 +270,8 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
                    help="StrLPose checkpoint (StrLPose.save); default: the shipped weights")
     p.add_argument("--dataset", choices=("synthetic", "demon", "kitti"), default="synthetic")
     p.add_argument("--data-root", help="DeMoN DeepSfM root or KITTI odometry root")
-    p.add_argument("--sequences", nargs="+", default=["09", "10"], help="KITTI test sequences")
+    p.add_argument("--sequences", nargs="+", default=["09", "10"],
+                   help="KITTI test sequences, space- or comma-separated (as --train-sequences)")
     p.add_argument("--frame-gap", type=_POSITIVE_INT, default=1, help="KITTI pair (i, i + gap)")
     p.add_argument("--split", default="test", help="DeMoN split folder")
     p.add_argument("--limit", type=_POSITIVE_INT, default=None,
@@ -308,6 +309,8 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
 
 def _checked(args: argparse.Namespace) -> Path:
     """Checks the paths, methods and device of parsed flags; returns the checkpoint path."""
+    # "06,07" as train.py's --train-sequences takes it, or "06 07"
+    args.sequences = [q for item in args.sequences for q in item.split(",") if q.strip()]
     ckpt = Path(args.checkpoint)
     if not ckpt.is_file():
         raise _UsageError(f"Expected a checkpoint file at '{ckpt}' (got none)")

@@ -34,8 +34,9 @@ def _is_number(v: Any) -> bool:
 class EstimatorConfig:
     """Every option of :class:`~strl_pyg.inference.estimator.PoseEstimator` (its keyword
     arguments are these fields; their meaning is documented there), checked when built: a bad
-    value is a one-line ``ValueError``. ``methods`` ``None``: every installed method; one name
-    as a ``str`` is one method. ``device`` is kept as a ``torch.device`` (or ``None``)."""
+    value is a one-line ``ValueError``. ``methods`` ``None`` or ``"all"``: every installed
+    method; a ``str`` is one method or comma-separated names (as ``--methods`` takes them).
+    ``device`` is kept as a ``torch.device`` (or ``None``)."""
 
     methods: tuple[str, ...] | None = None
     seed: int = 0

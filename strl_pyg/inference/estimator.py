@@ -373,17 +373,21 @@ def _unique(items: list[str]) -> list[str]:
 
 
 def _checked_names(methods: Any) -> tuple[str, ...] | str:
-    """Method names to run (``None``: every installed one; one ``str``: one method;
+    """Method names to run (``None`` or ``"all"``: every installed one; one ``str``: one
+    method, or comma-separated names as ``strl-pose predict --methods`` takes them;
     :data:`RECOMMENDED` stays as it is)."""
     if isinstance(methods, str) and methods == RECOMMENDED:
         return RECOMMENDED
+    if isinstance(methods, str) and methods == "all":
+        methods = None
     if isinstance(methods, str):
-        methods = (methods,)
+        methods = tuple(n.strip() for n in methods.split(","))
     names = tuple(methods) if methods is not None else tuple(
         n for n, s in METHODS.items() if s.available())
     unknown = [n for n in names if n not in METHODS]
     if unknown or not names:
-        raise ValueError(f"Expected methods from {tuple(METHODS)} (got {list(names)})")
+        raise ValueError(f"Expected methods from {tuple(METHODS)}, 'all' or "
+                         f"'{RECOMMENDED}' (got {list(names)})")
     missing = [n for n in names if not METHODS[n].available()]
     if missing:
         raise ValueError(f"Expected installed methods (got {missing}: not importable here)")

@@ -105,6 +105,23 @@ class TrainConfig:
     geo_ess_start: int = 200  # ... from this step on (the classifier learns first)
 
     def __post_init__(self) -> None:
+        import dataclasses
+        import math
+        import numbers
+
+        # types first: a string from a config file ("1e-3") is named, not compared with 0
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.type in ("float", "float | None", "int", "int | None") and value is not None:
+                integral = f.type.startswith("int")
+                kind = numbers.Integral if integral else numbers.Real
+                if not isinstance(value, kind) or isinstance(value, bool) or (
+                        not integral and not math.isfinite(value)):
+                    raise ValueError(f"Expected {'an integer' if integral else 'a finite number'}"
+                                     f" '{f.name}' (got {value!r}, {type(value).__name__})")
+            elif f.type == "bool" and not isinstance(value, bool):
+                raise ValueError(f"Expected a bool '{f.name}' (got {value!r}, "
+                                 f"{type(value).__name__})")
         if self.dataset not in DATASETS:
             raise ValueError(f"Expected dataset in {DATASETS} (got {self.dataset!r})")
         if self.matches not in ("ground_truth", "frontend"):

@@ -603,7 +603,7 @@ def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> T
         out = {}
         for item in items:
             if "=" not in item:
-                ap.error(f"expected KEY=VALUE (got {item!r})")
+                ap.error(f"Expected --set KEY=VALUE (got {item!r})")
             k, v = item.split("=", 1)
             out[k] = _parse_value(v)
         return out

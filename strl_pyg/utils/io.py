@@ -125,6 +125,25 @@ def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
         raise
 
 
+def _check_zip_crc(path: Path, what: str) -> None:
+    """``ValueError`` when a zip-format torch file has a record whose bytes no longer match
+    their CRC-32 (a damaged copy: ``torch.load`` does not check them and would load changed
+    weights). Legacy non-zip files are left to ``torch.load``."""
+    import zipfile
+
+    try:
+        if not zipfile.is_zipfile(path):
+            return
+        with zipfile.ZipFile(path) as z:
+            bad = z.testzip()
+    except (zipfile.BadZipFile, OSError, EOFError, RuntimeError) as err:
+        raise ValueError(f"Expected a readable {what} at '{path}' (got a damaged archive: "
+                         f"{one_line(err)})") from None
+    if bad is not None:
+        raise ValueError(f"Expected a readable {what} at '{path}' (got a damaged file: record "
+                         f"'{bad}' fails its checksum; copy or download it again)")
+
+
 def safe_torch_load(path: str | os.PathLike, what: str = "checkpoint",
                     map_location: Any = "cpu") -> Any:
     """``torch.load(path, weights_only=True)`` with one-line errors.
@@ -143,6 +162,9 @@ def safe_torch_load(path: str | os.PathLike, what: str = "checkpoint",
         raise IsADirectoryError(f"Expected a {what} file at '{path}' (got a folder)")
     if not path.is_file():
         raise FileNotFoundError(f"Expected a {what} file at '{path}' (got no such file)")
+    if path.stat().st_size == 0:
+        raise ValueError(f"Expected a readable {what} at '{path}' (got an empty file, 0 bytes)")
+    _check_zip_crc(path, what)
     try:
         return torch.load(path, map_location=map_location, weights_only=True)
     except pickle.UnpicklingError as err:
