@@ -279,3 +279,39 @@ def test_a_file_that_is_not_a_skipped_step_is_one_line(tmp_path):
     torch.save({"step": 3}, tmp_path / "x.pt")
     with pytest.raises(ValueError, match="Expected a skipped-step file"):
         loop.load_skipped_step(tmp_path / "x.pt")
+
+
+def test_resume_takes_what_the_command_line_left_out_from_the_run(tmp_path, capsys):
+    # reproduction: `train.py --out RUN --resume --steps 6` was refused with every option the
+    # run was started with listed as a difference: resuming meant retyping the whole command
+    import argparse
+    from dataclasses import asdict, replace
+
+    from strl_pyg.training.config import add_train_arguments
+    from strl_pyg.training.loop import config_from_args, settings_from_run
+
+    out = tmp_path / "run"
+    first = _cfg(out, steps=4, val_every=4, lr=1e-3)
+    train(first, progress=False)
+    ap = argparse.ArgumentParser()
+    add_train_arguments(ap)
+    # the command `--out RUN --steps 6 --resume`: everything else at the parser's defaults
+    given = config_from_args(ap.parse_args(["--out", str(out), "--steps", "6"]), ap)
+    cfg, taken = settings_from_run(given)
+    assert taken["train_pairs"] == 4 and taken["lr"] == 1e-3 and "steps" not in taken
+    assert taken["model_overrides"] == {"hidden": 16, "layers": 1, "heads": 2}
+    assert cfg.steps == 6 and cfg.out_dir == str(out)
+    own = ("steps", "tensorboard", "num_workers", "device")  # this command's, not the run's
+    assert ({k: v for k, v in asdict(cfg).items() if k not in own}
+            == {k: v for k, v in asdict(first).items() if k not in own})
+    assert train(cfg, resume=True, progress=False)["step"] == 6
+    # a value the command line does give is still checked against the run
+    given = config_from_args(ap.parse_args(["--out", str(out), "--steps", "8",
+                                            "--batch-size", "3"]), ap)
+    cfg, taken = settings_from_run(given)
+    assert "batch_size" not in taken
+    with pytest.raises(ValueError, match=r"'batch_size': \(2, 3\)"):
+        train(cfg, resume=True, progress=False)
+    # no run there: nothing taken
+    fresh = replace(given, out_dir=str(tmp_path / "none"))
+    assert settings_from_run(fresh) == (fresh, {})

@@ -629,10 +629,44 @@ def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> T
     )
 
 
+def settings_from_run(cfg: TrainConfig) -> tuple[TrainConfig, dict[str, Any]]:
+    """For ``--resume``: ``cfg`` with the settings its command line left at their defaults
+    taken from the run's ``last.pt`` (so ``--out RUN --resume`` continues a run without
+    retyping its options), and what was taken. The run folder, device and workers stay this
+    command's; a setting given on the command line is kept and checked against the run as
+    before. No ``last.pt``: ``cfg`` unchanged (:func:`train` reports it)."""
+    last = Path(cfg.out_dir) / "last.pt"
+    if not last.is_file():
+        return cfg, {}
+    saved = load_checkpoint(last).get("train_config")
+    if not isinstance(saved, dict):
+        return cfg, {}
+    defaults_ap = argparse.ArgumentParser(add_help=False)
+    add_train_arguments(defaults_ap)
+    base = config_from_args(defaults_ap.parse_args([]), defaults_ap)
+    taken = {}
+    for k, v in saved.items():
+        if k in ("out_dir", "device", "num_workers") or not hasattr(cfg, k):
+            continue
+        now = getattr(cfg, k)
+        if now == getattr(base, k) and v != now:
+            taken[k] = v
+    if not taken:
+        return cfg, {}
+    return TrainConfig.from_dict({**asdict(cfg), **taken}), taken
+
+
 def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
-    """Runs training from parsed :func:`add_train_arguments` flags; returns an exit code."""
+    """Runs training from parsed :func:`add_train_arguments` flags; returns an exit code.
+    With ``--resume``, what the command line leaves at its defaults comes from the run
+    (:func:`settings_from_run`, printed)."""
     try:
         cfg = config_from_args(args, ap)
+        if args.resume and not args.overwrite:
+            cfg, taken = settings_from_run(cfg)
+            if taken and int(os.environ.get("RANK", "0")) == 0:
+                print("resuming with the run's own settings for what the command left out: "
+                      + ", ".join(f"{k}={v!r}" for k, v in taken.items()))
         cfg.model_config()  # validate the model overrides before any work
         check_device(cfg.device)
         if args.resume and args.overwrite:
