@@ -29,11 +29,11 @@ from strl_pyg.cli.guard import OneLineArgumentParser, run_guarded
 from strl_pyg.training.config import add_train_arguments
 
 
-def _run(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
+def _run(args: argparse.Namespace, ap: argparse.ArgumentParser, argv: list[str]) -> int:
     check_train_files(args)  # before torch is imported
     from strl_pyg.training.loop import run_from_args
 
-    return run_from_args(args, ap)
+    return run_from_args(args, ap, argv)  # argv: what --resume takes from the run
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -41,7 +41,8 @@ def main(argv: list[str] | None = None) -> int:
                                formatter_class=argparse.RawDescriptionHelpFormatter)
     add_train_arguments(ap)
     # parsed under the guard: a bad flag or value is one error line, as in `strl-pose train`
-    return run_guarded(lambda: _run(ap.parse_args(argv), ap))
+    argv = sys.argv[1:] if argv is None else list(argv)
+    return run_guarded(lambda: _run(ap.parse_args(argv), ap, argv))
 
 
 if __name__ == "__main__":

@@ -220,3 +220,22 @@ def test_an_empty_file_is_named_as_such(tmp_path):
     path.write_bytes(b"")
     with pytest.raises(ValueError, match=r"got an empty file, 0 bytes"):
         StrLPose.load(path)
+
+
+def test_init_from_names_geometric_only_where_it_is_not_allowed(tmp_path):
+    # adding the geometric head to regression-only weights is allowed, so that difference is
+    # not listed; the other direction fails (the file's head has nowhere to go) and says why
+    plain = tmp_path / "plain.pt"
+    geo = tmp_path / "geo.pt"
+    tiny_model().save(plain)
+    StrLPose(StrLPoseConfig(hidden=16, layers=1, heads=2, patch_features=1,
+                            geometric=True)).save(geo)
+    _init_weights(StrLPose(StrLPoseConfig(hidden=16, layers=1, heads=2, patch_features=1,
+                                          geometric=True)), plain)  # allowed
+    with pytest.raises(ValueError, match=r"geometric True vs False"):
+        _init_weights(tiny_model(), geo)
+    wider = StrLPose(StrLPoseConfig(hidden=32, layers=1, heads=2, patch_features=1,
+                                    geometric=True))
+    with pytest.raises(ValueError, match=r"hidden 16 vs 32") as exc:
+        _init_weights(wider, plain)
+    assert "geometric False vs True" not in str(exc.value)

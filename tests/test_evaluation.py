@@ -306,7 +306,7 @@ def test_sequences_take_commas_as_train_sequences_do(tiny_checkpoint):
     # pairs, while train.py's --train-sequences takes the comma-separated form
     from strl_pyg.evaluation import run
 
-    for given in (["06,07"], ["06", "07"], ["06,", "07"]):
+    for given in (["06,07"], ["06", "07"], ["06,", "07"], ["06, 07"]):
         args = run.build_parser(None).parse_args(
             ["--checkpoint", str(tiny_checkpoint), "--sequences", *given])
         run._checked(args)

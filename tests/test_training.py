@@ -99,6 +99,22 @@ def test_config_names_a_value_of_the_wrong_type(kwargs, message):
     TrainConfig(lr=1e-3, steps=10, grad_clip=None, tensorboard=False, beta=1)  # numbers are fine
 
 
+def test_config_takes_numpy_scalars_as_plain_values_and_inf_where_it_means_off():
+    # review: np.float32 passed the type check, then config.json could not be written
+    import json
+    from dataclasses import asdict
+
+    import numpy as np
+
+    cfg = TrainConfig(lr=np.float32(0.5), steps=np.int64(10), tensorboard=np.False_,
+                      grad_clip=float("inf"), checkpoint_minutes=float("inf"))
+    assert type(cfg.lr) is float and type(cfg.steps) is int and cfg.tensorboard is False
+    assert cfg.lr == 0.5 and cfg.steps == 10
+    json.dumps(asdict(cfg))
+    with pytest.raises(ValueError, match=r"Expected a finite number 'lr' \(got inf"):
+        TrainConfig(lr=float("inf"))
+
+
 def _random_poses(log_var):
     """Four random predicted poses with these log-variances, and a forward ground truth."""
     import torch

@@ -281,23 +281,26 @@ def test_a_file_that_is_not_a_skipped_step_is_one_line(tmp_path):
         loop.load_skipped_step(tmp_path / "x.pt")
 
 
-def test_resume_takes_what_the_command_line_left_out_from_the_run(tmp_path, capsys):
+def test_resume_takes_what_the_command_line_left_out_from_the_run(tmp_path):
     # reproduction: `train.py --out RUN --resume --steps 6` was refused with every option the
     # run was started with listed as a difference: resuming meant retyping the whole command
     import argparse
     from dataclasses import asdict, replace
 
     from strl_pyg.training.config import add_train_arguments
-    from strl_pyg.training.loop import config_from_args, settings_from_run
+    from strl_pyg.training.loop import config_from_args, given_fields, settings_from_run
 
     out = tmp_path / "run"
     first = _cfg(out, steps=4, val_every=4, lr=1e-3)
     train(first, progress=False)
     ap = argparse.ArgumentParser()
     add_train_arguments(ap)
-    # the command `--out RUN --steps 6 --resume`: everything else at the parser's defaults
-    given = config_from_args(ap.parse_args(["--out", str(out), "--steps", "6"]), ap)
-    cfg, taken = settings_from_run(given)
+
+    def resumed(*flags):
+        argv = ["--out", str(out), "--resume", *flags]
+        return settings_from_run(config_from_args(ap.parse_args(argv), ap), given_fields(argv))
+
+    cfg, taken = resumed("--steps", "6")
     assert taken["train_pairs"] == 4 and taken["lr"] == 1e-3 and "steps" not in taken
     assert taken["model_overrides"] == {"hidden": 16, "layers": 1, "heads": 2}
     assert cfg.steps == 6 and cfg.out_dir == str(out)
@@ -305,13 +308,45 @@ def test_resume_takes_what_the_command_line_left_out_from_the_run(tmp_path, caps
     assert ({k: v for k, v in asdict(cfg).items() if k not in own}
             == {k: v for k, v in asdict(first).items() if k not in own})
     assert train(cfg, resume=True, progress=False)["step"] == 6
-    # a value the command line does give is still checked against the run
-    given = config_from_args(ap.parse_args(["--out", str(out), "--steps", "8",
-                                            "--batch-size", "3"]), ap)
-    cfg, taken = settings_from_run(given)
-    assert "batch_size" not in taken
+    # a value the command line gives is kept and checked against the run, also when it is
+    # the parser's default (review: `--steps 2000` equal to the default was replaced by the
+    # run's 4, and the run said it had finished)
+    default_steps = ap.get_default("steps")
+    cfg, taken = resumed("--steps", str(default_steps), "--batch-size", "3")
+    assert "steps" not in taken and "batch_size" not in taken and cfg.steps == default_steps
     with pytest.raises(ValueError, match=r"'batch_size': \(2, 3\)"):
         train(cfg, resume=True, progress=False)
+    cfg, taken = resumed("--lr", str(ap.get_default("lr")))  # the default lr, given
+    assert "lr" not in taken
+    with pytest.raises(ValueError, match=r"'lr': \(0.001, "):
+        train(cfg, resume=True, progress=False)
+    # a run saved before `loss` existed reads as the paper's loss, as _resume reads it
+    # (review: the raw dict left `loss` out, and the resume then failed on it)
+    from strl_pyg.training.checkpoints import load_checkpoint, save_checkpoint
+
+    state = load_checkpoint(out / "last.pt")
+    del state["train_config"]["loss"]
+    save_checkpoint(out / "last.pt", state)
+    cfg, taken = resumed()
+    assert taken["loss"] == "paper" and cfg.loss == "paper"
     # no run there: nothing taken
-    fresh = replace(given, out_dir=str(tmp_path / "none"))
-    assert settings_from_run(fresh) == (fresh, {})
+    fresh = replace(cfg, out_dir=str(tmp_path / "none"))
+    assert settings_from_run(fresh, set()) == (fresh, {})
+
+
+def test_every_training_flag_names_a_config_field():
+    """given_fields maps flags to TrainConfig fields: a new flag must map to one (or be
+    marked as not a setting of the run), else --resume would take it from the run."""
+    import argparse
+    from dataclasses import fields
+
+    from strl_pyg.training.config import add_train_arguments
+    from strl_pyg.training.loop import FLAG_FIELDS, given_fields
+
+    ap = argparse.ArgumentParser()
+    add_train_arguments(ap)
+    names = {f.name for f in fields(TrainConfig)}
+    for action in ap._actions:
+        assert FLAG_FIELDS.get(action.dest, action.dest) in names | {None}, action.dest
+    assert given_fields(["--set", "hidden=8", "--no-tensorboard", "--steps", "3", "--resume",
+                         "train"]) == {"model_overrides", "tensorboard", "steps"}

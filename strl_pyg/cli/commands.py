@@ -422,11 +422,11 @@ def _read_match_file(args):
         raise UsageError(str(err).splitlines()[0]) from None
 
 
-def cmd_train(args, parser) -> int:
+def cmd_train(args, parser, argv: list[str] | None = None) -> int:
     check_train_files(args)  # before torch is imported
     from strl_pyg.training.loop import run_from_args
 
-    return run_from_args(args, parser)
+    return run_from_args(args, parser, argv)
 
 
 def check_train_files(args) -> None:
@@ -546,7 +546,7 @@ def _dispatch(argv: list[str]) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "train":
-        return cmd_train(args, parser)
+        return cmd_train(args, parser, argv)
     if args.command == "bench":
         from strl_pyg.cli.bench import cmd_bench
 

@@ -310,7 +310,8 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
 def _checked(args: argparse.Namespace) -> Path:
     """Checks the paths, methods and device of parsed flags; returns the checkpoint path."""
     # "06,07" as train.py's --train-sequences takes it, or "06 07"
-    args.sequences = [q for item in args.sequences for q in item.split(",") if q.strip()]
+    args.sequences = [q.strip() for item in args.sequences for q in item.split(",")
+                      if q.strip()]
     ckpt = Path(args.checkpoint)
     if not ckpt.is_file():
         raise _UsageError(f"Expected a checkpoint file at '{ckpt}' (got none)")

@@ -157,11 +157,11 @@ def load_training_model(path: str | os.PathLike):
 
 def _mismatch(model: Any, state: dict[str, Any], saved_config: dict[str, Any] | None,
               allow_missing: tuple[str, ...] = (), shown: int = 3,
-              allowed_fields: tuple[str, ...] = ()) -> str:
+              allowed: dict[str, tuple[Any, Any]] | None = None) -> str:
     """What keeps ``state`` out of ``model`` (``""`` when nothing): mis-shaped, missing and
     unexpected keys (the first ``shown`` of each, version-1 names upgraded) and the config
-    fields in which ``saved_config`` differs from the model's (but ``allowed_fields``, which
-    may differ)."""
+    fields in which ``saved_config`` differs from the model's (but the differences
+    ``allowed`` names as ``{field: (file value, model value)}``)."""
     from strl_pyg.model.strl_pose import upgrade_key
 
     own = model.state_dict()
@@ -182,7 +182,8 @@ def _mismatch(model: Any, state: dict[str, Any], saved_config: dict[str, Any] | 
     if parts and isinstance(saved_config, dict):
         mine = model.config.to_dict()
         diff = [f"{k} {saved_config[k]!r} vs {mine[k]!r}" for k in mine
-                if k in saved_config and saved_config[k] != mine[k] and k not in allowed_fields]
+                if k in saved_config and saved_config[k] != mine[k]
+                and (allowed or {}).get(k) != (saved_config[k], mine[k])]
         if diff:
             parts.insert(0, "config fields (file vs model) " + ", ".join(diff))
     return "; ".join(parts)
@@ -206,7 +207,7 @@ def init_weights(model: Any, path: str | os.PathLike) -> None:
     # A model that adds the geometric head may start from regression-only weights: the new
     # head's parameters are the only ones allowed to be missing.
     problems = _mismatch(model, state, saved_config, allow_missing=("inlier_head.",),
-                         allowed_fields=("geometric",))
+                         allowed={"geometric": (False, True)})  # adding the head only
     if problems:
         raise ValueError(f"Expected weights matching this run's model config in '{path}' "
                          f"(got {problems})")

@@ -39,6 +39,10 @@ ABLATION_NAMES = ("baseline", "L", "LP", "R", "V", "LP+R", "LP+V", "V+W", "full"
 LR_SCHEDULES = ("constant", "cosine")
 
 
+#: Float settings where ``inf`` means "never" / "off" (the clip, the checkpoint interval).
+_INF_FIELDS = ("grad_clip", "checkpoint_minutes")
+
+
 @dataclass
 class TrainConfig:
     """Everything that decides a training run (stored in each checkpoint)."""
@@ -109,16 +113,25 @@ class TrainConfig:
         import math
         import numbers
 
+        import numpy as np
+
         # types first: a string from a config file ("1e-3") is named, not compared with 0
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
+            if isinstance(value, np.generic):  # numpy scalars as Python ones: the run's
+                value = value.item()           # config.json and last.pt hold plain values
+                setattr(self, f.name, value)
             if f.type in ("float", "float | None", "int", "int | None") and value is not None:
                 integral = f.type.startswith("int")
                 kind = numbers.Integral if integral else numbers.Real
-                if not isinstance(value, kind) or isinstance(value, bool) or (
-                        not integral and not math.isfinite(value)):
-                    raise ValueError(f"Expected {'an integer' if integral else 'a finite number'}"
-                                     f" '{f.name}' (got {value!r}, {type(value).__name__})")
+                # +inf is "never" / "off" where these read it so
+                bad = not isinstance(value, kind) or isinstance(value, bool) or (
+                    not integral and not math.isfinite(value)
+                    and not (value == math.inf and f.name in _INF_FIELDS))
+                if bad:
+                    what = "an integer" if integral else "a finite number"
+                    raise ValueError(f"Expected {what} '{f.name}' (got {value!r}, "
+                                     f"{type(value).__name__})")
             elif f.type == "bool" and not isinstance(value, bool):
                 raise ValueError(f"Expected a bool '{f.name}' (got {value!r}, "
                                  f"{type(value).__name__})")

@@ -629,41 +629,55 @@ def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> T
     )
 
 
-def settings_from_run(cfg: TrainConfig) -> tuple[TrainConfig, dict[str, Any]]:
-    """For ``--resume``: ``cfg`` with the settings its command line left at their defaults
-    taken from the run's ``last.pt`` (so ``--out RUN --resume`` continues a run without
-    retyping its options), and what was taken. The run folder, device and workers stay this
-    command's; a setting given on the command line is kept and checked against the run as
-    before. No ``last.pt``: ``cfg`` unchanged (:func:`train` reports it)."""
+#: ``add_train_arguments`` flags whose destination is not the :class:`TrainConfig` field of the
+#: same name (``None``: not a setting of the run).
+FLAG_FIELDS = {"set": "model_overrides", "workers": "num_workers", "out": "out_dir",
+               "no_tensorboard": "tensorboard", "resume": None, "overwrite": None,
+               "no_progress": None, "help": None}
+
+
+def given_fields(argv: Sequence[str]) -> set[str]:
+    """The :class:`TrainConfig` fields that the command line ``argv`` sets explicitly (a flag
+    given with the default value counts as given); tokens that are not training flags are
+    ignored."""
+    ap = argparse.ArgumentParser(add_help=False, argument_default=argparse.SUPPRESS)
+    add_train_arguments(ap)
+    for action in ap._actions:
+        action.default = argparse.SUPPRESS
+    given, _ = ap.parse_known_args(list(argv))
+    return {FLAG_FIELDS.get(dest, dest) for dest in vars(given)} - {None}
+
+
+def settings_from_run(cfg: TrainConfig, given: set[str]) -> tuple[TrainConfig, dict[str, Any]]:
+    """For ``--resume``: ``cfg`` with every setting its command line did not give (``given``:
+    :func:`given_fields`) taken from the run's ``last.pt``, so ``--out RUN --resume``
+    continues a run without retyping its options, and what was taken. The run folder, device
+    and workers stay this command's; what the command gives is kept (and checked against the
+    run by :func:`train`). No ``last.pt``: ``cfg`` unchanged (:func:`train` reports it)."""
     last = Path(cfg.out_dir) / "last.pt"
     if not last.is_file():
         return cfg, {}
-    saved = load_checkpoint(last).get("train_config")
-    if not isinstance(saved, dict):
+    raw = load_checkpoint(last).get("train_config")
+    if not isinstance(raw, dict):
         return cfg, {}
-    defaults_ap = argparse.ArgumentParser(add_help=False)
-    add_train_arguments(defaults_ap)
-    base = config_from_args(defaults_ap.parse_args([]), defaults_ap)
-    taken = {}
-    for k, v in saved.items():
-        if k in ("out_dir", "device", "num_workers") or not hasattr(cfg, k):
-            continue
-        now = getattr(cfg, k)
-        if now == getattr(base, k) and v != now:
-            taken[k] = v
+    saved = asdict(TrainConfig.from_dict(raw))  # older runs: the fields added since, filled
+    own = {"out_dir", "device", "num_workers"} | set(given)
+    taken = {k: v for k, v in saved.items() if k not in own and getattr(cfg, k) != v}
     if not taken:
         return cfg, {}
     return TrainConfig.from_dict({**asdict(cfg), **taken}), taken
 
 
-def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
+def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser,
+                  argv: Sequence[str] | None = None) -> int:
     """Runs training from parsed :func:`add_train_arguments` flags; returns an exit code.
-    With ``--resume``, what the command line leaves at its defaults comes from the run
-    (:func:`settings_from_run`, printed)."""
+    With ``--resume`` and the command line ``argv``, the settings it does not give come from
+    the run (:func:`settings_from_run`, printed); without ``argv``, every setting must match
+    the run."""
     try:
         cfg = config_from_args(args, ap)
-        if args.resume and not args.overwrite:
-            cfg, taken = settings_from_run(cfg)
+        if args.resume and not args.overwrite and argv is not None:
+            cfg, taken = settings_from_run(cfg, given_fields(argv))
             if taken and int(os.environ.get("RANK", "0")) == 0:
                 print("resuming with the run's own settings for what the command left out: "
                       + ", ".join(f"{k}={v!r}" for k, v in taken.items()))
