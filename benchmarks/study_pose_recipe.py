@@ -573,8 +573,8 @@ def plot(runs: dict[str, dict], path: Path) -> None:
     fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=7, frameon=False,
                title="matches-variant (mean over seeds; band: the seeds' range)",
                title_fontsize=7)
-    fig.suptitle("Training recipe study (baseline row; solid: front-end matches, "
-                 "dashed: generator's matches)")
+    fig.suptitle("Training recipe study (baseline row unless the run names another; solid: "
+                 "front-end matches, dashed: generator's matches)")
     rows = -(-len(variants) // 4)
     fig.tight_layout(rect=(0, min(0.5, (0.35 + 0.16 * rows) / fig.get_figheight()), 1, 1))
     path.parent.mkdir(parents=True, exist_ok=True)
