@@ -487,15 +487,12 @@ def _add_pair_args(p: argparse.ArgumentParser, optional_images: bool = False) ->
                         f"alike (default {MAX_SIDE}; 0: full resolution)")
 
 
-_Parser = OneLineArgumentParser  # the name earlier code used
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The ``strl-pose`` parser; building it imports neither torch nor the training code."""
     from strl_pyg.training.config import add_train_arguments
 
-    ap = _Parser(prog="strl-pose", description=__doc__,
-                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = OneLineArgumentParser(prog="strl-pose", description=__doc__,
+                               formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="command", required=True)
     p = sub.add_parser("demo", help="the main job on a generated pair (no downloads)")
     p.add_argument("--seed", type=non_negative_int, default=DEMO_SEED)

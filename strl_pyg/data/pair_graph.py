@@ -85,7 +85,9 @@ class CompleteEdges:
         def move(b):
             return None if b is None else b.to(device, non_blocking=non_blocking)
 
-        return CompleteEdges(move(self.batch_src), move(self.batch_dst))
+        src = move(self.batch_src)  # ids shared by source and target move once
+        return CompleteEdges(src, src if self.batch_dst is self.batch_src
+                             else move(self.batch_dst))
 
     def __repr__(self) -> str:
         def n(b):

@@ -109,14 +109,13 @@ class TrainConfig:
     geo_ess_start: int = 200  # ... from this step on (the classifier learns first)
 
     def __post_init__(self) -> None:
-        import dataclasses
         import math
         import numbers
 
         import numpy as np
 
         # types first: a string from a config file ("1e-3") is named, not compared with 0
-        for f in dataclasses.fields(self):
+        for f in fields(self):
             value = getattr(self, f.name)
             if isinstance(value, np.generic):  # numpy scalars as Python ones: the run's
                 value = value.item()           # config.json and last.pt hold plain values
