@@ -171,6 +171,21 @@ def test_evaluate_user_errors_are_one_line_and_exit_2(flags, expected, tiny_chec
     _one_error_line(capsys, expected)
 
 
+def test_evaluate_shares_the_cli_parser_and_suggests_a_flag(tiny_checkpoint, capsys):
+    """`strl-pose evaluate` kept its own near-copy of the one-line parser, without the other
+    commands' "did you mean" for a mistyped flag; one parser and one UsageError now."""
+    from strl_pyg import cli, utils
+    from strl_pyg.evaluation import run
+
+    assert cli.UsageError is utils.UsageError
+    assert isinstance(run.build_parser(), utils.OneLineArgumentParser)
+    argv = ["--checkpoint", str(tiny_checkpoint), "--num-piars", "3"]
+    assert cli.main(["evaluate", *argv]) == 2
+    _one_error_line(capsys, "did you mean --num-pairs?")
+    assert _script().main(argv) == 2
+    _one_error_line(capsys, "did you mean --num-pairs?")
+
+
 def test_evaluate_refuses_a_corrupt_checkpoint_in_one_line(tmp_path, capsys):
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"not a checkpoint")

@@ -4,11 +4,10 @@ Ctrl-C with 130."""
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 
-from strl_pyg.cli.readers import UsageError
+from strl_pyg.utils.commandline import OneLineArgumentParser, UsageError
 
 __all__ = ["run_guarded", "OneLineArgumentParser"]
 
@@ -58,42 +57,3 @@ def run_guarded(fn, *args) -> int:
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
-
-
-class OneLineArgumentParser(argparse.ArgumentParser):
-    """An ``argparse`` parser that reports a bad command line as one line (``UsageError``:
-    ``error: Expected valid arguments (got ...); did you mean ...?`` and exit code 2 under
-    :func:`run_guarded`) instead of argparse's usage block; parse inside ``run_guarded``."""
-
-    def error(self, message: str):
-        if message.startswith("Expected"):  # the caller's own one-line message
-            raise UsageError(message)
-        hint = _did_you_mean(self, message)
-        raise UsageError(f"Expected valid arguments (got {message}){hint}; see "
-                         f"'{self.prog} --help'")
-
-
-def _did_you_mean(parser: argparse.ArgumentParser, message: str) -> str:
-    """``", did you mean --K?"`` for an unrecognised flag close to one of the parser's or of
-    its commands' (case first: ``--k`` is ``--K``)."""
-    import difflib
-
-    if "unrecognized arguments:" not in message:
-        return ""
-    options = set(parser._option_string_actions)
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            for sub in action.choices.values():
-                options |= set(sub._option_string_actions)
-    hints = []
-    for token in message.split("unrecognized arguments:", 1)[1].split():
-        flag = token.split("=", 1)[0]
-        if not flag.startswith("-"):
-            continue
-        same_case = [o for o in options if o.lower() == flag.lower()]
-        close = same_case or difflib.get_close_matches(flag, sorted(options), n=1, cutoff=0.75)
-        if close:
-            hints.append((flag, close[0]))
-    if len(hints) == 1:
-        return f"; did you mean {hints[0][1]}?"
-    return "; did you mean " + ", ".join(f"{c} for {f}" for f, c in hints) + "?" if hints else ""

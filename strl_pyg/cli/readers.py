@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from strl_pyg.utils.commandline import UsageError
+
 __all__ = ["UsageError", "MAX_SIDE", "read_image_file", "read_intrinsics",
            "downscale_for_matching", "PairInputs", "read_pair", "non_negative_int",
            "bootstrap_count"]
@@ -22,10 +24,6 @@ __all__ = ["UsageError", "MAX_SIDE", "read_image_file", "read_intrinsics",
 #: A 6000x4000 pair at full resolution took 5.6 GB and 48 s in `strl-pose match`; 0.5 GB and
 #: 2.4 s at 1600 (2 CPU cores).
 MAX_SIDE = 1600
-
-
-class UsageError(ValueError):
-    """Bad input from the command line (printed without a traceback, exit code 2)."""
 
 
 def read_image_file(path: str | os.PathLike) -> np.ndarray:

@@ -58,6 +58,7 @@ from strl_pyg.metrics.two_view import (  # noqa: F401  (names this module had be
     relative_pose_error,
 )
 from strl_pyg.synthetic.config import LINE_SCENE_KINDS, SCENE_KINDS
+from strl_pyg.utils.commandline import OneLineArgumentParser, UsageError
 from strl_pyg.utils.io import one_line
 
 __all__ = [
@@ -227,19 +228,6 @@ def evaluate_pairs(
 
 
 # ----------------------------------------------------------------------------- command line
-class _UsageError(ValueError):
-    """A bad evaluation command line; :func:`main` prints it as one line, exit code 2."""
-
-
-class _Parser(argparse.ArgumentParser):
-    """Reports a bad flag or value as one :class:`_UsageError` line, not a usage block."""
-
-    def error(self, message: str):
-        if not message.startswith("Expected"):
-            message = f"Expected valid arguments (got {message}); see '{self.prog} --help'"
-        raise _UsageError(one_line(message))
-
-
 def _number(kind: type, low: float, what: str, high: float = math.inf):
     """An argparse ``type``: a finite ``kind`` in ``[low, high)`` or a one-line error."""
     def parse(text: str):
@@ -261,7 +249,7 @@ _NON_NEGATIVE_INT = _number(int, 0, "an integer >= 0")
 def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     """The flags of ``examples/evaluate.py`` and ``strl-pose evaluate``; a bad flag or value
     raises a one-line ``ValueError`` ("Expected ... (got ...)") instead of exiting."""
-    p = _Parser(prog=prog, description=(
+    p = OneLineArgumentParser(prog=prog, description=(
         "Evaluates a Str-L Pose checkpoint against the classical baselines and the fused pose."),
                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     from strl_pyg.training.checkpoints import default_checkpoint
@@ -314,39 +302,39 @@ def _checked(args: argparse.Namespace) -> Path:
                       if q.strip()]
     ckpt = Path(args.checkpoint)
     if not ckpt.is_file():
-        raise _UsageError(f"Expected a checkpoint file at '{ckpt}' (got none)")
+        raise UsageError(f"Expected a checkpoint file at '{ckpt}' (got none)")
     if args.dataset != "synthetic":
         if not args.data_root:
-            raise _UsageError(f"Expected --data-root for --dataset {args.dataset} (got none)")
+            raise UsageError(f"Expected --data-root for --dataset {args.dataset} (got none)")
         if not Path(args.data_root).is_dir():
-            raise _UsageError(f"Expected a data folder at '{args.data_root}' (got none)")
+            raise UsageError(f"Expected a data folder at '{args.data_root}' (got none)")
     if args.methods is not None:
         try:
             args.methods = list(resolve_methods(args.methods, True))
         except ValueError as err:
-            raise _UsageError(one_line(err)) from None
+            raise UsageError(one_line(err)) from None
         missing = sorted(set(args.methods) - set(available_methods()))
         if missing:
-            raise _UsageError(f"Expected available methods (got {missing}: is PoseLib "
+            raise UsageError(f"Expected available methods (got {missing}: is PoseLib "
                               "installed?)")
     try:
         torch.device(args.device)
     except RuntimeError:
-        raise _UsageError(f"Expected a torch device such as 'cpu' or 'cuda' for --device "
+        raise UsageError(f"Expected a torch device such as 'cpu' or 'cuda' for --device "
                           f"(got {args.device!r})") from None
     from strl_pyg.training.loop import check_device
 
     try:  # before the checkpoint is mapped onto it (an absent device blamed the checkpoint)
         check_device(args.device)
     except ValueError as err:
-        raise _UsageError(one_line(err)) from None
+        raise UsageError(one_line(err)) from None
     if args.out:
         from strl_pyg.utils.io import check_output_dir
 
         try:
             check_output_dir(args.out, "a folder for --out")  # before any work
         except OSError as err:
-            raise _UsageError(one_line(err)) from None
+            raise UsageError(one_line(err)) from None
     return ckpt
 
 
@@ -359,7 +347,7 @@ def _run(argv: list[str] | None, prog: str | None) -> int:
         model = StrLPose.load(ckpt, map_location=args.device)
     except (OSError, ValueError, TypeError, KeyError, RuntimeError) as err:
         text = one_line(err)
-        raise _UsageError(text if text.startswith("Expected") else (
+        raise UsageError(text if text.startswith("Expected") else (
             f"Expected a StrLPose checkpoint at '{ckpt}' (got {text})")) from None
     progress = not args.no_progress
     try:
@@ -377,9 +365,9 @@ def _run(argv: list[str] | None, prog: str | None) -> int:
                                      args.frame_gap, limit=args.limit, num_workers=args.workers,
                                      progress=progress, on_missing="skip")
     except (FileNotFoundError, ValueError) as err:
-        raise _UsageError(one_line(err)) from None
+        raise UsageError(one_line(err)) from None
     if not pairs:
-        raise _UsageError(f"Expected pairs to evaluate in {args.dataset} (got none)")
+        raise UsageError(f"Expected pairs to evaluate in {args.dataset} (got none)")
     meta = {"checkpoint": str(ckpt), "dataset": args.dataset, "pairs": len(pairs),
             "resample": "none" if args.no_resample else f"checkpoint's counts, seed "
                                                               f"{args.resample_seed}"}
@@ -403,7 +391,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     value, a missing checkpoint, data folder or pairs, or an unwritable ``--out``."""
     try:
         return _run(argv, prog)
-    except _UsageError as err:
+    except UsageError as err:
         print(f"error: {one_line(err)}", file=sys.stderr)
         return 2
 

@@ -2,7 +2,7 @@
 (:mod:`.lazy`), strict dataclass-from-dict (:mod:`.dataclass`), atomic writes and safe
 ``torch.load`` (:mod:`.io`), image checks and decoding (:mod:`.images`), large NumPy products
 through PyTorch's BLAS (:mod:`.products`), fork-safe process-wide thread pools
-(:mod:`.threads`).
+(:mod:`.threads`), one-line command-line errors (:mod:`.commandline`).
 """
 
 from __future__ import annotations
@@ -23,6 +23,8 @@ __all__ = [
     "check_image",
     "to_uint8",
     "FRONTEND_MIN_SIDE",
+    "UsageError",
+    "OneLineArgumentParser",
 ]
 
 __getattr__, __dir__ = lazy_exports(__name__, {
@@ -39,4 +41,6 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "check_image": "strl_pyg.utils.images",
     "to_uint8": "strl_pyg.utils.images",
     "FRONTEND_MIN_SIDE": "strl_pyg.utils.images",
+    "UsageError": "strl_pyg.utils.commandline",
+    "OneLineArgumentParser": "strl_pyg.utils.commandline",
 }, globals())
