@@ -20,7 +20,8 @@ Writes ``results_roll/<label>.json``; ``--report`` writes ``results_roll.md`` an
 ``figures/roll.png``. ``--verify`` asks whether the roll can be found at inference time
 without retraining: the network is run under four roll hypotheses (0, 90, 180, -90 deg), each
 answer rolled back, and the one whose pose has the smallest median Sampson distance on the
-pair's point matches is kept (the way a robust estimator scores its candidates); it writes
+pair's point matches is kept (the way a robust estimator scores its candidates), and
+separately the one with the smallest predicted translation variance; it writes
 ``results_roll/verify/<label>.json``, a table in the report.
 """
 
@@ -108,12 +109,13 @@ def verify(model, sets: dict[str, list]) -> dict[str, dict[str, list]]:
 
     res: dict[str, dict[str, list]] = {}
     for name, items in sets.items():
-        r = res[name] = {"as_is": [], "verified": [], "best": [], "picked": []}
+        r = res[name] = {"as_is": [], "verified": [], "best": [], "picked": [], "by_sigma": [],
+                         "picked_sigma": []}
         for g in items:
             truth = g[K.T_0TO1].reshape(4, 4).double()
             x0 = g[K.POINT][K.POS0].double()
             x1 = g[K.POINT][K.POS1].double()
-            errs, costs = [], []
+            errs, costs, sigmas = [], [], []
             for roll in ROLLS:
                 with torch.no_grad():
                     out = model(roll_cameras(g, np.radians(roll)))
@@ -123,16 +125,22 @@ def verify(model, sets: dict[str, list]) -> dict[str, dict[str, list]]:
                 T = roll_pose(T, -np.radians(roll))  # the answer in the pair's own frame
                 t = T[:3, 3] / T[:3, 3].norm()
                 costs.append(float(pose_sampson(T[:3, :3], t, x0, x1).abs().median()))
+                sigmas.append(float(out.log_var[0, 4:].sum()))
                 errs.append(_angle(T[:3, 3].numpy(), truth[:3, 3].numpy()))
             k = int(np.argmin(costs))
             r["as_is"].append(errs[0])
             r["verified"].append(errs[k])
             r["best"].append(min(errs))
             r["picked"].append(ROLLS[k])
+            j = int(np.argmin(sigmas))
+            r["by_sigma"].append(errs[j])
+            r["picked_sigma"].append(ROLLS[j])
         picked = {roll: r["picked"].count(roll) for roll in ROLLS}
+        by_sigma = {roll: r["picked_sigma"].count(roll) for roll in ROLLS}
         print(f"{name}: as is {np.median(r['as_is']):.1f}, verified "
-              f"{np.median(r['verified']):.1f}, best {np.median(r['best']):.1f} deg (median; "
-              f"rolls kept {picked})", flush=True)
+              f"{np.median(r['verified']):.1f}, by sigma {np.median(r['by_sigma']):.1f}, best "
+              f"{np.median(r['best']):.1f} deg (median; rolls kept {picked}, by sigma "
+              f"{by_sigma})", flush=True)
     return res
 
 
@@ -168,15 +176,19 @@ def report() -> int:
     if verified:
         lines += ["", "**Roll hypotheses kept by the matches** (`--verify`): median / mean "
                   "translation error (deg) as the pair is, of the hypothesis with the smallest "
-                  "median Sampson distance, and of the best hypothesis (an oracle); rolls kept "
-                  "(0 / 90 / -90 / 180).", "",
-                  "| weights | set | as is | verified | best | rolls kept |",
-                  "|---|---|---|---|---|---|"]
+                  "median Sampson distance, of the hypothesis with the smallest predicted "
+                  "translation variance (sum of its three log-variances; '-' where not "
+                  "measured), and of the best hypothesis (an oracle); rolls kept (0 / 90 / -90 "
+                  "/ 180) by the Sampson distance, then by the variance.", "",
+                  "| weights | set | as is | verified | by variance | best | rolls kept |",
+                  "|---|---|---|---|---|---|---|"]
         for label, run in verified.items():
             for s, e in run["errors"].items():
                 kept = " / ".join(str(e["picked"].count(r)) for r in ROLLS)
-                cells = [f"{np.median(e[k]):.1f} / {np.mean(e[k]):.1f}"
-                         for k in ("as_is", "verified", "best")]
+                if "picked_sigma" in e:
+                    kept += "; " + " / ".join(str(e["picked_sigma"].count(r)) for r in ROLLS)
+                cells = [f"{np.median(e[k]):.1f} / {np.mean(e[k]):.1f}" if k in e else "-"
+                         for k in ("as_is", "verified", "by_sigma", "best")]
                 lines.append(f"| {label} | {s} ({len(e['as_is'])}) | " + " | ".join(cells)
                              + f" | {kept} |")
     lines += ["", "```", banner().strip(), "```", "", "![roll](figures/roll.png)", ""]

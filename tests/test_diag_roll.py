@@ -73,14 +73,20 @@ def _consistent_graph():
 
 class _RightOnlyRolled:
     """The truth when the graph was rolled by 90 deg, a wrong pose (another translation, no
-    rotation) under every other roll: a network that knows only one camera orientation."""
+    rotation) under every other roll: a network that knows only one camera orientation. Its
+    translation log-variances are ``right_var`` on the right answer, 0 on the wrong ones."""
+
+    def __init__(self, right_var: float = 0.0):
+        self.right_var = right_var
 
     def __call__(self, g):
         T = g[K.T_0TO1].reshape(4, 4).double()
         if abs(float(g[K.ROLL].reshape(-1)[0]) - np.pi / 2) < 1e-9:
-            return SimpleNamespace(R=T[:3, :3][None], translation=T[:3, 3][None])
+            return SimpleNamespace(R=T[:3, :3][None], translation=T[:3, 3][None],
+                                   log_var=torch.full((1, 7), self.right_var))
         return SimpleNamespace(R=torch.eye(3, dtype=torch.float64)[None],
-                               translation=torch.tensor([[0.0, 0.0, 1.0]], dtype=torch.float64))
+                               translation=torch.tensor([[0.0, 0.0, 1.0]], dtype=torch.float64),
+                               log_var=torch.zeros(1, 7))
 
 
 def test_verify_keeps_the_roll_whose_pose_fits_the_matches():
@@ -88,6 +94,15 @@ def test_verify_keeps_the_roll_whose_pose_fits_the_matches():
     assert res["picked"] == [90]
     assert res["verified"][0] < 1e-4 and res["best"][0] < 1e-4
     assert res["as_is"][0] > 30.0  # unrolled, the wrong answer
+
+
+def test_verify_by_variance_keeps_the_least_uncertain_roll():
+    graph = {"one": [_consistent_graph()]}
+    sure = diag_roll.verify(_RightOnlyRolled(right_var=-2.0), graph)["one"]
+    assert sure["picked_sigma"] == [90] and sure["by_sigma"][0] < 1e-4
+    unsure = diag_roll.verify(_RightOnlyRolled(right_var=2.0), graph)["one"]
+    assert unsure["picked_sigma"][0] != 90 and unsure["by_sigma"][0] > 30.0
+    assert unsure["picked"] == [90]  # the Sampson distance does not read the variance
 
 
 def test_report_writes_the_table_and_figure(tmp_path, monkeypatch):
@@ -109,4 +124,11 @@ def test_report_writes_the_table_and_figure(tmp_path, monkeypatch):
         __import__("json").dumps({"checkpoint": "x", "errors": {"set": ver}}))
     assert diag_roll.main(["--report"]) == 0
     text = (tmp_path / "results_roll.md").read_text()
-    assert "| a | set (2) | 91.0 / 91.0 | 12.0 / 12.0 | 10.0 / 10.0 | 0 / 1 / 1 / 0 |" in text
+    assert "| a | set (2) | 91.0 / 91.0 | 12.0 / 12.0 | - | 10.0 / 10.0 | 0 / 1 / 1 / 0 |" in text
+    ver.update(by_sigma=[30.0, 50.0], picked_sigma=[0, 0])
+    (tmp_path / "results_roll" / "verify" / "a.json").write_text(
+        __import__("json").dumps({"checkpoint": "x", "errors": {"set": ver}}))
+    assert diag_roll.main(["--report"]) == 0
+    text = (tmp_path / "results_roll.md").read_text()
+    assert ("| a | set (2) | 91.0 / 91.0 | 12.0 / 12.0 | 40.0 / 40.0 | 10.0 / 10.0 | "
+            "0 / 1 / 1 / 0; 2 / 0 / 0 / 0 |") in text
