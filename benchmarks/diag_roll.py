@@ -99,7 +99,9 @@ def measure(model, sets: dict[str, list]) -> dict[str, dict[str, list[float]]]:
 def verify(model, sets: dict[str, list]) -> dict[str, dict[str, list]]:
     """Per set: the translation error (deg) of the pair as it is (``as_is``), of the roll
     hypothesis whose pose has the smallest median Sampson distance on the point matches
-    (``verified``, its roll in ``picked``) and of the best hypothesis (``best``: an oracle)."""
+    (``verified``, its roll in ``picked``), of the hypothesis with the smallest predicted
+    translation variance (``by_sigma``, its roll in ``picked_sigma``) and of the best
+    hypothesis (``best``: an oracle)."""
     import torch
 
     from strl_pyg.data import keys as K

@@ -74,7 +74,9 @@ def _consistent_graph():
 class _RightOnlyRolled:
     """The truth when the graph was rolled by 90 deg, a wrong pose (another translation, no
     rotation) under every other roll: a network that knows only one camera orientation. Its
-    translation log-variances are ``right_var`` on the right answer, 0 on the wrong ones."""
+    translation log-variances are ``right_var`` on the right answer, 0 on the wrong ones; its
+    quaternion's are the opposite (``-right_var``), so that reading the wrong columns picks
+    another roll."""
 
     def __init__(self, right_var: float = 0.0):
         self.right_var = right_var
@@ -83,7 +85,8 @@ class _RightOnlyRolled:
         T = g[K.T_0TO1].reshape(4, 4).double()
         if abs(float(g[K.ROLL].reshape(-1)[0]) - np.pi / 2) < 1e-9:
             return SimpleNamespace(R=T[:3, :3][None], translation=T[:3, 3][None],
-                                   log_var=torch.full((1, 7), self.right_var))
+                                   log_var=torch.tensor([[-self.right_var] * 4
+                                                         + [self.right_var] * 3]))
         return SimpleNamespace(R=torch.eye(3, dtype=torch.float64)[None],
                                translation=torch.tensor([[0.0, 0.0, 1.0]], dtype=torch.float64),
                                log_var=torch.zeros(1, 7))
