@@ -27,6 +27,10 @@ def tiny_config(out_dir, **kw) -> TrainConfig:
         num_lines=16, out_dir=str(out_dir), tensorboard=False, seed=3,
         scene={"image_size": [96, 256], "max_points": 64, "max_lines": 32},
         model_overrides={"hidden": 16, "layers": 1, "heads": 2, "patch_features": 1},
+        # the rate these tests' tolerances were set at (DDP against one process: Adam's
+        # steps scale float differences with it), constant so that a resumed run may extend
+        # --steps
+        lr=1e-4, lr_schedule="constant",
     )
     return replace(base, **kw)
 
@@ -66,7 +70,7 @@ def test_resume_errors(tmp_path):
         train(cfg, resume=True, progress=False)
     train(tiny_config(tmp_path / "ok", steps=2), progress=False)
     with pytest.raises(ValueError, match="config to match"):
-        train(tiny_config(tmp_path / "ok", steps=4, lr=1e-3), resume=True, progress=False)
+        train(tiny_config(tmp_path / "ok", steps=4, lr=5e-4), resume=True, progress=False)
 
 
 def test_config_validation():
@@ -329,7 +333,7 @@ def test_learning_rate_schedules():
     import itertools
     import math
 
-    const = TrainConfig(lr=1e-3, steps=10)
+    const = TrainConfig(lr=1e-3, steps=10, lr_schedule="constant", warmup_steps=0)
     assert [const.learning_rate(s) for s in (0, 5, 9)] == [1e-3] * 3
     warm = TrainConfig(lr=1e-3, steps=10, warmup_steps=4)
     assert [warm.learning_rate(s) for s in range(5)] == pytest.approx(
@@ -345,8 +349,42 @@ def test_learning_rate_schedules():
         TrainConfig(lr_schedule="step")
     with pytest.raises(ValueError, match=r"warmup_steps an integer in \[0, steps=10\)"):
         TrainConfig(steps=10, warmup_steps=10)
-    # a stored config from before the schedule reads as the paper's constant rate
-    assert TrainConfig.from_dict({"steps": 3, "loss": "balanced"}).lr_schedule == "constant"
+    # a stored config from before the schedule reads as the constant rate it trained with,
+    # not as today's default (a resumed old run would change its schedule)
+    old = TrainConfig.from_dict({"steps": 3, "loss": "balanced"})
+    assert (old.lr_schedule, old.warmup_steps, old.beta) == ("constant", 0, 0.5)
+    assert old.learning_rate(0) == old.lr
+
+
+def test_the_default_recipe_is_the_studys_and_the_papers_is_one_dict_away():
+    """0.4 made the study's winner the default (cosine from 1e-3 with a warm-up, beta 0.25);
+    the warm-up scales with short runs so that any --steps is valid."""
+    import argparse
+
+    from strl_pyg.training import PAPER_RECIPE
+    from strl_pyg.training.config import add_train_arguments
+    from strl_pyg.training.loop import config_from_args
+
+    d = TrainConfig()
+    assert (d.lr, d.lr_schedule, d.warmup_steps, d.beta, d.loss) == (
+        1e-3, "cosine", None, 0.25, "balanced")
+    assert TrainConfig(steps=2000).warmup == 100 and TrainConfig(steps=8000).warmup == 100
+    assert TrainConfig(steps=10).warmup == 0 and TrainConfig(steps=1).warmup == 0
+    assert TrainConfig(steps=400).warmup == 20
+    ramp = TrainConfig(steps=2000)
+    assert ramp.learning_rate(0) == pytest.approx(1e-5)  # 1e-3 / 100
+    assert ramp.learning_rate(99) == pytest.approx(1e-3)
+    assert ramp.learning_rate(1999) < 1e-6
+    assert TrainConfig(steps=2000, warmup_steps=0).learning_rate(0) == pytest.approx(1e-3)
+    paper = TrainConfig(**PAPER_RECIPE)
+    assert [paper.learning_rate(s) for s in (0, 1000, 1999)] == [1e-4] * 3
+    # the command line's defaults are the config's, and the round trip keeps None
+    ap = add_train_arguments(argparse.ArgumentParser())
+    cfg = config_from_args(ap.parse_args([]), ap)
+    assert (cfg.lr, cfg.lr_schedule, cfg.warmup_steps, cfg.beta) == (1e-3, "cosine", None, 0.25)
+    assert TrainConfig.from_dict(__import__("dataclasses").asdict(cfg)) == cfg
+    with pytest.raises(ValueError, match=r"warmup_steps an integer in \[0, steps=10\) or None"):
+        TrainConfig(steps=10, warmup_steps=-1)
 
 
 def test_a_cosine_run_logs_its_rates_and_resumes_on_the_same_schedule(tmp_path, monkeypatch):

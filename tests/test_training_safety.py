@@ -26,7 +26,8 @@ REPO = Path(__file__).resolve().parents[1]
 def _cfg(out: Path, **kw) -> TrainConfig:
     base = dict(train_pairs=4, val_pairs=2, steps=4, val_every=100, batch_size=2,
                 num_points=32, num_lines=16, scene_kinds=["boxes"], tensorboard=False,
-                model_overrides=dict(hidden=16, layers=1, heads=2), out_dir=str(out))
+                model_overrides=dict(hidden=16, layers=1, heads=2), out_dir=str(out),
+                lr_schedule="constant")  # so that a resumed run may extend its steps
     return TrainConfig(**{**base, **kw})
 
 
@@ -149,7 +150,8 @@ def _tiny(out_dir, **kw):
         train_pairs=6, val_pairs=3, batch_size=4, steps=4, val_every=2, num_points=32,
         num_lines=16, out_dir=str(out_dir), tensorboard=False, seed=3,
         scene={"image_size": [96, 256], "max_points": 64, "max_lines": 32},
-        model_overrides={"hidden": 16, "layers": 1, "heads": 2, "patch_features": 1})
+        model_overrides={"hidden": 16, "layers": 1, "heads": 2, "patch_features": 1},
+        lr_schedule="constant")
     return replace(base, **kw)
 
 
@@ -291,7 +293,7 @@ def test_resume_takes_what_the_command_line_left_out_from_the_run(tmp_path):
     from strl_pyg.training.loop import config_from_args, given_fields, settings_from_run
 
     out = tmp_path / "run"
-    first = _cfg(out, steps=4, val_every=4, lr=1e-3)
+    first = _cfg(out, steps=4, val_every=4, lr=5e-4)
     train(first, progress=False)
     ap = argparse.ArgumentParser()
     add_train_arguments(ap)
@@ -301,7 +303,8 @@ def test_resume_takes_what_the_command_line_left_out_from_the_run(tmp_path):
         return settings_from_run(config_from_args(ap.parse_args(argv), ap), given_fields(argv))
 
     cfg, taken = resumed("--steps", "6")
-    assert taken["train_pairs"] == 4 and taken["lr"] == 1e-3 and "steps" not in taken
+    assert taken["train_pairs"] == 4 and taken["lr"] == 5e-4 and "steps" not in taken
+    assert taken["lr_schedule"] == "constant"  # the run's, not today's default
     assert taken["model_overrides"] == {"hidden": 16, "layers": 1, "heads": 2}
     assert cfg.steps == 6 and cfg.out_dir == str(out)
     own = ("steps", "tensorboard", "num_workers", "device")  # this command's, not the run's
@@ -318,7 +321,7 @@ def test_resume_takes_what_the_command_line_left_out_from_the_run(tmp_path):
         train(cfg, resume=True, progress=False)
     cfg, taken = resumed("--lr", str(ap.get_default("lr")))  # the default lr, given
     assert "lr" not in taken
-    with pytest.raises(ValueError, match=r"'lr': \(0.001, "):
+    with pytest.raises(ValueError, match=r"'lr': \(0.0005, "):
         train(cfg, resume=True, progress=False)
     # a run saved before `loss` existed reads as the paper's loss, as _resume reads it
     # (review: the raw dict left `loss` out, and the resume then failed on it)
