@@ -14,7 +14,7 @@ flow       ``flow`` (+ u, x0.u, x0xu,  ``paper``
            standardised)
 balanced   ``paper``                   ``balanced`` (beta-NLL 0.5, w's variance detached,
                                        + angle of t)
-both       ``flow``                    ``balanced`` (the package's new default recipe)
+both       ``flow``                    ``balanced`` (at the study's constant 3e-4 and beta 0.5)
 =========  ==========================  =======================================================
 
 on two kinds of matches: ``gt`` (the generator's matches, 1200 training pairs) and ``fe``

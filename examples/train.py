@@ -3,8 +3,11 @@
 Examples:
     # a small CPU run on generated scenes (no downloads)
     python examples/train.py --steps 500 --out runs/synthetic
-    # continue it exactly where it stopped, to 1000 steps
-    python examples/train.py --steps 1000 --out runs/synthetic --resume
+    # after an interruption: continue it exactly where it stopped
+    python examples/train.py --out runs/synthetic --resume
+    # the paper's recipe (the default is the study's: cosine from 1e-3, beta 0.25)
+    python examples/train.py --loss paper --set inputs=paper --lr 1e-4 --lr-schedule constant \
+        --warmup-steps 0 --out runs/paper
     # an ablation row of the paper, e.g. points only
     python examples/train.py --model baseline --out runs/baseline
     # KITTI odometry (official layout), 2 processes with DistributedDataParallel

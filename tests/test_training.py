@@ -335,7 +335,7 @@ def test_learning_rate_schedules():
 
     const = TrainConfig(lr=1e-3, steps=10, lr_schedule="constant", warmup_steps=0)
     assert [const.learning_rate(s) for s in (0, 5, 9)] == [1e-3] * 3
-    warm = TrainConfig(lr=1e-3, steps=10, warmup_steps=4)
+    warm = TrainConfig(lr=1e-3, steps=10, warmup_steps=4, lr_schedule="constant")
     assert [warm.learning_rate(s) for s in range(5)] == pytest.approx(
         [2.5e-4, 5e-4, 7.5e-4, 1e-3, 1e-3])
     cos = TrainConfig(lr=1e-3, steps=104, warmup_steps=4, lr_schedule="cosine")
@@ -385,6 +385,28 @@ def test_the_default_recipe_is_the_studys_and_the_papers_is_one_dict_away():
     assert TrainConfig.from_dict(__import__("dataclasses").asdict(cfg)) == cfg
     with pytest.raises(ValueError, match=r"warmup_steps an integer in \[0, steps=10\) or None"):
         TrainConfig(steps=10, warmup_steps=-1)
+
+
+def test_table3_and_the_study_pin_their_reference_recipe():
+    """The package's defaults changed in 0.4; Table 3 (benchmarks/ablation.py) and the recipe
+    study keep the settings their committed runs trained with."""
+    import argparse
+    import sys
+
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    import ablation
+    import study_pose_recipe as study
+
+    from strl_pyg.training.config import add_train_arguments
+    from strl_pyg.training.loop import config_from_args
+
+    ap = add_train_arguments(argparse.ArgumentParser())
+    for args in (ablation.TRAIN_ARGS, study.COMMON + study.VARIANTS["both"]):
+        cfg = config_from_args(ap.parse_args(args), ap)
+        assert (cfg.lr, cfg.lr_schedule, cfg.warmup_steps, cfg.beta) == (3e-4, "constant", 0, 0.5)
+    winner = config_from_args(ap.parse_args(study.COMMON + study.VARIANTS["both-cos1e-3-b0.25"]), ap)
+    assert (winner.lr, winner.lr_schedule, winner.warmup_steps, winner.beta) == (
+        1e-3, "cosine", 100, 0.25)
 
 
 def test_a_cosine_run_logs_its_rates_and_resumes_on_the_same_schedule(tmp_path, monkeypatch):

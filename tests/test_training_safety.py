@@ -58,13 +58,23 @@ def test_a_signal_checkpoints_the_step_in_progress_and_resume_continues(tmp_path
 
     monkeypatch.setattr(loop.TrainLogger, "log", log)
     out = tmp_path / "run"
-    res = train(_cfg(out, steps=400, val_every=1000), progress=False)
+    res = train(_cfg(out, steps=400, val_every=1000), progress=False)  # warm-up 20 steps
     monkeypatch.setattr(loop.TrainLogger, "log", real)
     assert res["interrupted"] == "SIGTERM" and res["step"] == 3
     assert _step(out) == res["step"]
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # handlers restored
-    more = train(_cfg(out, steps=res["step"] + 2, val_every=1000), resume=True, progress=False)
-    assert more["step"] == res["step"] + 2 and "interrupted" not in more
+    # another --steps gives the default warm-up another length (min(100, 200 // 20) = 10):
+    # refused at step 3, inside it, where it would change the rates to come (review); the
+    # run's own length, given, resumes
+    with pytest.raises(ValueError, match="warm-up of 20 steps to resume"):
+        train(_cfg(out, steps=200, val_every=1000), resume=True, progress=False)
+    more = train(_cfg(out, steps=25, val_every=1000, warmup_steps=20), resume=True,
+                 progress=False)
+    assert more["step"] == 25 and "interrupted" not in more
+    rows = (out / "log.csv").read_text().splitlines()
+    rates = {int(r.split(",")[0]): float(r.split(",")[3]) for r in rows if ",train,lr," in r}
+    assert [rates[s] for s in (4, 20, 21, 25)] == pytest.approx(
+        [1e-3 * 4 / 20, 1e-3, 1e-3, 1e-3], rel=1e-6)
 
 
 def test_an_existing_run_folder_needs_resume_or_overwrite(tmp_path):
@@ -327,7 +337,16 @@ def test_resume_takes_what_the_command_line_left_out_from_the_run(tmp_path):
     # (review: the raw dict left `loss` out, and the resume then failed on it)
     from strl_pyg.training.checkpoints import load_checkpoint, save_checkpoint
 
+    # a run saved before the schedule and beta existed reads as what it trained with (a
+    # constant rate, no warm-up, beta 0.5), not as today's defaults (cosine, beta 0.25)
     state = load_checkpoint(out / "last.pt")
+    assert state["train_config"]["beta"] == 0.25
+    for key in ("lr_schedule", "warmup_steps", "beta"):
+        del state["train_config"][key]
+    save_checkpoint(out / "last.pt", state)
+    cfg, taken = resumed()
+    assert taken["beta"] == 0.5 and cfg.beta == 0.5 and taken["lr_schedule"] == "constant"
+    assert (cfg.lr_schedule, cfg.warmup_steps) == ("constant", 0)
     del state["train_config"]["loss"]
     save_checkpoint(out / "last.pt", state)
     cfg, taken = resumed()

@@ -329,7 +329,8 @@ def _resume(cfg: TrainConfig, ckpt_path: Path, model: StrLPose,
     saved = TrainConfig.from_dict(state["train_config"])
     # settings that do not change what is computed may differ (a moved run folder, more
     # steps, other workers or checkpoint intervals)
-    free = dict.fromkeys(RESUME_FREE_FIELDS)
+    # (the warm-up is compared by its length below: None's follows --steps)
+    free = dict.fromkeys((*RESUME_FREE_FIELDS, "warmup_steps"))
     if {**asdict(saved), **free} != {**asdict(cfg), **free}:
         diff = {k: (v, getattr(cfg, k)) for k, v in asdict(saved).items()
                 if k not in free and getattr(cfg, k) != v}
@@ -340,6 +341,13 @@ def _resume(cfg: TrainConfig, ckpt_path: Path, model: StrLPose,
         raise ValueError(f"Expected --steps {saved.steps} to resume: a {saved.lr_schedule} "
                          f"learning-rate schedule ends at the run's last step (got "
                          f"{cfg.steps}); to train on, start a new run with --init-from")
+    # a warm-up of another length changes the rates still to come: inside the warm-up, or
+    # anywhere on a cosine (which starts where the warm-up ends)
+    if cfg.warmup != saved.warmup and (saved.lr_schedule != "constant"
+                                       or start_step < max(cfg.warmup, saved.warmup)):
+        raise ValueError(f"Expected a warm-up of {saved.warmup} steps to resume this run (got "
+                         f"{cfg.warmup}; without --warmup-steps it follows --steps); give "
+                         f"--warmup-steps {saved.warmup}")
     if cfg.steps < start_step:
         raise ValueError(f"Expected --steps of at least the checkpoint's step {start_step} "
                          f"to resume (got {cfg.steps})")
