@@ -296,14 +296,12 @@ def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     ap.add_argument("--train-sequences", default=None, help="KITTI sequences, comma-separated")
     ap.add_argument("--val-sequences", default=None, help="KITTI sequences, comma-separated")
     ap.add_argument("--limit", type=int, default=None, help="keep only the first pairs")
-    ap.add_argument("--lr", type=float, default=d.lr,
-                    help=f"Adam's learning rate, the peak under --lr-schedule cosine (default "
-                         f"{d.lr:g}; the paper's: {PAPER_RECIPE['lr']:g} constant)")
+    ap.add_argument("--lr", type=float, default=d.lr, help=f"Adam's rate, the cosine's peak "
+                    f"(default {d.lr:g}; the paper's: {PAPER_RECIPE['lr']:g} constant)")
     ap.add_argument("--lr-schedule", choices=LR_SCHEDULES, default=d.lr_schedule,
                     help="cosine (default: to 0 at --steps) or constant (the paper)")
-    ap.add_argument("--warmup-steps", type=int, default=d.warmup_steps,
-                    help="linear learning-rate warm-up over this many steps (default: "
-                         "min(100, steps/20); 0: none, the paper)")
+    ap.add_argument("--warmup-steps", type=int, default=d.warmup_steps, help="linear warm-up "
+                    "steps (default: min(100, steps/20); 0: none, the paper)")
     ap.add_argument("--batch-size", type=int, default=d.batch_size)
     ap.add_argument("--steps", type=int, default=d.steps)
     ap.add_argument("--val-every", type=int, default=d.val_every)
