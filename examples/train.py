@@ -6,8 +6,8 @@ Examples:
     # after an interruption: continue it exactly where it stopped
     python examples/train.py --out runs/synthetic --resume
     # the paper's recipe (the default is the study's: cosine from 1e-3, beta 0.25)
-    python examples/train.py --loss paper --set inputs=paper --lr 1e-4 --lr-schedule constant \
-        --warmup-steps 0 --out runs/paper
+    python examples/train.py --loss paper --set inputs=paper --lr 1e-4 \\
+        --lr-schedule constant --warmup-steps 0 --out runs/paper
     # an ablation row of the paper, e.g. points only
     python examples/train.py --model baseline --out runs/baseline
     # KITTI odometry (official layout), 2 processes with DistributedDataParallel
