@@ -404,7 +404,8 @@ def test_table3_and_the_study_pin_their_reference_recipe():
     for args in (ablation.TRAIN_ARGS, study.COMMON + study.VARIANTS["both"]):
         cfg = config_from_args(ap.parse_args(args), ap)
         assert (cfg.lr, cfg.lr_schedule, cfg.warmup_steps, cfg.beta) == (3e-4, "constant", 0, 0.5)
-    winner = config_from_args(ap.parse_args(study.COMMON + study.VARIANTS["both-cos1e-3-b0.25"]), ap)
+    winner_args = study.COMMON + study.VARIANTS["both-cos1e-3-b0.25"]
+    winner = config_from_args(ap.parse_args(winner_args), ap)
     assert (winner.lr, winner.lr_schedule, winner.warmup_steps, winner.beta) == (
         1e-3, "cosine", 100, 0.25)
 

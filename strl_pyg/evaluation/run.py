@@ -316,12 +316,12 @@ def _checked(args: argparse.Namespace) -> Path:
         missing = sorted(set(args.methods) - set(available_methods()))
         if missing:
             raise UsageError(f"Expected available methods (got {missing}: is PoseLib "
-                              "installed?)")
+                             "installed?)")
     try:
         torch.device(args.device)
     except RuntimeError:
         raise UsageError(f"Expected a torch device such as 'cpu' or 'cuda' for --device "
-                          f"(got {args.device!r})") from None
+                         f"(got {args.device!r})") from None
     from strl_pyg.training.loop import check_device
 
     try:  # before the checkpoint is mapped onto it (an absent device blamed the checkpoint)

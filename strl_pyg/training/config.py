@@ -42,13 +42,13 @@ LR_SCHEDULES = ("constant", "cosine")
 
 #: Float settings where ``inf`` means "never" / "off" (the clip, the checkpoint interval).
 _INF_FIELDS = ("grad_clip", "checkpoint_minutes")
-#: Settings a stored config may lack because it was written before they existed, with the
-#: value every run had then (``TrainConfig.from_dict``): the constant rate and beta 0.5 were
-#: the defaults until 0.4 made the study's recipe the default.
-STORED_BEFORE = {"lr": 1e-4, "lr_schedule": "constant", "warmup_steps": 0, "beta": 0.5}
 #: The paper's optimiser settings (Adam at a constant 1e-4, no warm-up); with
 #: ``loss="paper"`` and ``model_overrides={"inputs": "paper"}`` the paper's whole recipe.
 PAPER_RECIPE = {"lr": 1e-4, "lr_schedule": "constant", "warmup_steps": 0}
+#: Settings a stored config may lack because it was written before they existed, with the
+#: value every run had then (``TrainConfig.from_dict``): the paper's optimiser and beta 0.5
+#: were the defaults until 0.4 made the study's recipe the default.
+STORED_BEFORE = {**PAPER_RECIPE, "beta": 0.5}
 
 
 @dataclass
