@@ -518,3 +518,64 @@ def test_roll_augment_on_pairs_without_intrinsics_is_refused_before_training(tmp
     with pytest.raises(ValueError, match="Expected training pairs with intrinsics K0 and K1"):
         train(cfg, datasets=(strip, list(val_ds)), progress=False)
     assert not (tmp_path / "run" / "last.pt").exists()
+
+
+def test_the_relative_clip_follows_the_median_of_recent_norms():
+    from strl_pyg.training import clip as clip_
+
+    c = clip_.GradientClip(10.0, relative=3.0)
+    for n in range(1, clip_.MIN_HISTORY):  # 19 norms: still the fixed clip
+        c.record(float(n))
+    assert c.threshold() == 10.0
+    c.record(float("nan"))  # a skipped step is not a norm
+    c.record(float("inf"))
+    assert c.threshold() == 10.0
+    c.record(20.0)  # 1..19, 20: median 10.5
+    assert c.threshold() == pytest.approx(31.5)
+    for _ in range(clip_.WINDOW):  # the window forgets the early norms
+        c.record(4.0)
+    assert c.threshold() == pytest.approx(12.0) and len(c.state()) == clip_.WINDOW
+    # restored from a checkpoint's norms: the same threshold
+    assert clip_.GradientClip(10.0, 3.0, c.state()).threshold() == pytest.approx(12.0)
+    # relative 0 is the fixed clip whatever was seen; None is no clip
+    assert clip_.GradientClip(10.0, 0.0, [1.0] * 50).threshold() == 10.0
+    assert clip_.GradientClip(None, 0.0).threshold() is None
+    with pytest.raises(ValueError, match="Expected a finite relative clip >= 0"):
+        clip_.GradientClip(10.0, -1.0)
+    with pytest.raises(ValueError, match="Expected grad_clip_relative >= 0"):
+        TrainConfig(grad_clip_relative=-0.5)
+    # a config stored before the setting existed trained with the fixed clip
+    assert TrainConfig.from_dict({"loss": "balanced"}).grad_clip_relative == 0.0
+
+
+def test_a_relative_clip_run_logs_its_threshold_and_resumes_with_its_norms(tmp_path, monkeypatch):
+    """The threshold of each step is ``relative`` x the median of the norms logged before it;
+    a resumed run reads those norms from last.pt (without them its third step would clip at
+    the fixed norm and its weights would differ from the uninterrupted run's)."""
+    import csv
+    import statistics
+
+    from strl_pyg.training import clip as clip_
+
+    monkeypatch.setattr(clip_, "MIN_HISTORY", 2)
+    kw = dict(grad_clip=100.0, grad_clip_relative=0.5)
+    train(tiny_config(tmp_path / "full", **kw), progress=False)
+    logs = {}
+    with open(tmp_path / "full" / "log.csv") as f:
+        for r in csv.DictReader(f):
+            if r["split"] == "train":
+                logs.setdefault(r["key"], {})[int(r["step"])] = float(r["value"])
+    norms = [logs["grad_norm"][s] for s in (1, 2, 3, 4)]
+    assert [logs["grad_clip"][s] for s in (1, 2)] == [100.0, 100.0]  # the fixed clip first
+    for s in (3, 4):
+        assert logs["grad_clip"][s] == pytest.approx(0.5 * statistics.median(norms[:s - 1]),
+                                                     rel=1e-5)
+        assert logs["clipped"][s] == float(norms[s - 1] > logs["grad_clip"][s])
+    assert logs["clipped"][3] == 1.0  # half the median: the clip acts
+    train(tiny_config(tmp_path / "split", steps=2, **kw), progress=False)
+    assert load_checkpoint(tmp_path / "split" / "last.pt")["grad_norms"] == pytest.approx(
+        norms[:2], rel=1e-5)
+    train(tiny_config(tmp_path / "split", **kw), resume=True, progress=False)
+    a = load_checkpoint(tmp_path / "full" / "last.pt")
+    b = load_checkpoint(tmp_path / "split" / "last.pt")
+    assert states_equal(a["model"], b["model"])

@@ -249,13 +249,13 @@ def test_a_skipped_step_keeps_its_batch_and_weights_to_reproduce_it(tmp_path, mo
     seen = {}
     real_step = loop._train_step
 
-    def recording(cfg, ddp_model, model, optimizer, losses, batch, step):
+    def recording(cfg, ddp_model, model, optimizer, losses, batch, step, clip):
         if step == 1:  # the second step, the planted one
             seen["weights"] = {k: v.clone() for k, v in model.state_dict().items()}
             with torch.no_grad():
                 seen["q"] = model.eval()(batch).quaternion.clone()
             model.train()
-        return real_step(cfg, ddp_model, model, optimizer, losses, batch, step)
+        return real_step(cfg, ddp_model, model, optimizer, losses, batch, step, clip)
 
     monkeypatch.setattr(loop, "_train_step", recording)
     _nan_gradients_on(monkeypatch, {2})

@@ -48,7 +48,7 @@ PAPER_RECIPE = {"lr": 1e-4, "lr_schedule": "constant", "warmup_steps": 0}
 #: Settings a stored config may lack because it was written before they existed, with the
 #: value every run had then (``TrainConfig.from_dict``): the paper's optimiser and beta 0.5
 #: were the defaults until 0.4 made the study's recipe the default.
-STORED_BEFORE = {**PAPER_RECIPE, "beta": 0.5}
+STORED_BEFORE = {**PAPER_RECIPE, "beta": 0.5, "grad_clip_relative": 0.0}
 
 
 @dataclass
@@ -93,7 +93,10 @@ class TrainConfig:
     # (strl_pyg.data.RandomRoll; 0: off, the paper): generated scenes are always upright
     roll_augment: float = 0.0
     init_from: str | None = None  # start from these weights (model.pt or last.pt); fine-tuning
-    grad_clip: float | None = 10.0  # max gradient norm (None: off)
+    grad_clip: float | None = 10.0  # max gradient norm (None: off); see grad_clip_relative
+    # > 0: the clip is this many times the median gradient norm of the last 200 steps, once 20
+    # are seen (grad_clip before; strl_pyg.training.clip); 0: grad_clip throughout
+    grad_clip_relative: float = 0.0
     # pose loss (strl_pyg.training.loss.LOSS_FORMS): "balanced" (beta-NLL, w's variance on a
     # detached residual, angular translation term) | "paper" (the paper's aleatoric loss); a
     # config stored without this key predates it: "paper" loss on "paper" inputs (from_dict)
@@ -163,6 +166,8 @@ class TrainConfig:
             raise ValueError(f"Expected angle_weight >= 0 (got {self.angle_weight!r})")
         if not 0.0 <= self.beta <= 1.0:
             raise ValueError(f"Expected beta in [0, 1] (got {self.beta!r})")
+        if not self.grad_clip_relative >= 0:
+            raise ValueError(f"Expected grad_clip_relative >= 0 (got {self.grad_clip_relative!r})")
         if not self.rot_weight > 0:
             raise ValueError(f"Expected rot_weight > 0 (got {self.rot_weight!r})")
         if self.loss not in ("paper", "balanced"):
@@ -252,6 +257,26 @@ class TrainConfig:
         return strict_from_dict(cls, d)
 
 
+def _add_loss_arguments(ap: argparse.ArgumentParser, d: TrainConfig) -> None:
+    """The pose loss's flags and the gradient clip's."""
+    ap.add_argument("--loss", choices=("balanced", "paper"), default=d.loss,
+                    help="pose loss: balanced (default; beta-NLL and an angular translation "
+                         "term) or the paper's aleatoric loss; --loss paper --set inputs=paper "
+                         "is the paper's recipe")
+    ap.add_argument("--angle-weight", type=float, default=d.angle_weight,
+                    help="--loss balanced: weight of the angular translation term")
+    ap.add_argument("--beta", type=float, default=d.beta,
+                    help=f"--loss balanced: beta of beta-NLL, in [0, 1] (default {d.beta:g}; 0: "
+                         "the aleatoric weighting, 1: the gradient of a plain MSE)")
+    ap.add_argument("--rot-weight", type=float, default=d.rot_weight,
+                    help="weight of the pose loss's rotation terms (translation's: 1)")
+    ap.add_argument("--grad-clip", type=float, default=d.grad_clip,
+                    help="max gradient norm (0: off); the norm is logged every step")
+    ap.add_argument("--grad-clip-relative", type=float, default=d.grad_clip_relative,
+                    metavar="K", help="clip at K x the median norm of the last 200 steps "
+                    "(--grad-clip for the first 20; 0: off)")
+
+
 def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Adds the training flags (one per :class:`TrainConfig` field that users set) to ``ap``."""
     d = TrainConfig()
@@ -273,19 +298,7 @@ def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     ap.add_argument("--matches", choices=("ground_truth", "frontend"), default=d.matches,
                     help="generated scenes: the generator's matches or front-end matches on "
                          "the rendered images (cached in --cache-dir)")
-    ap.add_argument("--loss", choices=("balanced", "paper"), default=d.loss,
-                    help="pose loss: balanced (default; beta-NLL and an angular translation "
-                         "term) or the paper's aleatoric loss; --loss paper --set inputs=paper "
-                         "is the paper's recipe")
-    ap.add_argument("--angle-weight", type=float, default=d.angle_weight,
-                    help="--loss balanced: weight of the angular translation term")
-    ap.add_argument("--beta", type=float, default=d.beta,
-                    help=f"--loss balanced: beta of beta-NLL, in [0, 1] (default {d.beta:g}; 0: "
-                         "the aleatoric weighting, 1: the gradient of a plain MSE)")
-    ap.add_argument("--rot-weight", type=float, default=d.rot_weight,
-                    help="weight of the pose loss's rotation terms (translation's: 1)")
-    ap.add_argument("--grad-clip", type=float, default=d.grad_clip,
-                    help="max gradient norm (0: off); the norm is logged every step")
+    _add_loss_arguments(ap, d)
     ap.add_argument("--outlier-augment", type=float, default=d.outlier_augment,
                     help="up to this fraction of point matches shuffled into outliers")
     ap.add_argument("--geo-ess-start", type=int, default=d.geo_ess_start,

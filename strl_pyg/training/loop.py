@@ -51,6 +51,7 @@ from strl_pyg.training.checkpoints import (
     save_checkpoint,
     set_rng_state,
 )
+from strl_pyg.training.clip import GradientClip
 from strl_pyg.training.config import DATASETS, TrainConfig, add_train_arguments  # noqa: F401
 from strl_pyg.training.data import (
     StepBatchSampler,
@@ -202,13 +203,9 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     model = StrLPose(model_cfg).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     loss_fn, geo_fn = _losses(cfg, model_cfg)
-    start_step, history, trivial_buf = 0, [], []  # trivial_buf: training poses, mean pose
-    if cfg.init_from and not resume:
-        init_weights(model, cfg.init_from)
-    if resume:
-        start_step, history, trivial_buf = _resume(cfg, ckpt_path, model, optimizer)
-    elif rank == 0:
-        check_run_folder(out_dir, overwrite)
+    # trivial_buf: training poses, for the mean pose
+    start_step, history, trivial_buf, clip = _start(cfg, model, optimizer, resume, overwrite,
+                                                    rank)
 
     ddp_model = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
 
@@ -226,7 +223,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
             return
         _check_finite_weights(model, step, ckpt_path)
         save_checkpoint(ckpt_path, _checkpoint_payload(cfg, model, optimizer, step, history,
-                                                       trivial_buf))
+                                                       trivial_buf, clip))
         if metrics_done:
             model.save(out_dir / "model.pt")  # the weights alone, for StrLPose.load
 
@@ -242,7 +239,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         T_gt = batch[keys_.T_0TO1]
         if sum(t.shape[0] for t in trivial_buf) < 4096:
             trivial_buf.append(unaugmented_poses(batch).cpu())
-        logs = _train_step(cfg, ddp_model, model, optimizer, (loss_fn, geo_fn), batch, step)
+        logs = _train_step(cfg, ddp_model, model, optimizer, (loss_fn, geo_fn), batch, step,
+                           clip)
         dumps = _keep_skipped(logs, dumps, bar, step + 1, cfg, model, batch, rank, world)
         skipped_in_a_row = _count_skipped(logs, skipped_in_a_row, step + 1, bar, ckpt_path)
         step += 1
@@ -320,11 +318,27 @@ def _distributed_setup(cfg: TrainConfig) -> tuple[int, int, str, bool]:
     return rank, world, device, own_group
 
 
+def _start(cfg: TrainConfig, model: StrLPose, optimizer: torch.optim.Optimizer, resume: bool,
+           overwrite: bool, rank: int) -> tuple[int, list, list, GradientClip]:
+    """Where a run starts: ``(step, validation history, mean-pose buffer, gradient clip)``,
+    from ``last.pt`` when ``resume``; otherwise from ``cfg.init_from``'s weights if it is
+    set, in a run folder that :func:`check_run_folder` accepts (on rank 0)."""
+    step, history, trivial_buf, norms = 0, [], [], []
+    if cfg.init_from and not resume:
+        init_weights(model, cfg.init_from)
+    if resume:
+        step, history, trivial_buf, norms = _resume(cfg, Path(cfg.out_dir) / "last.pt", model,
+                                                    optimizer)
+    elif rank == 0:
+        check_run_folder(cfg.out_dir, overwrite)
+    return step, history, trivial_buf, GradientClip(cfg.grad_clip, cfg.grad_clip_relative, norms)
+
+
 def _resume(cfg: TrainConfig, ckpt_path: Path, model: StrLPose,
-            optimizer: torch.optim.Optimizer) -> tuple[int, list, list]:
+            optimizer: torch.optim.Optimizer) -> tuple[int, list, list, list]:
     """Loads ``last.pt`` into the model, the optimiser and the RNGs after checking that it was
     written with this config (apart from :data:`RESUME_FREE_FIELDS`); returns ``(step,
-    history, mean-pose buffer)``."""
+    history, mean-pose buffer, the relative clip's recent gradient norms)``."""
     state = load_checkpoint(ckpt_path)
     saved = TrainConfig.from_dict(state["train_config"])
     # settings that do not change what is computed may differ (a moved run folder, more
@@ -355,7 +369,7 @@ def _resume(cfg: TrainConfig, ckpt_path: Path, model: StrLPose,
     optimizer.load_state_dict(model.upgrade_optimizer_state(state["optimizer"], state["model"]))
     trivial_buf = [state["trivial_T"]] if "trivial_T" in state else []
     set_rng_state(state["rng"])
-    return start_step, state.get("history", []), trivial_buf
+    return start_step, state.get("history", []), trivial_buf, state.get("grad_norms", [])
 
 
 def _loaders(cfg: TrainConfig, model_cfg: Any, train_ds: Any, val_ds: Any, start_step: int,
@@ -410,9 +424,11 @@ def _logger(cfg: TrainConfig, out_dir: Path, rank: int, start_step: int) -> Trai
 
 
 def _checkpoint_payload(cfg: TrainConfig, model: StrLPose, optimizer: torch.optim.Optimizer,
-                        step: int, history: list, trivial_buf: list) -> dict[str, Any]:
+                        step: int, history: list, trivial_buf: list,
+                        clip: GradientClip) -> dict[str, Any]:
     """What ``last.pt`` holds: configs, model, optimiser, step, RNG states, validation
-    history and up to 4096 training poses (the mean-pose baseline)."""
+    history, up to 4096 training poses (the mean-pose baseline) and, with a relative clip,
+    the gradient norms its median reads."""
     trivial = torch.cat(trivial_buf)[:4096] if trivial_buf else None
     return {
         "version": CHECKPOINT_VERSION,
@@ -424,6 +440,7 @@ def _checkpoint_payload(cfg: TrainConfig, model: StrLPose, optimizer: torch.opti
         "rng": rng_state(),
         "history": history,
         **({"trivial_T": trivial} if trivial is not None else {}),
+        **({"grad_norms": clip.state()} if clip.relative > 0 else {}),
     }
 
 
@@ -518,9 +535,10 @@ def _count_skipped(logs: dict, in_a_row: int, step: int, bar: Any, ckpt_path: Pa
 
 def _train_step(cfg: TrainConfig, ddp_model: torch.nn.Module, model: StrLPose,
                 optimizer: torch.optim.Optimizer, losses: tuple, batch: Any,
-                step: int) -> dict[str, Tensor]:
-    """One optimiser step on ``batch``; the logs of its losses, the gradient norm and whether
-    the clip was active (logged, so that a clip active on every step shows in the curves)."""
+                step: int, clip: GradientClip) -> dict[str, Tensor]:
+    """One optimiser step on ``batch``; the logs of its losses, the gradient norm, the clip's
+    threshold and whether it was active (logged, so that a clip active on every step shows in
+    the curves)."""
     loss_fn, geo_fn = losses
     T_gt = batch[keys_.T_0TO1]
     out = ddp_model(batch)
@@ -537,10 +555,13 @@ def _train_step(cfg: TrainConfig, ddp_model: torch.nn.Module, model: StrLPose,
     for group in optimizer.param_groups:
         group["lr"] = lr
     logs["lr"] = torch.tensor(lr)
-    grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(),
-                                               cfg.grad_clip or float("inf"))
+    threshold = clip.threshold()
+    grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), threshold or float("inf"))
     logs["grad_norm"] = grad_norm.detach()
-    logs["clipped"] = (grad_norm > cfg.grad_clip).float() if cfg.grad_clip else torch.zeros(())
+    logs["clipped"] = (grad_norm > threshold).float() if threshold else torch.zeros(())
+    if threshold and clip.relative > 0:
+        logs["grad_clip"] = torch.tensor(float(threshold))
+    clip.record(float(grad_norm))
     # a non-finite gradient (one bad batch: a degenerate solve in the geometric head; a
     # non-finite loss gives one too) would turn every weight into NaN for good: the step is
     # skipped and logged instead. Decided on the norm alone: under DDP it is of the
@@ -632,6 +653,7 @@ def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> T
         geo_ess_start=args.geo_ess_start, data_seed=args.data_seed,
         checkpoint_every=args.checkpoint_every, checkpoint_minutes=args.checkpoint_minutes,
         loss=args.loss, grad_clip=args.grad_clip if args.grad_clip > 0 else None,
+        grad_clip_relative=args.grad_clip_relative,
         angle_weight=args.angle_weight, rot_weight=args.rot_weight, beta=args.beta,
         lr_schedule=args.lr_schedule, warmup_steps=args.warmup_steps,
     )

@@ -1,0 +1,65 @@
+"""The gradient-norm clip of a training run.
+
+A fixed clip (``TrainConfig.grad_clip``) is only as good as its threshold's match with the
+loss's scale: with the balanced loss at beta 0.25 the gradient norm's median grows from ~15 to
+~24 over a 2000-step run, so a clip at 10 is active on 98 % of steps (it then rescales every
+step to the same norm, which Adam mostly undoes) and a clip at 50 misses the spikes of the late
+steps (99th percentile ~200). A *relative* clip (``grad_clip_relative``: that many times the
+median norm of the last :data:`WINDOW` steps) follows the scale and caps the spikes only
+(``benchmarks/results_pose_recipe.md``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Iterable
+
+__all__ = ["GradientClip", "WINDOW", "MIN_HISTORY"]
+
+#: Steps whose gradient norms the relative clip's median reads.
+WINDOW = 200
+#: Norms seen before the relative clip takes over from the fixed one (``grad_clip``).
+MIN_HISTORY = 20
+
+
+class GradientClip:
+    """The threshold of each step's gradient-norm clip.
+
+    Args:
+        fixed: The clip (a maximum norm; ``None``: off) while fewer than
+            :data:`MIN_HISTORY` norms are recorded, and always when ``relative`` is 0.
+        relative: When > 0, the clip is ``relative`` times the median of the last
+            :data:`WINDOW` recorded norms once :data:`MIN_HISTORY` are recorded.
+        norms: Norms recorded earlier (a resumed run's checkpoint), oldest first.
+    """
+
+    def __init__(self, fixed: float | None, relative: float = 0.0,
+                 norms: Iterable[float] = ()) -> None:
+        if not (relative >= 0 and math.isfinite(relative)):
+            raise ValueError(f"Expected a finite relative clip >= 0 (got {relative!r})")
+        self.fixed = fixed
+        self.relative = float(relative)
+        self.norms: deque[float] = deque(maxlen=WINDOW)
+        for n in norms:
+            self.record(n)
+
+    def threshold(self) -> float | None:
+        """The maximum gradient norm of the next step (``None``: no clip)."""
+        if self.relative > 0 and len(self.norms) >= MIN_HISTORY:
+            ordered = sorted(self.norms)
+            mid = len(ordered) // 2
+            median = ordered[mid] if len(ordered) % 2 else 0.5 * (ordered[mid - 1] + ordered[mid])
+            return self.relative * median
+        return self.fixed
+
+    def record(self, norm: float) -> None:
+        """Adds a step's gradient norm (before clipping); a non-finite one (a skipped step)
+        is left out."""
+        norm = float(norm)
+        if math.isfinite(norm):
+            self.norms.append(norm)
+
+    def state(self) -> list[float]:
+        """The recorded norms, for a checkpoint (the argument ``norms`` of a resumed run)."""
+        return list(self.norms)
