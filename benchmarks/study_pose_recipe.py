@@ -122,10 +122,16 @@ MATCHES = {
 EVAL_SETS = ("driving", "kitti06", "dino")
 
 
-def run_id(matches: str, variant: str, seed: int, row: str = "baseline") -> str:
-    """``fe-both-s0``; another Table 3 row than ``baseline`` is named: ``fe-LP-both-s0``."""
+#: ``train --default-width``: the model's default width instead of the protocol's 64 / 3 / 4
+DEFAULT_WIDTH = ["--set", "hidden=128", "--set", "layers=4", "--set", "heads=4"]
+
+
+def run_id(matches: str, variant: str, seed: int, row: str = "baseline",
+           wide: bool = False) -> str:
+    """``fe-both-s0``; another Table 3 row than ``baseline`` is named: ``fe-LP-both-s0``; a
+    run at the model's default width ends its variant in ``-w128``: ``fe-both-w128-s0``."""
     named = variant if row == "baseline" else f"{row}-{variant}"
-    return f"{matches}-{named}-s{seed}"
+    return f"{matches}-{named}{'-w128' if wide else ''}-s{seed}"
 
 
 def parse_run(spec: str) -> tuple[str, str, int]:
@@ -145,8 +151,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     root = Path(args.root)
     for spec in args.runs:
         matches, variant, seed = parse_run(spec)
-        out = root / "runs" / run_id(matches, variant, seed, args.row)
-        cmd = [sys.executable, str(TRAIN_SCRIPT), *COMMON, "--model", args.row,
+        out = root / "runs" / run_id(matches, variant, seed, args.row, args.default_width)
+        cmd = [sys.executable, str(TRAIN_SCRIPT), *COMMON,
+               *(DEFAULT_WIDTH if args.default_width else []), "--model", args.row,
                *MATCHES[matches], *VARIANTS[variant], "--seed", str(seed),
                "--steps", str(args.steps),
                "--cache-dir", str(Path(args.ablation_root) / "cache"), "--out", str(out)]
@@ -372,6 +379,60 @@ def cmd_motion(args: argparse.Namespace) -> int:
     ae.save_json(RESULTS / "by_motion.json", result)
     print(motion_table(result))
     plot_by_motion(result, HERE / "figures" / "pose_recipe_by_motion.png")
+    return 0
+
+
+def _train_log(run: Path) -> dict[str, dict[int, float]]:
+    """``{key: {step: value}}`` of a run's training rows in ``log.csv``."""
+    logs: dict[str, dict[int, float]] = {}
+    with open(run / "log.csv") as f:
+        for row in csv.DictReader(f):
+            if row["split"] == "train":
+                logs.setdefault(row["key"], {})[int(row["step"])] = float(row["value"])
+    return logs
+
+
+def cmd_clip(args: argparse.Namespace) -> int:
+    """The gradient norm of each run's steps against its clip's threshold (the fixed
+    ``--grad-clip`` or the logged relative one), the share of steps clipped per quarter of
+    the run, and a figure."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, axes = plt.subplots(1, len(args.runs), figsize=(5 * len(args.runs), 3.8),
+                             squeeze=False, sharey=True)
+    for ax, run in zip(axes[0], args.runs, strict=True):
+        run = Path(run)
+        logs = _train_log(run)
+        steps = np.array(sorted(logs["grad_norm"]))
+        norm = np.array([logs["grad_norm"][s] for s in steps])
+        fixed = json.loads((run / "config.json").read_text()).get("grad_clip")
+        clip = logs.get("grad_clip", {})
+        thr = np.array([clip.get(s, fixed if fixed is not None else np.inf) for s in steps])
+        clipped = norm > thr
+        quarters = np.array_split(np.arange(len(steps)), 4)
+        shares = " / ".join(f"{100 * clipped[q].mean():.0f}" for q in quarters)
+        print(f"{run.name}: clipped on {100 * clipped.mean():.1f} % of {len(steps)} steps "
+              f"(by quarter {shares} %); norm median {np.median(norm):.1f}, 99th percentile "
+              f"{np.percentile(norm, 99):.1f}")
+        ax.semilogy(steps, norm, ".", ms=1.5, color="0.6", label="gradient norm (each step)")
+        k = 50
+        med = [np.median(norm[max(0, i - k):i + 1]) for i in range(len(norm))]
+        ax.semilogy(steps, med, color="C0", label=f"running median ({k} steps)")
+        ax.semilogy(steps, thr, color="C3", label="clip threshold")
+        ax.set_title(f"{run.name}\nclipped on {100 * clipped.mean():.0f} % of steps", fontsize=9)
+        ax.set_xlabel("step")
+    axes[0][0].set_ylabel("gradient norm (log scale)")
+    axes[0][0].legend(fontsize=8, loc="upper left")
+    fig.suptitle("Gradient norm and the clip: a fixed clip against a relative one")
+    fig.tight_layout()
+    out = HERE / "figures" / "pose_recipe_clip.png"
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    print(f"wrote {out}")
     return 0
 
 
@@ -604,6 +665,8 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("--steps", type=int, default=STEPS)
     t.add_argument("--row", default="baseline", help="the Table 3 row (an ABLATIONS name) the "
                    "recipe is trained on; the run's name carries it unless it is baseline")
+    t.add_argument("--default-width", action="store_true", help="the model's default width "
+                   "(hidden 128, 4 layers, 4 heads) instead of the protocol's 64 / 3 / 4")
     s = sub.add_parser("score", help="score the finished runs into results_pose_recipe/")
     s.add_argument("--again", action="store_true", help="re-score runs already scored")
     m = sub.add_parser("motion", help="validation errors by motion: runs (folders with "
@@ -616,11 +679,14 @@ def main(argv: list[str] | None = None) -> int:
                        "t3-both-cos1e-3 t3-both (seeds pooled)")
     c.add_argument("a")
     c.add_argument("b")
+    k = sub.add_parser("clip", help="gradient norms against the clip's threshold: runs "
+                       "(folders with log.csv); the share clipped and a figure")
+    k.add_argument("runs", nargs="+")
     r = sub.add_parser("report", help="the table and the curves")
     r.add_argument("--out", default=str(HERE / "results_pose_recipe.md"))
     args = ap.parse_args(argv)
     return {"train": cmd_train, "score": cmd_score, "motion": cmd_motion,
-            "compare": cmd_compare, "parallax": cmd_parallax,
+            "compare": cmd_compare, "parallax": cmd_parallax, "clip": cmd_clip,
             "report": cmd_report}[args.cmd](args)
 
 
