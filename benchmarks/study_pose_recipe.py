@@ -413,7 +413,7 @@ def cmd_clip(args: argparse.Namespace) -> int:
         clip = logs.get("grad_clip", {})
         thr = np.array([clip.get(s, fixed if fixed is not None else np.inf) for s in steps])
         clipped = norm > thr
-        quarters = np.array_split(np.arange(len(steps)), 4)
+        quarters = [q for q in np.array_split(np.arange(len(steps)), 4) if len(q)]
         shares = " / ".join(f"{100 * clipped[q].mean():.0f}" for q in quarters)
         print(f"{run.name}: clipped on {100 * clipped.mean():.1f} % of {len(steps)} steps "
               f"(by quarter {shares} %); norm median {np.median(norm):.1f}, 99th percentile "
@@ -429,7 +429,7 @@ def cmd_clip(args: argparse.Namespace) -> int:
     axes[0][0].legend(fontsize=8, loc="upper left")
     fig.suptitle("Gradient norm and the clip: a fixed clip against a relative one")
     fig.tight_layout()
-    out = HERE / "figures" / "pose_recipe_clip.png"
+    out = Path(args.out)
     fig.savefig(out, dpi=110)
     plt.close(fig)
     print(f"wrote {out}")
@@ -682,6 +682,7 @@ def main(argv: list[str] | None = None) -> int:
     k = sub.add_parser("clip", help="gradient norms against the clip's threshold: runs "
                        "(folders with log.csv); the share clipped and a figure")
     k.add_argument("runs", nargs="+")
+    k.add_argument("--out", default=str(HERE / "figures" / "pose_recipe_clip.png"))
     r = sub.add_parser("report", help="the table and the curves")
     r.add_argument("--out", default=str(HERE / "results_pose_recipe.md"))
     args = ap.parse_args(argv)

@@ -122,3 +122,31 @@ def test_curves_pool_the_seeds_of_a_variant(tmp_path):
     assert (tmp_path / "c.png").read_bytes()[:4] == b"\x89PNG"
     assert seen["lines"]["t3-x (2 seeds)"] == ([250], [265.0])  # mean of 260 and 270
     assert seen["lines"]["gt-y"] == ([250, 500], [255.0, 505.0])
+
+
+def test_default_width_runs_are_named_apart_and_pin_the_width():
+    assert spr.run_id("fe", "both", 0) == "fe-both-s0"
+    assert spr.run_id("fe", "both", 1, "LP", wide=True) == "fe-LP-both-w128-s1"
+    assert spr.DEFAULT_WIDTH[spr.DEFAULT_WIDTH.index("--set") + 1] == "hidden=128"
+
+
+def test_clip_reads_the_fixed_and_the_relative_threshold(tmp_path, capsys):
+    import argparse
+    import json
+
+    for name, clip, rows in (
+            ("fixed", 10.0, [(1, "grad_norm", 20.0), (2, "grad_norm", 5.0)]),
+            ("relative", 10.0, [(1, "grad_norm", 20.0), (1, "grad_clip", 30.0),
+                                (2, "grad_norm", 5.0), (2, "grad_clip", 4.0)])):
+        run = tmp_path / name
+        run.mkdir()
+        (run / "config.json").write_text(json.dumps({"grad_clip": clip}))
+        (run / "log.csv").write_text("step,split,key,value\n" + "".join(
+            f"{s},train,{k},{v}\n" for s, k, v in rows) + "2,val,rot_err_deg,3.0\n")
+    out = tmp_path / "clip.png"
+    spr.cmd_clip(argparse.Namespace(runs=[str(tmp_path / "fixed"), str(tmp_path / "relative")],
+                                    out=str(out)))
+    text = capsys.readouterr().out
+    assert "fixed: clipped on 50.0 % of 2 steps" in text  # 20 > 10, 5 < 10
+    assert "relative: clipped on 50.0 % of 2 steps" in text  # 20 < 30, 5 > 4
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
