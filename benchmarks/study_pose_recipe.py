@@ -402,9 +402,13 @@ def cmd_clip(args: argparse.Namespace) -> int:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    fig, axes = plt.subplots(1, len(args.runs), figsize=(5 * len(args.runs), 3.8),
+    ncols = min(3, len(args.runs))
+    nrows = -(-len(args.runs) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(5 * ncols, 3.4 * nrows + 0.6),
                              squeeze=False, sharey=True)
-    for ax, run in zip(axes[0], args.runs, strict=True):
+    for ax in axes.flat[len(args.runs):]:
+        ax.set_visible(False)
+    for ax, run in zip(axes.flat, args.runs, strict=False):
         run = Path(run)
         logs = _train_log(run)
         steps = np.array(sorted(logs["grad_norm"]))
@@ -425,7 +429,8 @@ def cmd_clip(args: argparse.Namespace) -> int:
         ax.semilogy(steps, thr, color="C3", label="clip threshold")
         ax.set_title(f"{run.name}\nclipped on {100 * clipped.mean():.0f} % of steps", fontsize=9)
         ax.set_xlabel("step")
-    axes[0][0].set_ylabel("gradient norm (log scale)")
+    for row in axes:
+        row[0].set_ylabel("gradient norm (log scale)")
     axes[0][0].legend(fontsize=8, loc="upper left")
     fig.suptitle("Gradient norm and the clip: a fixed clip against a relative one")
     fig.tight_layout()
