@@ -124,10 +124,34 @@ def test_curves_pool_the_seeds_of_a_variant(tmp_path):
     assert seen["lines"]["gt-y"] == ([250, 500], [255.0, 505.0])
 
 
-def test_default_width_runs_are_named_apart_and_pin_the_width():
+def test_default_width_runs_are_named_apart_and_train_at_the_models_width(tmp_path,
+                                                                         monkeypatch):
+    import argparse
+
+    from strl_pyg.model.config import StrLPoseConfig
+    from strl_pyg.training.config import add_train_arguments
+    from strl_pyg.training.loop import config_from_args
+
     assert spr.run_id("fe", "both", 0) == "fe-both-s0"
     assert spr.run_id("fe", "both", 1, "LP", wide=True) == "fe-LP-both-w128-s1"
-    assert spr.DEFAULT_WIDTH[spr.DEFAULT_WIDTH.index("--set") + 1] == "hidden=128"
+    seen = []
+
+    def fake_run(cmd, **kw):
+        seen.append(cmd)
+        return argparse.Namespace(returncode=0)
+
+    monkeypatch.setattr(spr.subprocess, "run", fake_run)
+    args = argparse.Namespace(row="baseline", root=str(tmp_path), runs=["fe:both:1"],
+                              steps=10, ablation_root=str(tmp_path), default_width=True)
+    assert spr.cmd_train(args) == 0
+    cmd = seen[0]
+    assert cmd[cmd.index("--out") + 1].endswith("fe-both-w128-s1")
+    ap = add_train_arguments(argparse.ArgumentParser())
+    cfg = config_from_args(ap.parse_args(cmd[2:]), ap)  # after python and the script
+    d = StrLPoseConfig()
+    assert cfg.model_overrides == {"hidden": d.hidden, "layers": d.layers, "heads": d.heads,
+                                   "inputs": "flow"}
+    assert (cfg.steps, cfg.seed, cfg.lr, cfg.beta) == (10, 1, 3e-4, 0.5)  # the study's pins
 
 
 def test_clip_reads_the_fixed_and_the_relative_threshold(tmp_path, capsys):
@@ -135,9 +159,12 @@ def test_clip_reads_the_fixed_and_the_relative_threshold(tmp_path, capsys):
     import json
 
     for name, clip, rows in (
-            ("fixed", 10.0, [(1, "grad_norm", 20.0), (2, "grad_norm", 5.0)]),
-            ("relative", 10.0, [(1, "grad_norm", 20.0), (1, "grad_clip", 30.0),
-                                (2, "grad_norm", 5.0), (2, "grad_clip", 4.0)])):
+            ("fixed", 10.0, [(1, "grad_norm", 20.0), (1, "clipped", 1.0),
+                             (2, "grad_norm", 5.0), (2, "clipped", 0.0)]),
+            # the fixed clip of 100 would clip neither step: the logged threshold decides
+            ("relative", 100.0, [(1, "grad_norm", 20.0), (1, "grad_clip", 30.0),
+                                 (1, "clipped", 0.0), (2, "grad_norm", 5.0),
+                                 (2, "grad_clip", 4.0), (2, "clipped", 1.0)])):
         run = tmp_path / name
         run.mkdir()
         (run / "config.json").write_text(json.dumps({"grad_clip": clip}))
@@ -147,6 +174,8 @@ def test_clip_reads_the_fixed_and_the_relative_threshold(tmp_path, capsys):
     spr.cmd_clip(argparse.Namespace(runs=[str(tmp_path / "fixed"), str(tmp_path / "relative")],
                                     out=str(out)))
     text = capsys.readouterr().out
-    assert "fixed: clipped on 50.0 % of 2 steps" in text  # 20 > 10, 5 < 10
-    assert "relative: clipped on 50.0 % of 2 steps" in text  # 20 < 30, 5 > 4
+    assert "fixed: clipped on 50.0 % of 2 steps (by quarter 100 / 0 %)" in text
+    assert "relative: clipped on 50.0 % of 2 steps (by quarter 0 / 100 %)" in text
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(SystemExit, match="expected a run folder with log.csv and config.json"):
+        spr.cmd_clip(argparse.Namespace(runs=[str(tmp_path / "none")], out=str(out)))

@@ -1,6 +1,7 @@
 """Training Str-L Pose: the loop and its command line (:mod:`.loop`), the torch-free config and
 flags (:mod:`.config`), datasets and the step sampler (:mod:`.data`), losses (:mod:`.loss`),
-validation (:mod:`.validation`), checkpoints (:mod:`.checkpoints`) and logs (:mod:`.log`).
+validation (:mod:`.validation`), the gradient clip (:mod:`.clip`), checkpoints
+(:mod:`.checkpoints`) and logs (:mod:`.log`).
 """
 
 from __future__ import annotations

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 from strl_pyg.synthetic.config import LINE_SCENE_KINDS  # numpy only
+from strl_pyg.training.clip import MIN_HISTORY, WINDOW  # standard library only
 from strl_pyg.utils.dataclass import strict_from_dict
 
 __all__ = [
@@ -94,8 +95,9 @@ class TrainConfig:
     roll_augment: float = 0.0
     init_from: str | None = None  # start from these weights (model.pt or last.pt); fine-tuning
     grad_clip: float | None = 10.0  # max gradient norm (None: off); see grad_clip_relative
-    # > 0: the clip is this many times the median gradient norm of the last 200 steps, once 20
-    # are seen (grad_clip before; strl_pyg.training.clip); 0: grad_clip throughout
+    # > 0: the clip is this many times the median gradient norm of the last clip.WINDOW steps,
+    # once clip.MIN_HISTORY are seen (grad_clip before; strl_pyg.training.clip); 0: grad_clip
+    # throughout
     grad_clip_relative: float = 0.0
     # pose loss (strl_pyg.training.loss.LOSS_FORMS): "balanced" (beta-NLL, w's variance on a
     # detached residual, angular translation term) | "paper" (the paper's aleatoric loss); a
@@ -166,6 +168,8 @@ class TrainConfig:
             raise ValueError(f"Expected angle_weight >= 0 (got {self.angle_weight!r})")
         if not 0.0 <= self.beta <= 1.0:
             raise ValueError(f"Expected beta in [0, 1] (got {self.beta!r})")
+        if self.grad_clip is not None and not self.grad_clip > 0:
+            raise ValueError(f"Expected grad_clip > 0 or None (got {self.grad_clip!r})")
         if not self.grad_clip_relative >= 0:
             raise ValueError(f"Expected grad_clip_relative >= 0 (got {self.grad_clip_relative!r})")
         if not self.rot_weight > 0:
@@ -257,7 +261,7 @@ class TrainConfig:
         return strict_from_dict(cls, d)
 
 
-def _add_loss_arguments(ap: argparse.ArgumentParser, d: TrainConfig) -> None:
+def _add_loss_and_clip_arguments(ap: argparse.ArgumentParser, d: TrainConfig) -> None:
     """The pose loss's flags and the gradient clip's."""
     ap.add_argument("--loss", choices=("balanced", "paper"), default=d.loss,
                     help="pose loss: balanced (default; beta-NLL and an angular translation "
@@ -273,8 +277,8 @@ def _add_loss_arguments(ap: argparse.ArgumentParser, d: TrainConfig) -> None:
     ap.add_argument("--grad-clip", type=float, default=d.grad_clip,
                     help="max gradient norm (0: off); the norm is logged every step")
     ap.add_argument("--grad-clip-relative", type=float, default=d.grad_clip_relative,
-                    metavar="K", help="clip at K x the median norm of the last 200 steps "
-                    "(--grad-clip for the first 20; 0: off)")
+                    metavar="K", help=f"clip at K x the median norm of the last {WINDOW} "
+                    f"steps (--grad-clip for the first {MIN_HISTORY}; 0: off)")
 
 
 def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -298,7 +302,7 @@ def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     ap.add_argument("--matches", choices=("ground_truth", "frontend"), default=d.matches,
                     help="generated scenes: the generator's matches or front-end matches on "
                          "the rendered images (cached in --cache-dir)")
-    _add_loss_arguments(ap, d)
+    _add_loss_and_clip_arguments(ap, d)
     ap.add_argument("--outlier-augment", type=float, default=d.outlier_augment,
                     help="up to this fraction of point matches shuffled into outliers")
     ap.add_argument("--geo-ess-start", type=int, default=d.geo_ess_start,

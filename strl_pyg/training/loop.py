@@ -556,10 +556,11 @@ def _train_step(cfg: TrainConfig, ddp_model: torch.nn.Module, model: StrLPose,
         group["lr"] = lr
     logs["lr"] = torch.tensor(lr)
     threshold = clip.threshold()
-    grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), threshold or float("inf"))
+    grad_norm = torch.nn.utils.clip_grad_norm_(
+        model.parameters(), float("inf") if threshold is None else threshold)
     logs["grad_norm"] = grad_norm.detach()
-    logs["clipped"] = (grad_norm > threshold).float() if threshold else torch.zeros(())
-    if threshold and clip.relative > 0:
+    logs["clipped"] = torch.zeros(()) if threshold is None else (grad_norm > threshold).float()
+    if threshold is not None and clip.relative > 0:
         logs["grad_clip"] = torch.tensor(float(threshold))
     clip.record(float(grad_norm))
     # a non-finite gradient (one bad batch: a degenerate solve in the geometric head; a
