@@ -384,12 +384,10 @@ def cmd_motion(args: argparse.Namespace) -> int:
 
 def _train_log(run: Path) -> dict[str, dict[int, float]]:
     """``{key: {step: value}}`` of a run's training rows in ``log.csv``."""
-    logs: dict[str, dict[int, float]] = {}
-    with open(run / "log.csv") as f:
-        for row in csv.DictReader(f):
-            if row["split"] == "train":
-                logs.setdefault(row["key"], {})[int(row["step"])] = float(row["value"])
-    return logs
+    from strl_pyg.training.log import read_log
+
+    return {key: dict(zip(steps, values, strict=True))
+            for key, (steps, values) in read_log(run / "log.csv").get("train", {}).items()}
 
 
 def cmd_clip(args: argparse.Namespace) -> int:

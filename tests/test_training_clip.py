@@ -41,3 +41,16 @@ def test_the_relative_clip_follows_the_median_of_recent_norms():
         TrainConfig(grad_clip=-1.0)
     # a config stored before the setting existed trained with the fixed clip
     assert TrainConfig.from_dict({"loss": "balanced"}).grad_clip_relative == 0.0
+
+
+def test_the_command_line_turns_the_clip_off_at_0_and_refuses_a_negative_one():
+    import argparse
+
+    from strl_pyg.training.config import add_train_arguments
+    from strl_pyg.training.loop import config_from_args
+
+    ap = add_train_arguments(argparse.ArgumentParser())
+    assert config_from_args(ap.parse_args(["--grad-clip", "0"]), ap).grad_clip is None
+    # a negative clip was read as "off" without a word
+    with pytest.raises(ValueError, match=r"Expected grad_clip > 0 or None \(got -1.0\)"):
+        config_from_args(ap.parse_args(["--grad-clip", "-1"]), ap)

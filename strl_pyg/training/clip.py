@@ -14,6 +14,7 @@ It is an option, not the default: over three seeds of the study's protocol it wa
 from __future__ import annotations
 
 import math
+import statistics
 from collections import deque
 from collections.abc import Iterable
 
@@ -54,9 +55,7 @@ class GradientClip:
     def threshold(self) -> float | None:
         """The maximum gradient norm of the next step (``None``: no clip)."""
         if self.relative > 0 and len(self.norms) >= MIN_HISTORY:
-            ordered = sorted(self.norms)
-            mid = len(ordered) // 2
-            median = ordered[mid] if len(ordered) % 2 else 0.5 * (ordered[mid - 1] + ordered[mid])
+            median = statistics.median(self.norms)
             if median > 0:
                 return self.relative * median
         return self.fixed

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import random
 import signal
@@ -562,12 +563,13 @@ def _train_step(cfg: TrainConfig, ddp_model: torch.nn.Module, model: StrLPose,
     logs["clipped"] = torch.zeros(()) if threshold is None else (grad_norm > threshold).float()
     if threshold is not None and clip.relative > 0:
         logs["grad_clip"] = torch.tensor(float(threshold))
-    clip.record(float(grad_norm))
+    norm = float(grad_norm)  # one device sync for the clip's history and the check below
+    clip.record(norm)
     # a non-finite gradient (one bad batch: a degenerate solve in the geometric head; a
     # non-finite loss gives one too) would turn every weight into NaN for good: the step is
     # skipped and logged instead. Decided on the norm alone: under DDP it is of the
     # all-reduced gradients, so every rank skips the same steps (a rank's own loss is not).
-    finite = bool(torch.isfinite(grad_norm))
+    finite = math.isfinite(norm)
     logs["skipped"] = torch.tensor(0.0 if finite else 1.0)
     if finite:
         optimizer.step()
@@ -653,7 +655,7 @@ def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> T
         matches=args.matches, outlier_augment=args.outlier_augment,
         geo_ess_start=args.geo_ess_start, data_seed=args.data_seed,
         checkpoint_every=args.checkpoint_every, checkpoint_minutes=args.checkpoint_minutes,
-        loss=args.loss, grad_clip=args.grad_clip if args.grad_clip > 0 else None,
+        loss=args.loss, grad_clip=None if args.grad_clip == 0 else args.grad_clip,
         grad_clip_relative=args.grad_clip_relative,
         angle_weight=args.angle_weight, rot_weight=args.rot_weight, beta=args.beta,
         lr_schedule=args.lr_schedule, warmup_steps=args.warmup_steps,
