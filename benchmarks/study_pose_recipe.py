@@ -335,6 +335,158 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- Table 3
+#: The rows of Table 3 trained with a recipe, and the paper's claims about them as paired
+#: comparisons ``(row, against)``: "+LP", "+V" and the full model each against the baseline,
+#: and the full model against the rows it adds to.
+TABLE3_ROWS = ("baseline", "LP", "V", "full")
+TABLE3_CLAIMS = (("LP", "baseline"), ("V", "baseline"), ("full", "baseline"), ("full", "LP"),
+                 ("full", "V"))
+
+
+def t3_name(row: str, variant: str) -> str:
+    """The study's name of a Table 3 run (seed left off): ``t3-[ROW-]VARIANT``."""
+    return f"t3-{variant}" if row == "baseline" else f"t3-{row}-{variant}"
+
+
+def _seed_stat(values: list[float], digits: int = 1) -> str:
+    """``mean (lo-hi)`` over seeds; a single seed alone."""
+    import numpy as np
+
+    if len(values) == 1:
+        return f"{values[0]:.{digits}f}"
+    return f"{np.mean(values):.{digits}f} ({min(values):.{digits}f}-{max(values):.{digits}f})"
+
+
+def table3_rows(runs: dict[str, dict], variants: list[str]) -> list[str]:
+    """One line per (row, variant) with scored seeds: the validation translation mean and
+    median and rotation mean at the last step, and each evaluation set's median rotation /
+    translation error, as the mean over seeds with the seeds' range."""
+    head = ("| row | recipe | seeds | val trans mean | val trans median | val rot mean | "
+            + " | ".join(f"{s} rot / trans" for s in EVAL_SETS) + " |")
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for row in TABLE3_ROWS:
+        for variant in variants:
+            name = t3_name(row, variant)
+            seeds = sorted(pooled_errors(runs, name))
+            if not seeds:
+                continue
+            last = [runs[f"{name}-s{k}"]["history"][-1] for k in seeds]
+            cells = [row, f"`{variant}`", ", ".join(map(str, seeds)),
+                     _seed_stat([h["trans_err_deg"] for h in last]),
+                     _seed_stat([h["trans_err_med"] for h in last]),
+                     _seed_stat([h["rot_err_deg"] for h in last], 2)]
+            for s in EVAL_SETS:
+                errs = [runs[f"{name}-s{k}"]["errors"].get(s) for k in seeds]
+                if any(e is None for e in errs):
+                    cells.append("-")
+                    continue
+                cells.append(_seed_stat([_med(e, 0) for e in errs], 2) + " / "
+                             + _seed_stat([_med(e, 1) for e in errs]))
+            lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+def table3_claims(runs: dict[str, dict], variant: str) -> list[str]:
+    """The paper's claims as paired median ratios (first row / second row, pooled over the
+    seeds both have, 95 % paired bootstrap over (seed, pair); below 1: the first is better)."""
+    import ablation_eval as ae
+
+    head = ("| claim | seeds | " + " | ".join(f"{s} rot | {s} trans" for s in EVAL_SETS)
+            + " |")
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for a, b in TABLE3_CLAIMS:
+        ea = pooled_errors(runs, t3_name(a, variant))
+        eb = pooled_errors(runs, t3_name(b, variant))
+        seeds = sorted(set(ea) & set(eb))
+        if not seeds:
+            continue
+        cells = [f"{a} / {b}", ", ".join(map(str, seeds))]
+        for s in EVAL_SETS:
+            for which in (0, 1):
+                if not all(s in ea[k] and s in eb[k] for k in seeds):
+                    cells.append("-")
+                    continue
+                r, lo, hi, _ = ae.paired_ratio([x for k in seeds for x in ea[k][s]],
+                                               [x for k in seeds for x in eb[k][s]], which)
+                mark = "**" if hi < 1 or lo > 1 else ""
+                cells.append(f"{mark}{r:.2f} [{lo:.2f}, {hi:.2f}]{mark}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+def cmd_table3(args: argparse.Namespace) -> int:
+    """Table 3 of the study's scored runs (``t3-[ROW-]VARIANT-sS``): per row and recipe, and
+    the paper's claims as paired ratios for each recipe, with a figure."""
+    from common import banner
+
+    runs = _load()
+    missing = [v for v in args.variants if not pooled_errors(runs, t3_name("baseline", v))]
+    if missing:
+        raise SystemExit(f"error: expected scored baseline runs 't3-VARIANT-sN' for every "
+                         f"recipe (got none for {missing}; scored: run 'score' first)")
+    lines = ["# Table 3 with the study's recipes", "", "```", banner().strip(), "```", "",
+             "`python benchmarks/study_pose_recipe.py table3 " + " ".join(args.variants)
+             + "` (the study's Table 3 protocol: the ablation's front-end cache, width 64, "
+             "2000 steps; see `results_pose_recipe.md`). Validation: each run's own 100 "
+             "held-out generated pairs, translation-direction mean / median and rotation "
+             "mean (deg) at step 2000. Driving / KITTI 06 / dino: median rotation / "
+             "translation error (deg) of the regression head on front-end matches. Cells: "
+             "the mean over seeds (the seeds' range).", ""]
+    lines += table3_rows(runs, args.variants)
+    for variant in args.variants:
+        lines += ["", f"**The paper's claims, recipe `{variant}`**: median ratio, first row "
+                  "over second, pooled over the seeds both have [95 % paired bootstrap over "
+                  "(seed, pair); bold: the interval excludes 1; below 1: the first row is "
+                  "better].", ""]
+        lines += table3_claims(runs, variant)
+    lines += ["", "![Table 3](figures/table3_recipe.png)", ""]
+    notes = RESULTS / "notes_table3.md"  # the findings, written by hand from the tables
+    if notes.exists():
+        lines += [notes.read_text().rstrip(), ""]
+    out = Path(args.out)
+    out.write_text("\n".join(lines) + "\n")
+    plot_table3(runs, args.variants, HERE / "figures" / "table3_recipe.png")
+    print(f"wrote {out}")
+    return 0
+
+
+def plot_table3(runs: dict[str, dict], variants: list[str], path: Path) -> None:
+    """Each seed of each row and recipe: the validation translation mean, KITTI 06's and the
+    driving set's median translation errors."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = (("validation translation mean (generated)", None),
+              ("KITTI 06 translation median", "kitti06"),
+              ("driving translation median (generated)", "driving"))
+    fig, axes = plt.subplots(1, len(panels), figsize=(14, 4.2))
+    width = 0.7 / max(1, len(variants))
+    for ax, (title, s) in zip(axes, panels, strict=True):
+        for j, variant in enumerate(variants):
+            for i, row in enumerate(TABLE3_ROWS):
+                name = t3_name(row, variant)
+                seeds = sorted(pooled_errors(runs, name))
+                vals = [runs[f"{name}-s{k}"]["history"][-1]["trans_err_deg"] if s is None
+                        else _med(runs[f"{name}-s{k}"]["errors"][s], 1) for k in seeds]
+                x = [i + (j - (len(variants) - 1) / 2) * width] * len(vals)
+                ax.plot(x, vals, "o", color=f"C{j}", ms=5, alpha=0.8,
+                        label=variant if i == 0 else None)
+        ax.set_xticks(range(len(TABLE3_ROWS)), TABLE3_ROWS)
+        ax.set_xlabel("Table 3 row")
+        ax.set_ylabel("degrees")
+        ax.set_title(title, fontsize=10)
+        ax.grid(alpha=0.3)
+    axes[0].legend(title="recipe (one dot per seed)", fontsize=8, title_fontsize=8)
+    fig.suptitle("Table 3 rows under the study's recipes (2000 steps, front-end matches)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 # ----------------------------------------------------------------------------- by motion
 def validation_pairs(run: Path) -> list[tuple[str, object, object]]:
     """The run's own validation pairs as ``(motion, matches, T_0to1)``: the cached matches
@@ -693,12 +845,17 @@ def main(argv: list[str] | None = None) -> int:
                        "(folders with log.csv); the share clipped and a figure")
     k.add_argument("runs", nargs="+")
     k.add_argument("--out", default=str(HERE / "figures" / "pose_recipe_clip.png"))
+    t3 = sub.add_parser("table3", help="Table 3 of the scored t3-[ROW-]VARIANT runs: per "
+                        "row and recipe, the paper's claims as paired ratios, a figure")
+    t3.add_argument("variants", nargs="+", help="recipes (variant names), e.g. both "
+                    "both-cos1e-3-b0.25")
+    t3.add_argument("--out", default=str(HERE / "results_table3_recipe.md"))
     r = sub.add_parser("report", help="the table and the curves")
     r.add_argument("--out", default=str(HERE / "results_pose_recipe.md"))
     args = ap.parse_args(argv)
     return {"train": cmd_train, "score": cmd_score, "motion": cmd_motion,
             "compare": cmd_compare, "parallax": cmd_parallax, "clip": cmd_clip,
-            "report": cmd_report}[args.cmd](args)
+            "report": cmd_report, "table3": cmd_table3}[args.cmd](args)
 
 
 if __name__ == "__main__":

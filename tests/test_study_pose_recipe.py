@@ -179,3 +179,38 @@ def test_clip_reads_the_fixed_and_the_relative_threshold(tmp_path, capsys):
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(SystemExit, match="expected a run folder with log.csv and config.json"):
         spr.cmd_clip(argparse.Namespace(runs=[str(tmp_path / "none")], out=str(out)))
+
+
+def _t3_run(val_mean: float, rows: list) -> dict:
+    hist = [{"step": 2000, "trans_err_deg": val_mean, "trans_err_med": val_mean / 2,
+             "rot_err_deg": 5.0}]
+    return {"history": hist, "errors": {"driving": rows}}
+
+
+def test_table3_rows_claims_and_figure(tmp_path, monkeypatch):
+    runs = {"t3-r-s0": _t3_run(30.0, [[1.0, 4.0], [1.0, 4.0]]),
+            "t3-r-s1": _t3_run(40.0, [[3.0, 8.0], [3.0, 8.0]]),
+            "t3-LP-r-s0": _t3_run(20.0, [[0.5, 8.0], [0.5, 8.0]]),
+            "t3-full-r-s1": _t3_run(10.0, [[3.0, 4.0], [3.0, 4.0]])}
+    lines = spr.table3_rows(runs, ["r"])
+    # the mean over seeds with the seeds' range; a row without runs (V) is left out
+    assert lines[2].startswith("| baseline | `r` | 0, 1 | 35.0 (30.0-40.0) | 17.5 (15.0-20.0) "
+                               "| 5.00 (5.00-5.00) | 2.00 (1.00-3.00) / 6.0 (4.0-8.0) | - | - |")
+    assert [line.split(" | ")[0] for line in lines[2:]] == ["| baseline", "| LP", "| full"]
+    claims = spr.table3_claims(runs, "r")
+    # LP against baseline on their common seed 0 only; full / LP share no seed: no line
+    assert any(c.startswith("| LP / baseline | 0 | **0.50 [0.50, 0.50]** | **2.00 [2.00, "
+                            "2.00]** |") for c in claims)
+    assert any(c.startswith("| full / baseline | 1 | 1.00 [1.00, 1.00] | **0.50") for c in claims)
+    assert not any(c.startswith("| full / LP") for c in claims)
+    out = tmp_path / "t3.png"
+    runs = {k: {**v, "errors": {s: v["errors"]["driving"] for s in spr.EVAL_SETS}}
+            for k, v in runs.items()}
+    spr.plot_table3(runs, ["r"], out)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_table3_needs_a_scored_baseline(tmp_path, monkeypatch):
+    monkeypatch.setattr(spr, "RESULTS", tmp_path)
+    with pytest.raises(SystemExit, match="scored baseline runs"):
+        spr.main(["table3", "nothing", "--out", str(tmp_path / "t3.md")])
