@@ -231,8 +231,8 @@ def gradient_shares(run: Path, batches: int = 8) -> dict[str, float]:
             acc.append(float(torch.sqrt(sum((g.square().sum() for g in grads
                                              if g is not None), torch.zeros(())))))
     return {"grad_rot": float(np.median(rot)), "grad_trans": float(np.median(trans)),
-            "log_var_rot": float(out.log_var[:, :4].mean()),
-            "log_var_trans": float(out.log_var[:, 4:].mean())}
+            "log_var_rot": float(out.log_var[:, :4].detach().mean()),
+            "log_var_trans": float(out.log_var[:, 4:].detach().mean())}
 
 
 def _term(loss_fn, out, T, which: str):
