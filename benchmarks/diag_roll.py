@@ -96,12 +96,24 @@ def measure(model, sets: dict[str, list]) -> dict[str, dict[str, list[float]]]:
     return res
 
 
+def flow_axis_vertical(x0: np.ndarray, x1: np.ndarray) -> bool:
+    """Whether the displacements ``x1 - x0`` (K-normalised) run along the image's y more than
+    along its x: the principal axis of their second moment is within 45 deg of vertical. The
+    generator's upright orbits move along x; the dino's rolled views move along y."""
+    u = np.asarray(x1, dtype=float) - np.asarray(x0, dtype=float)
+    _, vecs = np.linalg.eigh(u.T @ u)
+    axis = vecs[:, -1]
+    return bool(abs(axis[1]) > abs(axis[0]))
+
+
 def verify(model, sets: dict[str, list]) -> dict[str, dict[str, list]]:
     """Per set: the translation error (deg) of the pair as it is (``as_is``), of the roll
     hypothesis whose pose has the smallest median Sampson distance on the point matches
     (``verified``, its roll in ``picked``), of the hypothesis with the smallest predicted
-    translation variance (``by_sigma``, its roll in ``picked_sigma``) and of the best
-    hypothesis (``best``: an oracle)."""
+    translation variance (``by_sigma``, its roll in ``picked_sigma``), of the roll that turns
+    the flow's principal axis horizontal (``axis_p90`` / ``axis_m90``: +90 or -90 deg where
+    the axis is vertical, as it is elsewhere; ``vertical`` per pair; the axis does not tell
+    which of the two) and of the best hypothesis (``best``: an oracle)."""
     import torch
 
     from strl_pyg.data import keys as K
@@ -112,7 +124,7 @@ def verify(model, sets: dict[str, list]) -> dict[str, dict[str, list]]:
     res: dict[str, dict[str, list]] = {}
     for name, items in sets.items():
         r = res[name] = {"as_is": [], "verified": [], "best": [], "picked": [], "by_sigma": [],
-                         "picked_sigma": []}
+                         "picked_sigma": [], "axis_p90": [], "axis_m90": [], "vertical": []}
         for g in items:
             truth = g[K.T_0TO1].reshape(4, 4).double()
             x0 = g[K.POINT][K.POS0].double()
@@ -137,6 +149,10 @@ def verify(model, sets: dict[str, list]) -> dict[str, dict[str, list]]:
             j = int(np.argmin(sigmas))
             r["by_sigma"].append(errs[j])
             r["picked_sigma"].append(ROLLS[j])
+            vertical = flow_axis_vertical(x0.numpy(), x1.numpy())
+            r["vertical"].append(vertical)
+            r["axis_p90"].append(errs[ROLLS.index(90)] if vertical else errs[0])
+            r["axis_m90"].append(errs[ROLLS.index(-90)] if vertical else errs[0])
         picked = {roll: r["picked"].count(roll) for roll in ROLLS}
         by_sigma = {roll: r["picked_sigma"].count(roll) for roll in ROLLS}
         print(f"{name}: as is {np.median(r['as_is']):.1f}, verified "
@@ -180,17 +196,22 @@ def report() -> int:
                   "translation error (deg) as the pair is, of the hypothesis with the smallest "
                   "median Sampson distance, of the hypothesis with the smallest predicted "
                   "translation variance (sum of its three log-variances; '-' where not "
-                  "measured), and of the best hypothesis (an oracle); rolls kept (0 / 90 / -90 "
-                  "/ 180) by the Sampson distance, then by the variance.", "",
-                  "| weights | set | as is | verified | by variance | best | rolls kept |",
-                  "|---|---|---|---|---|---|---|"]
+                  "measured), of the roll +90 or -90 deg where the flow's principal axis is "
+                  "vertical (the pair as it is elsewhere; the share of vertical pairs), and of "
+                  "the best hypothesis (an oracle); rolls kept (0 / 90 / -90 / 180) by the "
+                  "Sampson distance, then by the variance.", "",
+                  "| weights | set | as is | verified | by variance | axis, +90 | axis, -90 | "
+                  "vertical | best | rolls kept |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
         for label, run in verified.items():
             for s, e in run["errors"].items():
                 kept = " / ".join(str(e["picked"].count(r)) for r in ROLLS)
                 if "picked_sigma" in e:
                     kept += "; " + " / ".join(str(e["picked_sigma"].count(r)) for r in ROLLS)
                 cells = [f"{np.median(e[k]):.1f} / {np.mean(e[k]):.1f}" if k in e else "-"
-                         for k in ("as_is", "verified", "by_sigma", "best")]
+                         for k in ("as_is", "verified", "by_sigma", "axis_p90", "axis_m90")]
+                cells.append(f"{100 * np.mean(e['vertical']):.0f} %" if "vertical" in e else "-")
+                cells.append(f"{np.median(e['best']):.1f} / {np.mean(e['best']):.1f}")
                 lines.append(f"| {label} | {s} ({len(e['as_is'])}) | " + " | ".join(cells)
                              + f" | {kept} |")
     lines += ["", "```", banner().strip(), "```", "", "![roll](figures/roll.png)", ""]

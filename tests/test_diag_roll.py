@@ -52,15 +52,15 @@ def test_a_fixed_answer_is_lost_by_the_roll_and_the_truth_is_not():
     assert max(max(v) for v in oracle.values()) < 1e-3
 
 
-def _consistent_graph():
-    """Matches that are exact projections under the pair's pose (a sideways move and a small
-    yaw), so the true pose has zero Sampson distance."""
+def _consistent_graph(t=(0.6, 0.1, 0.05)):
+    """Matches that are exact projections under the pair's pose (by default a sideways move
+    and a small yaw), so the true pose has zero Sampson distance."""
     rng = np.random.default_rng(1)
     Km = np.array([[100.0, 0, 64], [0, 100, 64], [0, 0, 1]])
     X = np.c_[rng.uniform(-1, 1, (20, 2)), rng.uniform(3, 6, 20)]
     a = np.radians(5.0)
     R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
-    t = np.array([0.6, 0.1, 0.05])
+    t = np.asarray(t, dtype=float)
     X1 = X @ R.T + t
     p0 = (X[:, :2] / X[:, 2:]) * 100 + 64
     p1 = (X1[:, :2] / X1[:, 2:]) * 100 + 64
@@ -127,11 +127,39 @@ def test_report_writes_the_table_and_figure(tmp_path, monkeypatch):
         __import__("json").dumps({"checkpoint": "x", "errors": {"set": ver}}))
     assert diag_roll.main(["--report"]) == 0
     text = (tmp_path / "results_roll.md").read_text()
-    assert "| a | set (2) | 91.0 / 91.0 | 12.0 / 12.0 | - | 10.0 / 10.0 | 0 / 1 / 1 / 0 |" in text
+    assert ("| a | set (2) | 91.0 / 91.0 | 12.0 / 12.0 | - | - | - | - | 10.0 / 10.0 | "
+            "0 / 1 / 1 / 0 |") in text
     ver.update(by_sigma=[30.0, 50.0], picked_sigma=[0, 0])
     (tmp_path / "results_roll" / "verify" / "a.json").write_text(
         __import__("json").dumps({"checkpoint": "x", "errors": {"set": ver}}))
     assert diag_roll.main(["--report"]) == 0
     text = (tmp_path / "results_roll.md").read_text()
-    assert ("| a | set (2) | 91.0 / 91.0 | 12.0 / 12.0 | 40.0 / 40.0 | 10.0 / 10.0 | "
+    assert ("| a | set (2) | 91.0 / 91.0 | 12.0 / 12.0 | 40.0 / 40.0 | - | - | - | 10.0 / 10.0 | "
             "0 / 1 / 1 / 0; 2 / 0 / 0 / 0 |") in text
+    ver.update(axis_p90=[20.0, 22.0], axis_m90=[90.0, 92.0], vertical=[True, False])
+    (tmp_path / "results_roll" / "verify" / "a.json").write_text(
+        __import__("json").dumps({"checkpoint": "x", "errors": {"set": ver}}))
+    assert diag_roll.main(["--report"]) == 0
+    text = (tmp_path / "results_roll.md").read_text()
+    assert ("| a | set (2) | 91.0 / 91.0 | 12.0 / 12.0 | 40.0 / 40.0 | 21.0 / 21.0 | "
+            "91.0 / 91.0 | 50 % | 10.0 / 10.0 |") in text
+
+
+def test_flow_axis_tells_vertical_from_horizontal_motion():
+    rng = np.random.default_rng(3)
+    x0 = rng.uniform(-0.5, 0.5, (50, 2))
+    along = np.c_[rng.normal(0.1, 0.02, 50), rng.normal(0.0, 0.02, 50)]
+    assert not diag_roll.flow_axis_vertical(x0, x0 + along)
+    assert diag_roll.flow_axis_vertical(x0, x0 + along[:, ::-1])
+    assert diag_roll.flow_axis_vertical(x0, x0 - along[:, ::-1])  # the sign does not matter
+
+
+def test_verify_by_flow_axis_rolls_only_vertical_flow():
+    sideways = diag_roll.verify(_RightOnlyRolled(), {"one": [_consistent_graph()]})["one"]
+    assert sideways["vertical"] == [False]
+    assert sideways["axis_p90"] == sideways["axis_m90"] == sideways["as_is"]
+    upward = diag_roll.verify(_RightOnlyRolled(), {"one": [_consistent_graph((0.1, 0.6, 0.05))]})
+    upward = upward["one"]
+    assert upward["vertical"] == [True]
+    assert upward["axis_p90"][0] < 1e-4  # the network is right under +90 only
+    assert upward["axis_m90"][0] > 30.0
