@@ -359,10 +359,11 @@ def _seed_stat(values: list[float], digits: int = 1) -> str:
 
 
 def table3_rows(runs: dict[str, dict], variants: list[str]) -> list[str]:
-    """One line per (row, variant) with scored seeds: the validation translation mean and
-    median and rotation mean at the last step, and each evaluation set's median rotation /
+    """One line per (row, variant) with scored seeds: the step the runs reached (each
+    distinct one, so that runs of other lengths show), the validation translation mean and
+    median and rotation mean at that step, and each evaluation set's median rotation /
     translation error, as the mean over seeds with the seeds' range."""
-    head = ("| row | recipe | seeds | val trans mean | val trans median | val rot mean | "
+    head = ("| row | recipe | seeds | step | val trans mean | val trans median | val rot mean | "
             + " | ".join(f"{s} rot / trans" for s in EVAL_SETS) + " |")
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for row in TABLE3_ROWS:
@@ -372,7 +373,9 @@ def table3_rows(runs: dict[str, dict], variants: list[str]) -> list[str]:
             if not seeds:
                 continue
             last = [runs[f"{name}-s{k}"]["history"][-1] for k in seeds]
+            steps = sorted({int(runs[f"{name}-s{k}"]["step"]) for k in seeds})
             cells = [row, f"`{variant}`", ", ".join(map(str, seeds)),
+                     " / ".join(map(str, steps)),
                      _seed_stat([h["trans_err_deg"] for h in last]),
                      _seed_stat([h["trans_err_med"] for h in last]),
                      _seed_stat([h["rot_err_deg"] for h in last], 2)]
@@ -424,13 +427,13 @@ def cmd_table3(args: argparse.Namespace) -> int:
     missing = [v for v in args.variants if not pooled_errors(runs, t3_name("baseline", v))]
     if missing:
         raise SystemExit(f"error: expected scored baseline runs 't3-VARIANT-sN' for every "
-                         f"recipe (got none for {missing}; scored: run 'score' first)")
+                         f"recipe (got none for {missing}; train and 'score' them first)")
     lines = ["# Table 3 with the study's recipes", "", "```", banner().strip(), "```", "",
              "`python benchmarks/study_pose_recipe.py table3 " + " ".join(args.variants)
              + "` (the study's Table 3 protocol: the ablation's front-end cache, width 64, "
              "2000 steps; see `results_pose_recipe.md`). Validation: each run's own 100 "
              "held-out generated pairs, translation-direction mean / median and rotation "
-             "mean (deg) at step 2000. Driving / KITTI 06 / dino: median rotation / "
+             "mean (deg) at the runs' last step. Driving / KITTI 06 / dino: median rotation / "
              "translation error (deg) of the regression head on front-end matches. Cells: "
              "the mean over seeds (the seeds' range).", ""]
     lines += table3_rows(runs, args.variants)
@@ -468,9 +471,10 @@ def plot_table3(runs: dict[str, dict], variants: list[str], path: Path) -> None:
         for j, variant in enumerate(variants):
             for i, row in enumerate(TABLE3_ROWS):
                 name = t3_name(row, variant)
-                seeds = sorted(pooled_errors(runs, name))
-                vals = [runs[f"{name}-s{k}"]["history"][-1]["trans_err_deg"] if s is None
-                        else _med(runs[f"{name}-s{k}"]["errors"][s], 1) for k in seeds]
+                scored = [runs[f"{name}-s{k}"] for k in sorted(pooled_errors(runs, name))]
+                vals = [r["history"][-1]["trans_err_deg"] if s is None
+                        else _med(r["errors"][s], 1) for r in scored
+                        if s is None or s in r["errors"]]  # a set it was not scored on
                 x = [i + (j - (len(variants) - 1) / 2) * width] * len(vals)
                 ax.plot(x, vals, "o", color=f"C{j}", ms=5, alpha=0.8,
                         label=variant if i == 0 else None)
@@ -845,8 +849,10 @@ def main(argv: list[str] | None = None) -> int:
                        "(folders with log.csv); the share clipped and a figure")
     k.add_argument("runs", nargs="+")
     k.add_argument("--out", default=str(HERE / "figures" / "pose_recipe_clip.png"))
-    t3 = sub.add_parser("table3", help="Table 3 of the scored t3-[ROW-]VARIANT runs: per "
-                        "row and recipe, the paper's claims as paired ratios, a figure")
+    t3 = sub.add_parser("table3", help="Table 3 of the scored runs named "
+                        "t3-[ROW-]VARIANT-sS (--root's runs/ under those names, e.g. links to "
+                        "'train --row ROW fe:VARIANT:S --steps 2000' runs): per row and "
+                        "recipe, the paper's claims as paired ratios, a figure")
     t3.add_argument("variants", nargs="+", help="recipes (variant names), e.g. both "
                     "both-cos1e-3-b0.25")
     t3.add_argument("--out", default=str(HERE / "results_table3_recipe.md"))

@@ -152,6 +152,9 @@ def test_flow_axis_tells_vertical_from_horizontal_motion():
     assert not diag_roll.flow_axis_vertical(x0, x0 + along)
     assert diag_roll.flow_axis_vertical(x0, x0 + along[:, ::-1])
     assert diag_roll.flow_axis_vertical(x0, x0 - along[:, ::-1])  # the sign does not matter
+    # no displacement to read: left as it is (eigh of a zero moment would say "vertical")
+    assert not diag_roll.flow_axis_vertical(x0, x0)
+    assert not diag_roll.flow_axis_vertical(np.zeros((0, 2)), np.zeros((0, 2)))
 
 
 def test_verify_by_flow_axis_rolls_only_vertical_flow():

@@ -3,6 +3,7 @@ motion (where the validation mean of issue 30's study comes from)."""
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -181,33 +182,55 @@ def test_clip_reads_the_fixed_and_the_relative_threshold(tmp_path, capsys):
         spr.cmd_clip(argparse.Namespace(runs=[str(tmp_path / "none")], out=str(out)))
 
 
-def _t3_run(val_mean: float, rows: list) -> dict:
-    hist = [{"step": 2000, "trans_err_deg": val_mean, "trans_err_med": val_mean / 2,
+def _t3_run(val_mean: float, rows: list, step: int = 2000) -> dict:
+    hist = [{"step": step, "trans_err_deg": val_mean, "trans_err_med": val_mean / 2,
              "rot_err_deg": 5.0}]
-    return {"history": hist, "errors": {"driving": rows}}
+    return {"step": step, "history": hist, "errors": {"driving": rows}}
 
 
-def test_table3_rows_claims_and_figure(tmp_path, monkeypatch):
-    runs = {"t3-r-s0": _t3_run(30.0, [[1.0, 4.0], [1.0, 4.0]]),
+def _t3_runs() -> dict:
+    return {"t3-r-s0": _t3_run(30.0, [[1.0, 4.0], [1.0, 4.0]]),
             "t3-r-s1": _t3_run(40.0, [[3.0, 8.0], [3.0, 8.0]]),
             "t3-LP-r-s0": _t3_run(20.0, [[0.5, 8.0], [0.5, 8.0]]),
+            "t3-LP-r-s1": _t3_run(20.0, [[3.0, 8.0], [3.0, 8.0]], step=8000),
             "t3-full-r-s1": _t3_run(10.0, [[3.0, 4.0], [3.0, 4.0]])}
+
+
+def test_table3_rows_claims_and_figure(tmp_path):
+    runs = _t3_runs()
     lines = spr.table3_rows(runs, ["r"])
-    # the mean over seeds with the seeds' range; a row without runs (V) is left out
-    assert lines[2].startswith("| baseline | `r` | 0, 1 | 35.0 (30.0-40.0) | 17.5 (15.0-20.0) "
-                               "| 5.00 (5.00-5.00) | 2.00 (1.00-3.00) / 6.0 (4.0-8.0) | - | - |")
+    # the mean over seeds with the seeds' range; a row without runs (V) is left out; a set
+    # the runs were not scored on is '-'
+    assert lines[2].startswith("| baseline | `r` | 0, 1 | 2000 | 35.0 (30.0-40.0) | "
+                               "17.5 (15.0-20.0) | 5.00 (5.00-5.00) | 2.00 (1.00-3.00) / "
+                               "6.0 (4.0-8.0) | - | - |")
     assert [line.split(" | ")[0] for line in lines[2:]] == ["| baseline", "| LP", "| full"]
+    assert "| LP | `r` | 0, 1 | 2000 / 8000 |" in lines[3]  # runs of other lengths show
     claims = spr.table3_claims(runs, "r")
-    # LP against baseline on their common seed 0 only; full / LP share no seed: no line
-    assert any(c.startswith("| LP / baseline | 0 | **0.50 [0.50, 0.50]** | **2.00 [2.00, "
-                            "2.00]** |") for c in claims)
+    # LP against baseline pooled over seeds 0 and 1: rotation medians 1.75 against 2.0
+    assert any(c.startswith("| LP / baseline | 0, 1 | 0.88 [") for c in claims)
+    # full against baseline on their common seed 1 only; full / LP: seed 1
     assert any(c.startswith("| full / baseline | 1 | 1.00 [1.00, 1.00] | **0.50") for c in claims)
-    assert not any(c.startswith("| full / LP") for c in claims)
+    assert any(c.startswith("| full / LP | 1 | 1.00 [1.00, 1.00] | **0.50") for c in claims)
+    assert not any(c.startswith("| V /") for c in claims)
     out = tmp_path / "t3.png"
-    runs = {k: {**v, "errors": {s: v["errors"]["driving"] for s in spr.EVAL_SETS}}
-            for k, v in runs.items()}
-    spr.plot_table3(runs, ["r"], out)
+    spr.plot_table3(runs, ["r"], out)  # only "driving" scored: the other panels stay empty
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_table3_writes_the_tables_notes_and_figure(tmp_path, monkeypatch):
+    monkeypatch.setattr(spr, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr(spr, "HERE", tmp_path)
+    (tmp_path / "results").mkdir()
+    for name, run in _t3_runs().items():
+        (tmp_path / "results" / f"{name}.json").write_text(json.dumps(run))
+    (tmp_path / "results" / "notes_table3.md").write_text("Findings by hand.")
+    out = tmp_path / "t3.md"
+    assert spr.main(["table3", "r", "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "**The paper's claims, recipe `r`**" in text
+    assert "| LP / baseline | 0, 1 |" in text and text.rstrip().endswith("Findings by hand.")
+    assert (tmp_path / "figures" / "table3_recipe.png").read_bytes()[:4] == b"\x89PNG"
 
 
 def test_table3_needs_a_scored_baseline(tmp_path, monkeypatch):
