@@ -320,6 +320,8 @@ def test_tensorboard_absent_is_said_once_and_recorded(tmp_path, monkeypatch):
     assert len(said) == 1 and "--no-tensorboard" in str(said[0].message)
     config = json.loads((tmp_path / "run" / "config.json").read_text())
     assert config["tensorboard"] is False and not (tmp_path / "run" / "tb").exists()
+    # what was used: the default warm-up (None) as its length, min(100, 2 // 20); was null
+    assert config["warmup_steps"] == 0
 
 
 def test_curves_show_the_training_loss_beside_validation(tmp_path):

@@ -414,13 +414,15 @@ def _datasets(cfg: TrainConfig, model: StrLPose, datasets: Sequence[Any] | None,
 
 def _logger(cfg: TrainConfig, out_dir: Path, rank: int, start_step: int) -> TrainLogger:
     """The run's logger (rank 0 writes) and its ``config.json``: what was used ("tensorboard"
-    is false when it was asked for but is not installed)."""
+    is false when it was asked for but is not installed; "warmup_steps" is the warm-up's
+    length, also where the config left it to the default, None)."""
     if rank == 0:
         out_dir.mkdir(parents=True, exist_ok=True)
     logger = TrainLogger(out_dir, rank == 0, cfg.tensorboard, start_step)
     if rank == 0:
         (out_dir / "config.json").write_text(
-            json.dumps({**asdict(cfg), "tensorboard": logger.tensorboard}, indent=2))
+            json.dumps({**asdict(cfg), "tensorboard": logger.tensorboard,
+                        "warmup_steps": cfg.warmup}, indent=2))
     return logger
 
 
