@@ -167,6 +167,37 @@ def verify(model, sets: dict[str, list]) -> dict[str, dict[str, list]]:
     return res
 
 
+def verify_table() -> list[str]:
+    """The report's lines for the ``--verify`` runs (``results_roll/verify/``); none without."""
+    lines: list[str] = []
+    verified = {p.stem: json.loads(p.read_text())
+                for p in sorted((RESULTS / "verify").glob("*.json"))}
+    if verified:
+        lines += ["", "**Roll hypotheses kept by the matches** (`--verify`): median / mean "
+                  "translation error (deg) as the pair is, of the hypothesis with the smallest "
+                  "median Sampson distance, of the hypothesis with the smallest predicted "
+                  "translation variance (sum of its three log-variances; '-' where not "
+                  "measured), of the roll +90 or -90 deg where the flow's principal axis is "
+                  "vertical (the pair as it is elsewhere; the share of vertical pairs), and of "
+                  "the best hypothesis (an oracle); rolls kept (0 / 90 / -90 / 180) by the "
+                  "Sampson distance, then by the variance.", "",
+                  "| weights | set | as is | verified | by variance | +90 if flow vertical | "
+                  "-90 if flow vertical | flow vertical | best | rolls kept |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
+        for label, run in verified.items():
+            for s, e in run["errors"].items():
+                kept = " / ".join(str(e["picked"].count(r)) for r in ROLLS)
+                if "picked_sigma" in e:
+                    kept += "; " + " / ".join(str(e["picked_sigma"].count(r)) for r in ROLLS)
+                cells = [f"{np.median(e[k]):.1f} / {np.mean(e[k]):.1f}" if k in e else "-"
+                         for k in ("as_is", "verified", "by_sigma", "axis_p90", "axis_m90")]
+                cells.append(f"{100 * np.mean(e['vertical']):.0f} %" if "vertical" in e else "-")
+                cells.append(f"{np.median(e['best']):.1f} / {np.mean(e['best']):.1f}")
+                lines.append(f"| {label} | {s} ({len(e['as_is'])}) | " + " | ".join(cells)
+                             + f" | {kept} |")
+    return lines
+
+
 def report() -> int:
     import matplotlib
 
@@ -194,31 +225,7 @@ def report() -> int:
                 continue
             cells = [f"{np.median(e[str(r)]):.1f} / {np.mean(e[str(r)]):.1f}" for r in ROLLS]
             lines.append(f"| {label} | {s} ({len(e['0'])}) | " + " | ".join(cells) + " |")
-    verified = {p.stem: json.loads(p.read_text())
-                for p in sorted((RESULTS / "verify").glob("*.json"))}
-    if verified:
-        lines += ["", "**Roll hypotheses kept by the matches** (`--verify`): median / mean "
-                  "translation error (deg) as the pair is, of the hypothesis with the smallest "
-                  "median Sampson distance, of the hypothesis with the smallest predicted "
-                  "translation variance (sum of its three log-variances; '-' where not "
-                  "measured), of the roll +90 or -90 deg where the flow's principal axis is "
-                  "vertical (the pair as it is elsewhere; the share of vertical pairs), and of "
-                  "the best hypothesis (an oracle); rolls kept (0 / 90 / -90 / 180) by the "
-                  "Sampson distance, then by the variance.", "",
-                  "| weights | set | as is | verified | by variance | +90 if flow vertical | "
-                  "-90 if flow vertical | flow vertical | best | rolls kept |",
-                  "|---|---|---|---|---|---|---|---|---|---|"]
-        for label, run in verified.items():
-            for s, e in run["errors"].items():
-                kept = " / ".join(str(e["picked"].count(r)) for r in ROLLS)
-                if "picked_sigma" in e:
-                    kept += "; " + " / ".join(str(e["picked_sigma"].count(r)) for r in ROLLS)
-                cells = [f"{np.median(e[k]):.1f} / {np.mean(e[k]):.1f}" if k in e else "-"
-                         for k in ("as_is", "verified", "by_sigma", "axis_p90", "axis_m90")]
-                cells.append(f"{100 * np.mean(e['vertical']):.0f} %" if "vertical" in e else "-")
-                cells.append(f"{np.median(e['best']):.1f} / {np.mean(e['best']):.1f}")
-                lines.append(f"| {label} | {s} ({len(e['as_is'])}) | " + " | ".join(cells)
-                             + f" | {kept} |")
+    lines += verify_table()
     lines += ["", "```", banner().strip(), "```", "", "![roll](figures/roll.png)", ""]
     notes = HERE / "results_roll" / "notes.md"
     if notes.exists():
