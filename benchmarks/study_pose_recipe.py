@@ -303,12 +303,20 @@ def pooled_errors(runs: dict[str, dict], prefix: str) -> dict[int, dict[str, lis
     return out
 
 
+def pooled_ratio(ea: dict[int, dict], eb: dict[int, dict], seeds: list[int], s: str,
+                 which: int) -> tuple[float, float, float, int]:
+    """``ablation_eval.paired_ratio`` of set ``s``'s rotation (0) or translation (1) errors,
+    the (seed, pair) rows of ``seeds`` pooled (``ea`` / ``eb``: :func:`pooled_errors`)."""
+    import ablation_eval as ae
+
+    return ae.paired_ratio([row for k in seeds for row in ea[k][s]],
+                           [row for k in seeds for row in eb[k][s]], which)
+
+
 def compare_table(runs: dict[str, dict], a: str, b: str) -> str:
     """Median ratio ``a / b`` per evaluation set, rotation and translation, over the (seed,
     pair) errors of the seeds both variants have, with a paired-bootstrap interval over
     those pairs (the variance between seeds is not in it)."""
-    import ablation_eval as ae
-
     ea, eb = pooled_errors(runs, a), pooled_errors(runs, b)
     seeds = sorted(set(ea) & set(eb))
     if not seeds:
@@ -320,11 +328,9 @@ def compare_table(runs: dict[str, dict], a: str, b: str) -> str:
     for s in EVAL_SETS:
         if not all(s in ea[k] and s in eb[k] for k in seeds):
             continue
-        xa = [row for k in seeds for row in ea[k][s]]
-        xb = [row for k in seeds for row in eb[k][s]]
         cells = []
         for which in (0, 1):
-            r, lo, hi, n = ae.paired_ratio(xa, xb, which)
+            r, lo, hi, n = pooled_ratio(ea, eb, seeds, s, which)
             cells.append(f"{r:.2f} [{lo:.2f}, {hi:.2f}], {n}")
         lines.append(f"| {s} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -393,8 +399,6 @@ def table3_rows(runs: dict[str, dict], variants: list[str]) -> list[str]:
 def table3_claims(runs: dict[str, dict], variant: str) -> list[str]:
     """The paper's claims as paired median ratios (first row / second row, pooled over the
     seeds both have, 95 % paired bootstrap over (seed, pair); below 1: the first is better)."""
-    import ablation_eval as ae
-
     head = ("| claim | seeds | " + " | ".join(f"{s} rot | {s} trans" for s in EVAL_SETS)
             + " |")
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
@@ -410,8 +414,7 @@ def table3_claims(runs: dict[str, dict], variant: str) -> list[str]:
                 if not all(s in ea[k] and s in eb[k] for k in seeds):
                     cells.append("-")
                     continue
-                r, lo, hi, _ = ae.paired_ratio([x for k in seeds for x in ea[k][s]],
-                                               [x for k in seeds for x in eb[k][s]], which)
+                r, lo, hi, _ = pooled_ratio(ea, eb, seeds, s, which)
                 mark = "**" if hi < 1 or lo > 1 else ""
                 cells.append(f"{mark}{r:.2f} [{lo:.2f}, {hi:.2f}]{mark}")
         lines.append("| " + " | ".join(cells) + " |")
