@@ -481,8 +481,10 @@ def test_shipped_metadata_is_read_with_the_checkpoint_checks(tmp_path, monkeypat
 
     assert StrLPose.pretrained_metadata() == StrLPose.from_pretrained().metadata
     monkeypatch.setitem(StrLPose.PRETRAINED, "geometric", ("missing.pt", {}))
-    with pytest.raises(FileNotFoundError, match="Expected the shipped checkpoint 'missing.pt'"):
-        StrLPose.pretrained_metadata()
+    for read in (StrLPose.pretrained_metadata, StrLPose.from_pretrained):
+        with pytest.raises(FileNotFoundError,
+                           match="Expected the shipped checkpoint 'missing.pt'"):
+            read()
 
 
 def test_the_default_predict_does_not_build_the_network(tmp_path, pair, capsys, monkeypatch):

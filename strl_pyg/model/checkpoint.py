@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -188,39 +190,43 @@ class CheckpointIO:
     def from_pretrained(cls, name: str = "geometric", map_location: Any = "cpu") -> Any:
         """A shipped checkpoint (:attr:`PRETRAINED`), read from the installed package (not the
         working directory), in eval mode."""
-        if name not in cls.PRETRAINED:
-            raise ValueError(f"Expected a pretrained name in {tuple(cls.PRETRAINED)} "
-                             f"(got {name!r})")
-        from importlib.resources import as_file, files
-
-        file, fallback = cls.PRETRAINED[name]
-        with as_file(files("strl_pyg") / "weights" / file) as path:
-            cls._check_shipped(path, file)
+        fallback = cls._shipped_entry(name)[1]
+        with cls._shipped_path(name) as path:
             model = cls.load(path, map_location)
         if "_metadata" not in model.__dict__:
             model.metadata = fallback
         return model.eval()
 
-    @staticmethod
-    def _check_shipped(path: Any, file: str) -> None:
-        if not Path(path).is_file():
-            raise FileNotFoundError(f"Expected the shipped checkpoint '{file}' in the "
-                                    f"strl_pyg package at {path} (got none)")
+    @classmethod
+    def _shipped_entry(cls, name: str) -> tuple[str, dict[str, Any]]:
+        """``(file name, fallback metadata)`` of a shipped checkpoint, or a one-line error."""
+        if name not in cls.PRETRAINED:
+            raise ValueError(f"Expected a pretrained name in {tuple(cls.PRETRAINED)} "
+                             f"(got {name!r})")
+        return cls.PRETRAINED[name]
+
+    @classmethod
+    @contextmanager
+    def _shipped_path(cls, name: str) -> Iterator[Path]:
+        """The path of a shipped checkpoint inside the installed package (not the working
+        directory), checked to exist."""
+        from importlib.resources import as_file, files
+
+        file = cls._shipped_entry(name)[0]
+        with as_file(files("strl_pyg") / "weights" / file) as path:
+            if not Path(path).is_file():
+                raise FileNotFoundError(f"Expected the shipped checkpoint '{file}' in the "
+                                        f"strl_pyg package at {path} (got none)")
+            yield Path(path)
 
     @classmethod
     def pretrained_header(cls, name: str = "geometric") -> tuple[StrLPoseConfig, dict[str, Any]]:
         """The config and the training metadata (calibration, recommended order, ...) of a
         shipped checkpoint, checked as :meth:`from_pretrained` checks the file, without
         building the network."""
-        if name not in cls.PRETRAINED:
-            raise ValueError(f"Expected a pretrained name in {tuple(cls.PRETRAINED)} "
-                             f"(got {name!r})")
-        from importlib.resources import as_file, files
-
-        file, fallback = cls.PRETRAINED[name]
-        with as_file(files("strl_pyg") / "weights" / file) as path:
-            cls._check_shipped(path, file)
-            payload = cls._read_payload(Path(path))
+        fallback = cls._shipped_entry(name)[1]
+        with cls._shipped_path(name) as path:
+            payload = cls._read_payload(path)
         config = StrLPoseConfig.from_dict(payload["config"])
         md = payload.get("metadata")
         return config, cls._check_metadata(fallback if md is None else md, config)
