@@ -205,7 +205,6 @@ def gradient_shares(run: Path, batches: int = 8) -> dict[str, float]:
     from strl_pyg.training.config import TrainConfig
     from strl_pyg.training.data import _Resampled, build_datasets
     from strl_pyg.training.loop import _collater
-    from strl_pyg.training.loss import PoseLoss
 
     state = load_checkpoint(run / "last.pt")
     cfg = TrainConfig.from_dict(state["train_config"])
@@ -213,8 +212,7 @@ def gradient_shares(run: Path, batches: int = 8) -> dict[str, float]:
     model.load_state_dict(state["model"])
     model.train()
     train, _ = build_datasets(cfg)
-    loss_fn = PoseLoss(translation=model.config.translation, form=cfg.loss,
-                       angle_weight=cfg.angle_weight, rot_weight=cfg.rot_weight)
+    loss_fn = run_loss(cfg, model.config)
     shared = [p for n, p in model.named_parameters() if not n.startswith("pose_head.")]
     collate = _collater(model.config)
     data = _Resampled(train, cfg.num_points, cfg.num_lines, 12345, cfg.swap_prob)
@@ -233,6 +231,14 @@ def gradient_shares(run: Path, batches: int = 8) -> dict[str, float]:
     return {"grad_rot": float(np.median(rot)), "grad_trans": float(np.median(trans)),
             "log_var_rot": float(out.log_var[:, :4].detach().mean()),
             "log_var_trans": float(out.log_var[:, 4:].detach().mean())}
+
+
+def run_loss(cfg, model_cfg):
+    """The pose loss the run trained with (the training loop's own construction: its form,
+    beta and weights)."""
+    from strl_pyg.training.loop import _losses
+
+    return _losses(cfg, model_cfg)[0]
 
 
 def _term(loss_fn, out, T, which: str):
@@ -270,6 +276,11 @@ def cmd_score(args: argparse.Namespace) -> int:
         ae.save_json(RESULTS / "poselib.json", ae.poselib_errors(sets))
     for run in sorted((root / "runs").iterdir()):
         path = RESULTS / f"{run.name}.json"
+        if args.runs and run.name not in args.runs:
+            continue
+        if args.shares_only:
+            _rescore_shares(run, path)
+            continue
         if not (run / "model.pt").exists() or (path.exists() and not args.again):
             continue
         state = torch.load(run / "last.pt", map_location="cpu", weights_only=False)
@@ -284,6 +295,22 @@ def cmd_score(args: argparse.Namespace) -> int:
             "errors": eval_errors(run, sets)})
         print(f"[{time.strftime('%H:%M:%S')}] {run.name}: scored -> {path}", flush=True)
     return 0
+
+
+def _rescore_shares(run: Path, path: Path) -> None:
+    """``score --shares-only``: the gradient shares of a scored run measured again (the rest
+    of its record kept)."""
+    import ablation_eval as ae
+
+    if not path.exists():
+        print(f"{run.name}: not scored yet; --shares-only updates scored runs")
+        return
+    record = json.loads(path.read_text())
+    shares = gradient_shares(run)
+    old = {k: record.get(k) for k in ("grad_rot", "grad_trans")}
+    ae.save_json(path, {**record, **shares})
+    print(f"{run.name}: grad rot / trans {old['grad_rot']:.3g} / {old['grad_trans']:.3g} -> "
+          f"{shares['grad_rot']:.3g} / {shares['grad_trans']:.3g}", flush=True)
 
 
 # ----------------------------------------------------------------------------- paired
@@ -838,6 +865,9 @@ def main(argv: list[str] | None = None) -> int:
                    "(hidden 128, 4 layers, 4 heads) instead of the protocol's 64 / 3 / 4")
     s = sub.add_parser("score", help="score the finished runs into results_pose_recipe/")
     s.add_argument("--again", action="store_true", help="re-score runs already scored")
+    s.add_argument("--shares-only", action="store_true", help="measure only the gradient "
+                   "shares of scored runs again (their errors kept)")
+    s.add_argument("--runs", nargs="+", metavar="NAME", help="only these runs (folder names)")
     m = sub.add_parser("motion", help="validation errors by motion: runs (folders with "
                        "last.pt and model.pt, the same validation pairs) and PoseLib")
     m.add_argument("runs", nargs="+")

@@ -237,3 +237,17 @@ def test_table3_needs_a_scored_baseline(tmp_path, monkeypatch):
     monkeypatch.setattr(spr, "RESULTS", tmp_path)
     with pytest.raises(SystemExit, match="scored baseline runs"):
         spr.main(["table3", "nothing", "--out", str(tmp_path / "t3.md")])
+
+
+def test_gradient_shares_use_the_runs_own_loss():
+    """Before: the study built its loss without the run's beta (0.5 for every run, also the
+    default recipe's beta 0.25 runs), so their gradient shares were another loss's."""
+    from strl_pyg.training.config import TrainConfig
+    from strl_pyg.training.loop import _losses
+
+    cfg = TrainConfig(beta=0.25, rot_weight=3.0, angle_weight=0.5)
+    model_cfg = cfg.model_config()
+    got, want = spr.run_loss(cfg, model_cfg), _losses(cfg, model_cfg)[0]
+    assert (got.beta, got.rot_weight, got.angle_weight, got.form, got.translation) == (
+        want.beta, want.rot_weight, want.angle_weight, want.form, want.translation)
+    assert got.beta == 0.25 and got.rot_weight == 3.0
