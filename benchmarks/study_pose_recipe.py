@@ -127,11 +127,13 @@ DEFAULT_WIDTH = ["--set", "hidden=128", "--set", "layers=4", "--set", "heads=4"]
 
 
 def run_id(matches: str, variant: str, seed: int, row: str = "baseline",
-           wide: bool = False) -> str:
+           wide: bool = False, table3: bool = False) -> str:
     """``fe-both-s0``; another Table 3 row than ``baseline`` is named: ``fe-LP-both-s0``; a
-    run at the model's default width ends its variant in ``-w128``: ``fe-both-w128-s0``."""
+    run at the model's default width ends its variant in ``-w128``: ``fe-both-w128-s0``; a
+    run of the Table 3 protocol (front-end matches) starts ``t3-`` where ``fe-`` stood, the
+    name ``table3`` reads: ``t3-LP-both-s0``."""
     named = variant if row == "baseline" else f"{row}-{variant}"
-    return f"{matches}-{named}{'-w128' if wide else ''}-s{seed}"
+    return f"{'t3' if table3 else matches}-{named}{'-w128' if wide else ''}-s{seed}"
 
 
 def parse_run(spec: str) -> tuple[str, str, int]:
@@ -151,7 +153,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     root = Path(args.root)
     for spec in args.runs:
         matches, variant, seed = parse_run(spec)
-        out = root / "runs" / run_id(matches, variant, seed, args.row, args.default_width)
+        if args.table3 and matches != "fe":
+            raise SystemExit(f"error: expected front-end matches (fe:...) for a --table3 run "
+                             f"(got {spec!r})")
+        out = root / "runs" / run_id(matches, variant, seed, args.row, args.default_width,
+                                     args.table3)
         cmd = [sys.executable, str(TRAIN_SCRIPT), *COMMON,
                *(DEFAULT_WIDTH if args.default_width else []), "--model", args.row,
                *MATCHES[matches], *VARIANTS[variant], "--seed", str(seed),
@@ -864,6 +870,9 @@ def main(argv: list[str] | None = None) -> int:
                    "recipe is trained on; the run's name carries it unless it is baseline")
     t.add_argument("--default-width", action="store_true", help="the model's default width "
                    "(hidden 128, 4 layers, 4 heads) instead of the protocol's 64 / 3 / 4")
+    t.add_argument("--table3", action="store_true", help="name the runs t3-[ROW-]VARIANT-sS, "
+                   "as the table3 command reads them (front-end matches; train --steps 2000 "
+                   "for the protocol)")
     s = sub.add_parser("score", help="score the finished runs into results_pose_recipe/")
     s.add_argument("--again", action="store_true", help="re-score runs already scored")
     s.add_argument("--shares-only", action="store_true", help="measure only the gradient "

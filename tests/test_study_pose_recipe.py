@@ -135,6 +135,7 @@ def test_default_width_runs_are_named_apart_and_train_at_the_models_width(tmp_pa
 
     assert spr.run_id("fe", "both", 0) == "fe-both-s0"
     assert spr.run_id("fe", "both", 1, "LP", wide=True) == "fe-LP-both-w128-s1"
+    assert spr.run_id("fe", "both", 2, "L", table3=True) == "t3-L-both-s2"
     seen = []
 
     def fake_run(cmd, **kw):
@@ -143,7 +144,8 @@ def test_default_width_runs_are_named_apart_and_train_at_the_models_width(tmp_pa
 
     monkeypatch.setattr(spr.subprocess, "run", fake_run)
     args = argparse.Namespace(row="baseline", root=str(tmp_path), runs=["fe:both:1"],
-                              steps=10, ablation_root=str(tmp_path), default_width=True)
+                              steps=10, ablation_root=str(tmp_path), default_width=True,
+                              table3=False)
     assert spr.cmd_train(args) == 0
     cmd = seen[0]
     assert cmd[cmd.index("--out") + 1].endswith("fe-both-w128-s1")
@@ -251,3 +253,22 @@ def test_gradient_shares_use_the_runs_own_loss():
     assert (got.beta, got.rot_weight, got.angle_weight, got.form, got.translation) == (
         want.beta, want.rot_weight, want.angle_weight, want.form, want.translation)
     assert got.beta == 0.25 and got.rot_weight == 3.0
+
+
+def test_table3_runs_are_named_as_table3_reads_them(tmp_path, monkeypatch):
+    """Before: train named every run fe-..., and the Table 3 runs were linked by hand as
+    t3-... for table3 to read them."""
+    import argparse
+
+    seen = []
+    monkeypatch.setattr(spr.subprocess, "run",
+                        lambda cmd, **kw: seen.append(cmd) or argparse.Namespace(returncode=0))
+    args = argparse.Namespace(row="L", root=str(tmp_path), runs=["fe:both:0"], steps=2000,
+                              ablation_root=str(tmp_path), default_width=False, table3=True)
+    assert spr.cmd_train(args) == 0
+    out = seen[0][seen[0].index("--out") + 1]
+    assert Path(out).name == "t3-L-both-s0"
+    assert spr.split_seed(Path(out).name) == (spr.t3_name("L", "both"), 0)
+    args.runs = ["gt:both:0"]
+    with pytest.raises(SystemExit, match="front-end matches"):
+        spr.cmd_train(args)
