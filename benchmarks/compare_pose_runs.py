@@ -15,9 +15,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import sys
 from pathlib import Path
+from typing import Any
 
 
 def read_tables(path: Path) -> dict[tuple[str, str], list[str]]:
@@ -32,49 +34,81 @@ def read_tables(path: Path) -> dict[tuple[str, str], list[str]]:
     return out
 
 
+def load_pairs(path: Path) -> dict[str, list[dict]]:
+    """The per-pair records of a ``bench_pose.py`` JSON file (``{"pairs": {set: [{"pair":
+    name, "methods": {method: {...}}}]}}``), or a one-line ``ValueError``."""
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        raise ValueError(f"Expected a bench_pose.py per-pair file at '{path}' "
+                         f"(got {err})") from None
+    pairs = data.get("pairs") if isinstance(data, dict) else None
+    if not isinstance(pairs, dict) or not all(
+            isinstance(v, list) and all(isinstance(r, dict) and isinstance(r.get("pair"), str)
+                                        and isinstance(r.get("methods"), dict) for r in v)
+            for v in pairs.values()):
+        raise ValueError(f"Expected a bench_pose.py per-pair file at '{path}': an object "
+                         f"with 'pairs' {{set: [{{'pair', 'methods'}}, ...]}} (got another "
+                         f"layout)")
+    return pairs
+
+
+def _both_solved(old: dict, new: dict, names: Any, method: str) -> list[tuple]:
+    """``((rot, trans) of old, (rot, trans) of new)`` for each pair of the sets ``names``
+    that both runs solved (``status`` ok), matched by the pair's name; a translation error
+    without a direction counts as 180 deg, as ``bench_pose.py`` counts it."""
+    def errors(r: dict) -> tuple[float, float]:
+        rot, t = r.get("rot"), r.get("trans", math.nan)
+        if not all(isinstance(v, (int, float)) for v in (rot, t)):
+            raise ValueError(f"Expected numbers 'rot' and 'trans' in each solved record (got "
+                             f"{r!r} for '{method}')")
+        return float(rot), float(t) if math.isfinite(t) else 180.0
+
+    out = []
+    for name in names:
+        by_pair = {r["pair"]: r["methods"].get(method) for r in old.get(name, [])}
+        for r in new.get(name, []):
+            x, y = by_pair.get(r["pair"]), r["methods"].get(method)
+            if x and y and x.get("status") == "ok" == y.get("status"):
+                out.append((errors(x), errors(y)))
+    return out
+
+
 def paired_ratios(old: dict, new: dict, methods: list[str]) -> list[tuple]:
     """``(set, method, rotation (ratio, low, high), translation (...), n)``: new / old over
-    the pairs of a set both runs solved (``status`` ok), matched by the pair's name."""
+    the pairs of a set both runs solved (:func:`_both_solved`); sets in one file only, and
+    methods with fewer than 2 such pairs, are left out."""
     import numpy as np
 
     from strl_pyg.metrics.stats import median_ratio_interval
 
     rows = []
-    for name, records in new.items():
-        by_pair = {r["pair"]: r for r in old.get(name, [])}
+    for name in (n for n in new if n in old):
         for m in methods:
-            got = [(r["methods"][m], by_pair[r["pair"]]["methods"][m]) for r in records
-                   if r["pair"] in by_pair and m in r["methods"]
-                   and m in by_pair[r["pair"]]["methods"]]
-            got = [(x, y) for x, y in got if x.get("status") == "ok" == y.get("status")]
+            got = _both_solved(old, new, [name], m)
             if len(got) < 2:
                 continue
-            ratios = [median_ratio_interval(np.array([x[k] for x, _ in got]),
-                                            np.array([y[k] for _, y in got]))
-                      for k in ("rot", "trans")]
-            rows.append((name, m, *ratios, len(got)))
+            a, b = np.asarray([g[0] for g in got]), np.asarray([g[1] for g in got])
+            rows.append((name, m, median_ratio_interval(b[:, 0], a[:, 0]),
+                         median_ratio_interval(b[:, 1], a[:, 1]), len(got)))
     return rows
 
 
-def pooled_generated(pairs: dict, method: str) -> tuple[int, float, float] | None:
-    """``(pairs, mean, median)`` of the method's translation error over every generated set
-    (``generated/*``); the pairs it did not solve are left out (their count is ``pairs``'s
-    complement)."""
-    errors = [r["methods"][method]["trans"] for name, records in pairs.items()
-              if name.startswith("generated/") for r in records
-              if r["methods"].get(method, {}).get("status") == "ok"]
-    if not errors:
+def pooled_generated(old: dict, new: dict, method: str) -> tuple | None:
+    """``(pairs, (mean, median) of old, (mean, median) of new)`` of the method's translation
+    error over every generated set (``generated/*``), on the pairs both runs solved; None
+    without such pairs."""
+    got = _both_solved(old, new, [n for n in new if n.startswith("generated/")], method)
+    if not got:
         return None
-    return len(errors), statistics.fmean(errors), statistics.median(errors)
+    stats = [(statistics.fmean(t), statistics.median(t))
+             for t in ([g[0][1] for g in got], [g[1][1] for g in got])]
+    return len(got), *stats
 
 
 def _print_paired(old_json: Path, new_json: Path, labels: tuple[str, str],
                   methods: list[str]) -> None:
-    try:
-        old, new = (json.loads(p.read_text())["pairs"] for p in (old_json, new_json))
-    except (OSError, ValueError, KeyError) as err:
-        print(f"error: expected two bench_pose.py per-pair files (got {err})", file=sys.stderr)
-        return
+    old, new = load_pairs(old_json), load_pairs(new_json)
     la, lb = labels
     print(f"\nPaired median ratios {lb} / {la} (below 1: {lb} better; 95 % bootstrap over the "
           f"pairs both solved):\n")
@@ -82,13 +116,14 @@ def _print_paired(old_json: Path, new_json: Path, labels: tuple[str, str],
     for name, m, rot, trans, n in paired_ratios(old, new, methods):
         print(f"| {name} | {m} | {rot[0]:.2f} [{rot[1]:.2f}, {rot[2]:.2f}] | "
               f"{trans[0]:.2f} [{trans[1]:.2f}, {trans[2]:.2f}] | {n} |")
-    print("\nTranslation error over the generated sets together (deg):\n")
-    print(f"| method | {la}: pairs, mean / median | {lb}: pairs, mean / median |\n|---|---|---|")
+    print("\nTranslation error over the generated sets together, on the pairs both solved "
+          "(deg):\n")
+    print(f"| method | pairs | {la}: mean / median | {lb}: mean / median |\n|---|---|---|---|")
     for m in methods:
-        cells = [pooled_generated(p, m) for p in (old, new)]
-        if any(cells):
-            print(f"| {m} | " + " | ".join("-" if c is None else f"{c[0]}, {c[1]:.1f} / "
-                                           f"{c[2]:.1f}" for c in cells) + " |")
+        got = pooled_generated(old, new, m)
+        if got:
+            print(f"| {m} | {got[0]} | {got[1][0]:.1f} / {got[1][1]:.1f} | "
+                  f"{got[2][0]:.1f} / {got[2][1]:.1f} |")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -111,8 +146,15 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"| {s} | {m} | {x[0]} / {x[1]} | {x[3]} | {x[6]} | {x[7]} | "
                       f"{y[0]} / {y[1]} | {y[3]} | {y[6]} | {y[7]} |")
     old_json, new_json = args.old.with_suffix(".json"), args.new.with_suffix(".json")
-    if old_json.is_file() and new_json.is_file():
-        _print_paired(old_json, new_json, (la, lb), args.methods.split(","))
+    missing = [str(p) for p in (old_json, new_json) if not p.is_file()]
+    if len(missing) == 1:
+        print(f"\n(no paired ratios: no per-pair file '{missing[0]}' beside its table)")
+    elif not missing:
+        try:
+            _print_paired(old_json, new_json, (la, lb), args.methods.split(","))
+        except ValueError as err:
+            print(f"error: {err}", file=sys.stderr)
+            return 1
     return 0
 
 

@@ -308,15 +308,17 @@ def _rescore_shares(run: Path, path: Path) -> None:
     of its record kept)."""
     import ablation_eval as ae
 
-    if not path.exists():
-        print(f"{run.name}: not scored yet; --shares-only updates scored runs")
+    if not path.exists() or not (run / "last.pt").exists():
+        print(f"{run.name}: {'no last.pt' if path.exists() else 'not scored yet'}; "
+              f"--shares-only updates scored runs from their last.pt")
         return
     record = json.loads(path.read_text())
     shares = gradient_shares(run)
-    old = {k: record.get(k) for k in ("grad_rot", "grad_trans")}
+    old = " / ".join("-" if record.get(k) is None else f"{record[k]:.3g}"
+                     for k in ("grad_rot", "grad_trans"))
     ae.save_json(path, {**record, **shares})
-    print(f"{run.name}: grad rot / trans {old['grad_rot']:.3g} / {old['grad_trans']:.3g} -> "
-          f"{shares['grad_rot']:.3g} / {shares['grad_trans']:.3g}", flush=True)
+    print(f"{run.name}: grad rot / trans {old} -> {shares['grad_rot']:.3g} / "
+          f"{shares['grad_trans']:.3g}", flush=True)
 
 
 # ----------------------------------------------------------------------------- paired

@@ -241,18 +241,33 @@ def test_table3_needs_a_scored_baseline(tmp_path, monkeypatch):
         spr.main(["table3", "nothing", "--out", str(tmp_path / "t3.md")])
 
 
-def test_gradient_shares_use_the_runs_own_loss():
+def test_gradient_shares_use_the_runs_own_loss(tmp_path, monkeypatch):
     """Before: the study built its loss without the run's beta (0.5 for every run, also the
     default recipe's beta 0.25 runs), so their gradient shares were another loss's."""
-    from strl_pyg.training.config import TrainConfig
-    from strl_pyg.training.loop import _losses
+    import torch
 
-    cfg = TrainConfig(beta=0.25, rot_weight=3.0, angle_weight=0.5)
-    model_cfg = cfg.model_config()
-    got, want = spr.run_loss(cfg, model_cfg), _losses(cfg, model_cfg)[0]
-    assert (got.beta, got.rot_weight, got.angle_weight, got.form, got.translation) == (
-        want.beta, want.rot_weight, want.angle_weight, want.form, want.translation)
-    assert got.beta == 0.25 and got.rot_weight == 3.0
+    from strl_pyg.training import TrainConfig, train
+
+    run = tmp_path / "run"
+    train(TrainConfig(train_pairs=6, val_pairs=3, batch_size=4, steps=2, val_every=2,
+                      num_points=32, num_lines=16, out_dir=str(run), tensorboard=False,
+                      scene={"image_size": [96, 256], "max_points": 64, "max_lines": 32},
+                      model_overrides={"hidden": 16, "layers": 1, "heads": 2,
+                                       "patch_features": 1},
+                      beta=0.1, rot_weight=3.0), progress=False)
+    seen = []
+
+    def term(loss_fn, out, T, which):
+        seen.append((loss_fn.beta, loss_fn.rot_weight, which))
+        return out.log_var.sum() * (2.0 if which == "rot" else 1.0)
+
+    monkeypatch.setattr(spr, "_term", term)
+    shares = spr.gradient_shares(run, batches=2)
+    assert set(seen) == {(0.1, 3.0, "rot"), (0.1, 3.0, "trans")}
+    # each share is the norm of its own term's gradient: the rotation's stand-in is twice
+    # the translation's
+    assert shares["grad_rot"] == pytest.approx(2 * shares["grad_trans"], rel=1e-5)
+    assert torch.isfinite(torch.tensor(shares["log_var_rot"]))
 
 
 def test_table3_runs_are_named_as_table3_reads_them(tmp_path, monkeypatch):
