@@ -40,11 +40,13 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import json
 import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -119,7 +121,9 @@ MATCHES = {
     "gt": ["--matches", "ground_truth", "--train-pairs", "1200"],
     "fe": ["--matches", "frontend", "--train-pairs", "2000"],
 }
-EVAL_SETS = ("driving", "kitti06", "dino")
+EVAL_SETS = ("driving", "kitti06", "kitti06_3", "dino")
+SET_TITLES = {"driving": "driving", "kitti06": "KITTI 06 (i, i+1)",
+              "kitti06_3": "KITTI 06 (i, i+3)", "dino": "dino"}
 
 
 #: ``train --default-width``: the model's default width instead of the protocol's 64 / 3 / 4
@@ -275,17 +279,21 @@ def cmd_score(args: argparse.Namespace) -> int:
     root = Path(args.root)
     cache = Path(args.ablation_root) / "eval_cache"
     sets = {"driving": bp.generated_pairs("driving", ae.GENERATED_PAIRS, cache),
-            "kitti06": bp.kitti_pairs(1, cache), "dino": bp.dino_pairs(cache)}
+            "kitti06": bp.kitti_pairs(1, cache), "kitti06_3": bp.kitti_pairs(3, cache),
+            "dino": bp.dino_pairs(cache)}
     sets = {k: v for k, v in sets.items() if v}
     RESULTS.mkdir(parents=True, exist_ok=True)
-    if not (RESULTS / "poselib.json").exists():
-        ae.save_json(RESULTS / "poselib.json", ae.poselib_errors(sets))
+    _add_sets(RESULTS / "poselib.json", sets, ae.poselib_errors)
     for run in sorted((root / "runs").iterdir()):
         path = RESULTS / f"{run.name}.json"
         if args.runs and run.name not in args.runs:
             continue
         if args.shares_only:
             _rescore_shares(run, path)
+            continue
+        if args.add_sets:
+            if path.exists() and (run / "model.pt").exists():
+                _add_sets(path, sets, functools.partial(eval_errors, run), key="errors")
             continue
         if not (run / "model.pt").exists() or (path.exists() and not args.again):
             continue
@@ -301,6 +309,22 @@ def cmd_score(args: argparse.Namespace) -> int:
             "errors": eval_errors(run, sets)})
         print(f"[{time.strftime('%H:%M:%S')}] {run.name}: scored -> {path}", flush=True)
     return 0
+
+
+def _add_sets(path: Path, sets: dict, errors: Callable, key: str | None = None) -> None:
+    """Scores the evaluation sets a record (``path``, its ``key`` or the whole file) does not
+    have yet with ``errors(sets)`` and adds them; a missing file is written whole. Used for
+    PoseLib's reference and by ``score --add-sets``."""
+    import ablation_eval as ae
+
+    record = json.loads(path.read_text()) if path.exists() else {}
+    have = record.get(key, {}) if key else record
+    new = {k: v for k, v in sets.items() if k not in have}
+    if not new:
+        return
+    have = {**have, **errors(new)}
+    ae.save_json(path, {**record, key: have} if key else have)
+    print(f"{path.stem}: added {', '.join(new)}", flush=True)
 
 
 def _rescore_shares(run: Path, path: Path) -> None:
@@ -472,7 +496,9 @@ def cmd_table3(args: argparse.Namespace) -> int:
              + "` (the study's Table 3 protocol: the ablation's front-end cache, width 64, "
              "2000 steps; see `results_pose_recipe.md`). Validation: each run's own 100 "
              "held-out generated pairs, translation-direction mean / median and rotation "
-             "mean (deg) at the runs' last step. Driving / KITTI 06 / dino: median rotation / "
+             "mean (deg) at the runs' last step. Driving / KITTI 06 (frames i, i+1 and i, i+3; "
+             "kitti06_3: scored since stop 45, '-' where a run was not) / dino: median "
+             "rotation / "
              "translation error (deg) of the regression head on front-end matches. Cells: "
              "the mean over seeds (the seeds' range).", ""]
     lines += table3_rows(runs, args.variants)
@@ -775,15 +801,16 @@ def cmd_report(args: argparse.Namespace) -> int:
              "", "`python benchmarks/study_pose_recipe.py report` (runs trained with `train`, "
              "scored with `score`; see the script's docstring for the protocol). Validation: "
              "the run's own 100 held-out pairs (same match kind as training); mean / median "
-             "translation-direction error (deg). Driving / KITTI 06 / dino: the final "
+             "translation-direction error (deg). Driving / KITTI 06 (i, i+1) / KITTI 06 (i, "
+             "i+3) (since stop 45; '-': not scored) / dino: the final "
              "weights on front-end matches, median rotation / translation error (deg). "
              "Gradient norms: the rotation and translation terms' gradients in the shared "
              "layers (median of 8 training batches, final weights); clipped: share of steps "
              "whose gradient norm exceeded the clip (10; the run's own threshold with "
              "--grad-clip-relative).", ""]
-    head = ("| run | step | val trans mean / median | val rot mean | driving rot / trans | "
-            "KITTI 06 rot / trans | dino rot / trans | grad rot / trans | clipped | "
-            "s_rot / s_trans |")
+    head = ("| run | step | val trans mean / median | val rot mean | "
+            + " | ".join(f"{SET_TITLES[s]} rot / trans" for s in EVAL_SETS)
+            + " | grad rot / trans | clipped | s_rot / s_trans |")
     lines += [head, "|" + "---|" * (head.count("|") - 1)]
     for name, r in runs.items():
         h = r["history"][-1]
@@ -880,6 +907,8 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("--shares-only", action="store_true", help="measure only the gradient "
                    "shares of scored runs again (their errors kept)")
     s.add_argument("--runs", nargs="+", metavar="NAME", help="only these runs (folder names)")
+    s.add_argument("--add-sets", action="store_true", help="score scored runs on the "
+                   "evaluation sets their records do not have yet (their other figures kept)")
     m = sub.add_parser("motion", help="validation errors by motion: runs (folders with "
                        "last.pt and model.pt, the same validation pairs) and PoseLib")
     m.add_argument("runs", nargs="+")

@@ -287,3 +287,50 @@ def test_table3_runs_are_named_as_table3_reads_them(tmp_path, monkeypatch):
     args.runs = ["gt:both:0"]
     with pytest.raises(SystemExit, match="front-end matches"):
         spr.cmd_train(args)
+
+
+def test_add_sets_scores_only_the_sets_a_record_lacks(tmp_path, capsys):
+    """score --add-sets (KITTI 06 (i, i+3) came after most runs were scored): the sets a
+    record has are kept, the others scored and added; PoseLib's file the same, whole."""
+    path = tmp_path / "run.json"
+    path.write_text(json.dumps({"run": "r", "errors": {"driving": [[1.0, 2.0]]}}))
+    calls = []
+
+    def errors(sets):
+        calls.append(sorted(sets))
+        return {k: [[9.0, 9.0]] for k in sets}
+
+    sets = {"driving": ["p"], "kitti06_3": ["q"]}
+    spr._add_sets(path, sets, errors, key="errors")
+    spr._add_sets(path, sets, errors, key="errors")  # nothing left to add: not called
+    assert calls == [["kitti06_3"]]
+    assert json.loads(path.read_text()) == {
+        "run": "r", "errors": {"driving": [[1.0, 2.0]], "kitti06_3": [[9.0, 9.0]]}}
+    poselib = tmp_path / "poselib.json"
+    spr._add_sets(poselib, sets, errors)
+    assert json.loads(poselib.read_text()) == {k: [[9.0, 9.0]] for k in sets}
+    assert "kitti06_3" in capsys.readouterr().out
+    assert "kitti06_3" in spr.EVAL_SETS
+
+
+def test_report_header_names_every_scored_set(tmp_path, monkeypatch):
+    """Before: the report's header was written by hand for three sets, so a fourth
+    (KITTI 06 (i, i+3)) shifted every column after KITTI 06 under the wrong title."""
+    monkeypatch.setattr(spr, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr(spr, "HERE", tmp_path)
+    (tmp_path / "results").mkdir()
+    for name, run in _t3_runs().items():
+        run = {**run, "grad_rot": 1.0, "grad_trans": 2.0, "clipped_share": 0.5,
+               "log_var_rot": -8.0, "log_var_trans": -2.0,
+               "errors": {**run["errors"], "kitti06_3": [[0.5, 1.0], [0.7, 2.0]]}}
+        (tmp_path / "results" / f"{name}.json").write_text(json.dumps(run))
+    (tmp_path / "results" / "poselib.json").write_text(json.dumps({"driving": [[0.1, 1.0]]}))
+    out = tmp_path / "report.md"
+    assert spr.main(["report", "--out", str(out)]) == 0
+    table = [ln for ln in out.read_text().splitlines() if ln.startswith("| ")]
+    head = [c.strip() for c in table[0].strip("|").split("|")]
+    assert head[4:8] == ["driving rot / trans", "KITTI 06 (i, i+1) rot / trans",
+                         "KITTI 06 (i, i+3) rot / trans", "dino rot / trans"]
+    assert {ln.count("|") for ln in table} == {table[0].count("|")}
+    row = [c.strip() for c in table[1].strip("|").split("|")]
+    assert row[head.index("KITTI 06 (i, i+3) rot / trans")] == "0.60 / 1.5"
