@@ -270,18 +270,56 @@ def eval_errors(run: Path, sets: dict) -> dict[str, list]:
     return ae.model_errors(StrLPose.load(run / "model.pt"), sets)
 
 
-def cmd_score(args: argparse.Namespace) -> int:
+def eval_sets(ablation_root: Path) -> dict[str, list]:
+    """The study's evaluation sets (:data:`EVAL_SETS`) on the ablation's cached front-end
+    matches; the absent ones (no data) left out."""
     import ablation_eval as ae
     import bench_pose as bp
+
+    cache = ablation_root / "eval_cache"
+    sets = {"driving": bp.generated_pairs("driving", ae.GENERATED_PAIRS, cache),
+            "kitti06": bp.kitti_pairs(1, cache), "kitti06_3": bp.kitti_pairs(3, cache),
+            "dino": bp.dino_pairs(cache)}
+    return {k: v for k, v in sets.items() if v}
+
+
+def cmd_checkpoints(args: argparse.Namespace) -> int:
+    """Any weights' regression head (a ship candidate, the shipped model) on the study's
+    evaluation sets, the same pairs as the Table 3 rows, beside PoseLib's reference."""
+    import ablation_eval as ae
+    import torch
+
+    from strl_pyg.model.strl_pose import StrLPose
+
+    torch.set_num_threads(1)
+    sets = eval_sets(Path(args.ablation_root))
+    cols = [s for s in EVAL_SETS if s in sets]
+    lines = ["| weights | " + " | ".join(f"{SET_TITLES[s]} rot / trans" for s in cols) + " |",
+             "|---|" + "---|" * len(cols)]
+    poselib = RESULTS / "poselib.json"
+    named = [("PoseLib (same matches)", json.loads(poselib.read_text()))] \
+        if poselib.exists() else []
+    for path in args.weights:
+        try:
+            model = StrLPose.load(path) if path != "shipped" else StrLPose.from_pretrained()
+        except (OSError, ValueError) as err:
+            raise SystemExit(f"error: {err}") from None
+        named.append((path, ae.model_errors(model, sets)))
+    for label, errors in named:
+        lines.append(f"| {label} | " + " | ".join(
+            f"{_med(errors[s], 0):.2f} / {_med(errors[s], 1):.1f}" if s in errors else "-"
+            for s in cols) + " |")
+    print("\n".join(lines))
+    return 0
+
+
+def cmd_score(args: argparse.Namespace) -> int:
+    import ablation_eval as ae
     import torch
 
     torch.set_num_threads(1)
     root = Path(args.root)
-    cache = Path(args.ablation_root) / "eval_cache"
-    sets = {"driving": bp.generated_pairs("driving", ae.GENERATED_PAIRS, cache),
-            "kitti06": bp.kitti_pairs(1, cache), "kitti06_3": bp.kitti_pairs(3, cache),
-            "dino": bp.dino_pairs(cache)}
-    sets = {k: v for k, v in sets.items() if v}
+    sets = eval_sets(Path(args.ablation_root))
     RESULTS.mkdir(parents=True, exist_ok=True)
     _add_sets(RESULTS / "poselib.json", sets, ae.poselib_errors)
     for run in sorted((root / "runs").iterdir()):
@@ -930,12 +968,16 @@ def main(argv: list[str] | None = None) -> int:
     t3.add_argument("variants", nargs="+", help="recipes (variant names), e.g. both "
                     "both-cos1e-3-b0.25")
     t3.add_argument("--out", default=str(HERE / "results_table3_recipe.md"))
+    w = sub.add_parser("checkpoints", help="weights' regression head on the study's evaluation "
+                       "sets (the Table 3 rows' pairs): model.pt files or 'shipped'")
+    w.add_argument("weights", nargs="+")
     r = sub.add_parser("report", help="the table and the curves")
     r.add_argument("--out", default=str(HERE / "results_pose_recipe.md"))
     args = ap.parse_args(argv)
     return {"train": cmd_train, "score": cmd_score, "motion": cmd_motion,
             "compare": cmd_compare, "parallax": cmd_parallax, "clip": cmd_clip,
-            "report": cmd_report, "table3": cmd_table3}[args.cmd](args)
+            "report": cmd_report, "table3": cmd_table3,
+            "checkpoints": cmd_checkpoints}[args.cmd](args)
 
 
 if __name__ == "__main__":

@@ -334,3 +334,26 @@ def test_report_header_names_every_scored_set(tmp_path, monkeypatch):
     assert {ln.count("|") for ln in table} == {table[0].count("|")}
     row = [c.strip() for c in table[1].strip("|").split("|")]
     assert row[head.index("KITTI 06 (i, i+3) rot / trans")] == "0.60 / 1.5"
+
+
+def test_checkpoints_scores_weights_on_the_study_sets(tmp_path, monkeypatch, capsys):
+    """checkpoints: any weights beside PoseLib on the study's pairs; a bad file is one line."""
+    import ablation_eval as ae
+
+    from strl_pyg.model import StrLPose, StrLPoseConfig
+
+    monkeypatch.setattr(spr, "RESULTS", tmp_path)
+    (tmp_path / "poselib.json").write_text(json.dumps({"kitti06_3": [[0.1, 1.0], [0.3, 2.0]]}))
+    monkeypatch.setattr(spr, "eval_sets", lambda root: {"kitti06_3": ["p", "q"]})
+    monkeypatch.setattr(ae, "model_errors",
+                        lambda model, sets: {k: [[1.0, 10.0], None, [3.0, 30.0]] for k in sets})
+    weights = tmp_path / "w.pt"
+    StrLPose(StrLPoseConfig(hidden=16, layers=1, heads=2)).save(weights)
+    assert spr.main(["checkpoints", str(weights)]) == 0
+    out = capsys.readouterr().out
+    assert "| weights | KITTI 06 (i, i+3) rot / trans |" in out
+    assert "| PoseLib (same matches) | 0.20 / 1.5 |" in out
+    assert f"| {weights} | 2.00 / 20.0 |" in out  # a pair without a pose is left out
+    (tmp_path / "bad.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(SystemExit, match="^error: "):
+        spr.main(["checkpoints", str(tmp_path / "bad.pt")])
