@@ -301,7 +301,8 @@ def cmd_checkpoints(args: argparse.Namespace) -> int:
         if poselib.exists() else []
     for path in args.weights:
         try:
-            model = StrLPose.load(path) if path != "shipped" else StrLPose.from_pretrained()
+            model = StrLPose.from_pretrained(path.partition(":")[2] or "geometric") \
+                if path.split(":")[0] == "shipped" else StrLPose.load(path)
         except (OSError, ValueError) as err:
             raise SystemExit(f"error: {err}") from None
         named.append((path, ae.model_errors(model, sets)))
@@ -969,7 +970,8 @@ def main(argv: list[str] | None = None) -> int:
                     "both-cos1e-3-b0.25")
     t3.add_argument("--out", default=str(HERE / "results_table3_recipe.md"))
     w = sub.add_parser("checkpoints", help="weights' regression head on the study's evaluation "
-                       "sets (the Table 3 rows' pairs): model.pt files or 'shipped'")
+                       "sets (the Table 3 rows' pairs): model.pt files, 'shipped' or "
+                       "'shipped:NAME' (StrLPose.PRETRAINED)")
     w.add_argument("weights", nargs="+")
     r = sub.add_parser("report", help="the table and the curves")
     r.add_argument("--out", default=str(HERE / "results_pose_recipe.md"))
