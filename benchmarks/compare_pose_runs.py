@@ -15,11 +15,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
-import statistics
 import sys
 from pathlib import Path
-from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
 def read_tables(path: Path) -> dict[tuple[str, str], list[str]]:
@@ -53,44 +54,34 @@ def load_pairs(path: Path) -> dict[str, list[dict]]:
     return pairs
 
 
-def _both_solved(old: dict, new: dict, names: Any, method: str) -> list[tuple]:
-    """``((rot, trans) of old, (rot, trans) of new)`` for each pair of the sets ``names``
-    that both runs solved (``status`` ok), matched by the pair's name; a translation error
-    without a direction counts as 180 deg, as ``bench_pose.py`` counts it."""
-    def errors(r: dict) -> tuple[float, float]:
-        rot, t = r.get("rot"), r.get("trans", math.nan)
-        if not all(isinstance(v, (int, float)) for v in (rot, t)):
-            raise ValueError(f"Expected numbers 'rot' and 'trans' in each solved record (got "
-                             f"{r!r} for '{method}')")
-        return float(rot), float(t) if math.isfinite(t) else 180.0
+def _both_solved(old: dict, new: dict, names: list[str], method: str) -> tuple:
+    """``(old, new)`` rotation and translation errors ``[n, 2]`` of ``method`` on the pairs
+    of the sets ``names`` both runs solved, matched by the pair's name
+    (``bench_pose.paired_errors``: a translation without a direction counts as 180 deg)."""
+    import bench_pose as bp
 
-    out = []
+    rows = []
     for name in names:
         by_pair = {r["pair"]: r["methods"].get(method) for r in old.get(name, [])}
-        for r in new.get(name, []):
-            x, y = by_pair.get(r["pair"]), r["methods"].get(method)
-            if x and y and x.get("status") == "ok" == y.get("status"):
-                out.append((errors(x), errors(y)))
-    return out
+        rows += [{"methods": {"old": by_pair[r["pair"]], "new": r["methods"].get(method)}}
+                 for r in new.get(name, []) if r["pair"] in by_pair]
+    return bp.paired_errors(rows, "old", "new")
 
 
 def paired_ratios(old: dict, new: dict, methods: list[str]) -> list[tuple]:
     """``(set, method, rotation (ratio, low, high), translation (...), n)``: new / old over
     the pairs of a set both runs solved (:func:`_both_solved`); sets in one file only, and
     methods with fewer than 2 such pairs, are left out."""
-    import numpy as np
-
     from strl_pyg.metrics.stats import median_ratio_interval
 
     rows = []
     for name in (n for n in new if n in old):
         for m in methods:
-            got = _both_solved(old, new, [name], m)
-            if len(got) < 2:
+            a, b = _both_solved(old, new, [name], m)
+            if len(a) < 2:
                 continue
-            a, b = np.asarray([g[0] for g in got]), np.asarray([g[1] for g in got])
             rows.append((name, m, median_ratio_interval(b[:, 0], a[:, 0]),
-                         median_ratio_interval(b[:, 1], a[:, 1]), len(got)))
+                         median_ratio_interval(b[:, 1], a[:, 1]), len(a)))
     return rows
 
 
@@ -98,12 +89,10 @@ def pooled_generated(old: dict, new: dict, method: str) -> tuple | None:
     """``(pairs, (mean, median) of old, (mean, median) of new)`` of the method's translation
     error over every generated set (``generated/*``), on the pairs both runs solved; None
     without such pairs."""
-    got = _both_solved(old, new, [n for n in new if n.startswith("generated/")], method)
-    if not got:
+    a, b = _both_solved(old, new, [n for n in new if n.startswith("generated/")], method)
+    if not len(a):
         return None
-    stats = [(statistics.fmean(t), statistics.median(t))
-             for t in ([g[0][1] for g in got], [g[1][1] for g in got])]
-    return len(got), *stats
+    return len(a), *((float(np.mean(t)), float(np.median(t))) for t in (a[:, 1], b[:, 1]))
 
 
 def _print_paired(old_json: Path, new_json: Path, labels: tuple[str, str],
@@ -154,6 +143,11 @@ def main(argv: list[str] | None = None) -> int:
             _print_paired(old_json, new_json, (la, lb), args.methods.split(","))
         except ValueError as err:
             print(f"error: {err}", file=sys.stderr)
+            return 1
+        except (KeyError, TypeError) as err:  # a solved record without its errors
+            print(f"error: Expected 'rot' and 'trans' numbers in every solved record of "
+                  f"'{old_json}' and '{new_json}' (got {type(err).__name__}: {err})",
+                  file=sys.stderr)
             return 1
     return 0
 

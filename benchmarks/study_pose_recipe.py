@@ -214,7 +214,7 @@ def gradient_shares(run: Path, batches: int = 8) -> dict[str, float]:
     from strl_pyg.training.checkpoints import load_checkpoint
     from strl_pyg.training.config import TrainConfig
     from strl_pyg.training.data import _Resampled, build_datasets
-    from strl_pyg.training.loop import _collater
+    from strl_pyg.training.loop import _collater, _losses
 
     state = load_checkpoint(run / "last.pt")
     cfg = TrainConfig.from_dict(state["train_config"])
@@ -222,7 +222,7 @@ def gradient_shares(run: Path, batches: int = 8) -> dict[str, float]:
     model.load_state_dict(state["model"])
     model.train()
     train, _ = build_datasets(cfg)
-    loss_fn = run_loss(cfg, model.config)
+    loss_fn = _losses(cfg, model.config)[0]  # the run's own loss: its form, beta, weights
     shared = [p for n, p in model.named_parameters() if not n.startswith("pose_head.")]
     collate = _collater(model.config)
     data = _Resampled(train, cfg.num_points, cfg.num_lines, 12345, cfg.swap_prob)
@@ -241,14 +241,6 @@ def gradient_shares(run: Path, batches: int = 8) -> dict[str, float]:
     return {"grad_rot": float(np.median(rot)), "grad_trans": float(np.median(trans)),
             "log_var_rot": float(out.log_var[:, :4].detach().mean()),
             "log_var_trans": float(out.log_var[:, 4:].detach().mean())}
-
-
-def run_loss(cfg, model_cfg):
-    """The pose loss the run trained with (the training loop's own construction: its form,
-    beta and weights)."""
-    from strl_pyg.training.loop import _losses
-
-    return _losses(cfg, model_cfg)[0]
 
 
 def _term(loss_fn, out, T, which: str):

@@ -91,3 +91,15 @@ def test_a_bad_per_pair_file_is_one_line(tmp_path, capsys, text):
     assert cpr.main([str(tmp_path / "old.md"), str(tmp_path / "new.md")]) == 1
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: Expected a bench_pose.py per-pair file") and "\n" not in err
+
+
+def test_a_solved_record_without_its_errors_is_one_line(tmp_path, capsys):
+    for label in ("old", "new"):
+        (tmp_path / f"{label}.md").write_text(TABLE.format(r=1, t=10))
+    (tmp_path / "old.json").write_text(json.dumps({"pairs": _pairs(1.0)}))
+    bad = _pairs(1.0)
+    bad["generated/driving"][0]["methods"]["regression"] = {"status": "ok", "rot": 1.0}
+    (tmp_path / "new.json").write_text(json.dumps({"pairs": bad}))
+    assert cpr.main([str(tmp_path / "old.md"), str(tmp_path / "new.md")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: Expected 'rot' and 'trans' numbers") and "\n" not in err
