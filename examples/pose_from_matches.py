@@ -40,10 +40,12 @@ import numpy as np
 
 
 def _parser() -> argparse.ArgumentParser:
+    from strl_pyg.cli.guard import OneLineArgumentParser
     from strl_pyg.training.checkpoints import default_checkpoint
 
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    # a bad command line or file is one `error: ...` line (exit 2), as in `strl-pose`
+    ap = OneLineArgumentParser(description=__doc__,
+                               formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--npz", help="match file (default: a generated pair)")
     ap.add_argument("--K", help="intrinsics of both images: 'fx,fy,cx,cy' or a file")
     ap.add_argument("--image0", help="reference image (sizes and pixels for the model)")
@@ -86,9 +88,13 @@ def _read_file_matches(args, ap):
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = _parser()
-    args = ap.parse_args(argv)
+    from strl_pyg.cli.guard import run_guarded
 
+    ap = _parser()
+    return run_guarded(lambda: _run(ap.parse_args(argv), ap))
+
+
+def _run(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
     import torch
 
     from strl_pyg import StrLPose

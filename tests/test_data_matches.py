@@ -77,8 +77,10 @@ def test_nan_and_zero_length_and_outside():
         make(lines0=lines)
     pts = make().points0.copy()
     pts[2] = [W + OUT_OF_IMAGE_TOLERANCE + 1, 3]
-    with pytest.raises(ValueError, match="inside the 160x120 image"):
+    # the size as everywhere else, (H, W) (it said "160x120", W x H, stop 46)
+    with pytest.raises(ValueError, match=r"inside the 120x160 px image \(H x W") as err:
         make(points0=pts)
+    assert "(W, H)?" not in str(err.value)
 
 
 def test_save_load_roundtrip(tmp_path):

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import sys
+import warnings
 
 from strl_pyg.utils.commandline import OneLineArgumentParser, UsageError
 
@@ -35,6 +36,14 @@ def _stdout_closed() -> int:
     return 141
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A Python warning as the command's other warnings: one ``warning: ...`` line on stderr
+    (not the source file and line that raised it)."""
+    kind = "" if issubclass(category, UserWarning) else f"{category.__name__}: "
+    first = str(message).splitlines()[0] if str(message) else category.__name__
+    print(f"warning: {kind}{first}", file=sys.stderr if file is None else file)
+
+
 def run_guarded(fn, *args) -> int:
     """Runs ``fn(*args)`` and returns its exit code; a user error (bad flag or value, bad or
     missing file, unwritable output, refused checkpoint: ``UsageError``, ``OSError``, or a
@@ -43,7 +52,9 @@ def run_guarded(fn, *args) -> int:
     stdout (``| head``) ends quietly with 141."""
     try:
         try:
-            return int(fn(*args) or 0)
+            with warnings.catch_warnings():
+                warnings.showwarning = _one_line_warning
+                return int(fn(*args) or 0)
         finally:  # a closed pipe shows here (also after --help's SystemExit), not at exit
             sys.stdout.flush()
     except BrokenPipeError:  # '| head' closed stdout: not the user's path, nothing to say

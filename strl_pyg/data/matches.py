@@ -133,9 +133,13 @@ def _check_in_image(coords: np.ndarray, size: tuple[int, int], name: str) -> Non
     )
     if out.any():
         i = int(np.flatnonzero(out)[0])
+        fits_transposed = not ((xy[:, 0] < -tol) | (xy[:, 0] > h - 1 + tol) | (xy[:, 1] < -tol)
+                               | (xy[:, 1] > w - 1 + tol)).any()
+        hint = (f"; they fit a {w}x{h} image: was image_size{name[-1]} given as (W, H)? "
+                "Sizes are (H, W)" if fits_transposed else "")
         raise ValueError(
-            f"Expected '{name}' inside the {w}x{h} image (+-{tol} px) "
-            f"(got {int(out.sum())} coordinates outside, first {xy[i].tolist()})"
+            f"Expected '{name}' inside the {h}x{w} px image (H x W, +-{tol} px) "
+            f"(got {int(out.sum())} coordinates outside, first {xy[i].tolist()}){hint}"
         )
 
 
@@ -157,7 +161,9 @@ class PairMatches:
 
     Args:
         points0, points1: Matched points, ``[Np, 2]`` pixels; row ``i`` of both is one match.
-        lines0, lines1: Matched segments, ``[Nl, 2, 2]`` pixels; endpoint ``k`` of line ``i`` in
+        lines0, lines1: Matched segments, ``[Nl, 2, 2]`` pixels (``[Nl, 4]`` or ``[Nl, 1, 4]``
+            rows ``(x1, y1, x2, y2)``, as OpenCV's LSD gives them, are read as that); endpoint
+            ``k`` of line ``i`` in
             image 0 matches endpoint ``k`` of line ``i`` in image 1, unless
             ``info["line_endpoints"] == "as detected"`` (:data:`ENDPOINTS_AS_DETECTED`: the front
             end's descriptor matcher, whose segments match as lines but whose endpoints do not
@@ -251,6 +257,8 @@ class PairMatches:
         arr = _as_array(value, name)
         if arr.size == 0:
             return np.zeros((0, *tail), dtype=np.float64)
+        if tail == (2, 2) and arr.shape[1:] in ((4,), (1, 4)):
+            arr = arr.reshape(-1, 2, 2)  # (x1, y1, x2, y2) rows, as OpenCV's LSD gives them
         if arr.ndim != 1 + len(tail) or arr.shape[1:] != tail:
             want = "[N, " + ", ".join(map(str, tail)) + "]"
             raise ValueError(f"Expected '{name}' of shape {want} (got {tuple(arr.shape)})")

@@ -21,6 +21,12 @@ ZERO_PARALLAX_FRACTION = 0.8
 #: Plausible focal lengths, as multiples of the image width.
 FOCAL_RANGE = (0.1, 10.0)
 
+#: A principal point at this many times the image centre's coordinates or more (or as many
+#: times less), by the same factor in x and y (within ``RESIZED_AGREE``), says K was made
+#: for a resized image (:func:`intrinsics_problems`).
+RESIZED_MIN = 1.5
+RESIZED_AGREE = 1.25
+
 #: A K whose focal lengths are at most this and whose principal point lies within this of
 #: the origin looks normalised (by the image width or size) rather than in pixels.
 NORMALISED_K_MAX = 10.0
@@ -29,7 +35,8 @@ NORMALISED_K_MAX = 10.0
 def intrinsics_problems(size0: Any, size1: Any, K0: Any, K1: Any) -> list[str]:
     """Why the intrinsics do not fit the images (``[]`` when they do, or when there are
     none): one K for images of different sizes; a principal point outside the image (with a
-    hint when ``cx`` and ``cy`` look swapped); a normalised K (focal lengths and principal
+    hint when ``cx`` and ``cy`` look swapped) or, by one factor in x and y, far from its
+    centre (a K of the image before it was resized); a normalised K (focal lengths and principal
     point of at most :data:`NORMALISED_K_MAX`) with pixel coordinates; a focal length outside
     :data:`FOCAL_RANGE` times the width. Sizes are ``(H, W)``; every pose computed with such
     intrinsics is ``"unreliable"`` (:class:`~strl_pyg.inference.estimator.PoseEstimator`)."""
@@ -61,6 +68,12 @@ def intrinsics_problems(size0: Any, size1: Any, K0: Any, K1: Any) -> list[str]:
                     if swapped else ": is K for this image, in pixels?")
             out.append(f"{name}: principal point (cx={cx:.1f}, cy={cy:.1f}) lies outside the "
                        f"{size} image{hint}")
+        elif (scale := _resized_by(cx, cy, w, h)) is not None:
+            out.append(f"{name}: principal point (cx={cx:.1f}, cy={cy:.1f}) is at "
+                       f"{2 * cx / (w - 1):.2f}x and {2 * cy / (h - 1):.2f}x the centre of the "
+                       f"{size} "
+                       f"image: K looks made for the image {scale:.3g}x this size (a resized "
+                       f"image needs its K resized with it: K[:2] *= {1 / scale:.3g})")
         if not (lo * w <= fx <= hi * w and lo * w <= fy <= hi * w):
             out.append(f"{name}: focal length (fx={fx:.4g}, fy={fy:.4g} px) is outside "
                        f"{lo:g}-{hi:g}x the image width ({w} px): is K for this image, in "
@@ -68,12 +81,32 @@ def intrinsics_problems(size0: Any, size1: Any, K0: Any, K1: Any) -> list[str]:
     return out
 
 
+def _resized_by(cx: float, cy: float, w: int, h: int) -> float | None:
+    """The factor by which the image would have to be resized for K's principal point to
+    sit at its centre, when both axes agree on one (within :data:`RESIZED_AGREE`) that is
+    at least :data:`RESIZED_MIN` away from 1 (a K of the full-size image on a half-size
+    one: 2); else ``None``. A principal point off-centre in one axis only (a crop) is not
+    one."""
+    if cx <= 0 or cy <= 0 or w < 2 or h < 2:
+        return None
+    rx, ry = 2 * cx / (w - 1), 2 * cy / (h - 1)  # the centre of pixel centres 0..w-1
+    if abs(np.log(rx / ry)) > np.log(RESIZED_AGREE):
+        return None
+    scale = float(np.sqrt(rx * ry))
+    if abs(np.log(scale)) < np.log(RESIZED_MIN):
+        return None
+    for nice in (1 / 4, 1 / 3, 1 / 2, 2, 3, 4):  # the usual resize factors, where it is one
+        if abs(np.log(scale / nice)) < np.log(1.05):
+            return nice
+    return scale
+
+
 def input_warnings(size0: Any, size1: Any, K0: Any, K1: Any) -> list[str]:
     """Warnings about the intrinsics: none at all (the classical solvers cannot run), or
     :func:`intrinsics_problems`."""
     if K0 is None or K1 is None:
-        return ["no intrinsics (K0, K1): the network's coordinates are normalised by the image "
-                "size and the classical solvers cannot run"]
+        return ["no intrinsics (K0, K1): the classical solvers cannot run, and a network "
+                "pose (from coordinates normalised by the image size) is not a metric one"]
     return intrinsics_problems(size0, size1, K0, K1)
 
 

@@ -115,6 +115,29 @@ class CheckpointSettings:
     calibration_bootstrap: int = 0
     recommended_order: tuple[str, ...] = ()
     fusion_inflation: float = 1.0
+    #: ``name -> (scale, bootstrap)`` for methods this checkpoint has no scale of and whose
+    #: covariance does not depend on the network (PoseLib, OpenCV): the shipped checkpoint's
+    #: (:meth:`with_fallback`)
+    fallback_calibration: dict[str, tuple[float, int]] = field(default_factory=dict)
+
+    def with_fallback(self, shipped: CheckpointSettings,
+                      names: Any) -> CheckpointSettings:
+        """These settings with ``shipped``'s calibration scales of ``names`` (the methods
+        whose covariance does not read the network) where this checkpoint has none: a
+        checkpoint of one's own (no ``--calibrate``) does not change PoseLib's sigma."""
+        fallback = {n: (shipped.calibration[n], shipped.calibration_bootstrap) for n in names
+                    if n not in self.calibration and n in shipped.calibration}
+        return dataclasses.replace(self, fallback_calibration=fallback) if fallback else self
+
+    def scale_of(self, name: str) -> tuple[float | None, int, bool]:
+        """The calibration scale of ``name`` (``None``: none), the bootstrap count it was
+        fitted with, and whether it is the shipped checkpoint's fallback."""
+        if name in self.calibration:
+            return self.calibration[name], self.calibration_bootstrap, False
+        if name in self.fallback_calibration:
+            scale, boot = self.fallback_calibration[name]
+            return scale, boot, True
+        return None, self.calibration_bootstrap, False
 
     @classmethod
     def from_metadata(cls, md: Any) -> CheckpointSettings:

@@ -210,6 +210,14 @@ def methods_needed(names: Any) -> tuple[str, ...]:
     return tuple(m for m in METHODS if m in want)
 
 
+def network_free_methods() -> tuple[str, ...]:
+    """The registered methods whose result does not read the network, not even through a
+    method they depend on (PoseLib, OpenCV, ``vp``): their calibration does not depend on
+    the checkpoint."""
+    return tuple(n for n in METHODS
+                 if not any(METHODS[m].uses_network for m in methods_needed((n,))))
+
+
 def classical_method() -> str:
     """The classical solver other methods start from: PoseLib if installed, else OpenCV."""
     return "poselib" if METHODS["poselib"].available() else "opencv"
@@ -298,6 +306,30 @@ def _attach_fundamental(estimate: PoseEstimate, matches: PairMatches, threshold_
     estimate.pose.info = info
 
 
+#: The share of line matches running opposite ways in the two images (directions more than
+#: 90 deg apart) above which their endpoints look unmatched (:func:`_flipped_lines`).
+FLIPPED_LINES_SHARE = 0.2
+
+
+def _flipped_lines(matches: PairMatches) -> list[str]:
+    """A warning when more than :data:`FLIPPED_LINES_SHARE` of at least 5 line matches whose
+    endpoints are said to correspond run opposite ways in the two images: endpoint order
+    as a line detector gave it, which the network reads as a half-turn of the segment."""
+    if matches.num_lines < 5 or not matches.line_endpoints_correspond:
+        return []
+    d0 = matches.lines0[:, 1] - matches.lines0[:, 0]
+    d1 = matches.lines1[:, 1] - matches.lines1[:, 0]
+    if matches.has_intrinsics:  # image 1's directions seen with image 0's camera
+        A = matches.K0[:2, :2] @ np.linalg.inv(matches.K1[:2, :2])
+        d1 = d1 @ A.T
+    opposite = int(np.sum(np.einsum("ij,ij->i", d0, d1) < 0))
+    if opposite <= FLIPPED_LINES_SHARE * matches.num_lines:
+        return []
+    return [f"{opposite} of {matches.num_lines} line matches run opposite ways in the two "
+            "images: are their endpoints matched (endpoint k to endpoint k)? If not, say so "
+            "with info={'line_endpoints': 'as detected'}, or order them alike"]
+
+
 def _checked_pair(matches: PairMatches) -> tuple[PairMatches, list[str], np.ndarray,
                                                   str | None, list[str]]:
     """The pair's one input check: the matches with each correspondence once (every decision,
@@ -310,6 +342,7 @@ def _checked_pair(matches: PairMatches) -> tuple[PairMatches, list[str], np.ndar
         matches.image_size0, matches.image_size1, None, None)
     matches, repeats, rows = matches.deduplicated()
     warnings += repeats
+    warnings += _flipped_lines(matches)
     n, degenerate = matches.num_distinct_points, None
     spread = _spread_px(matches)
     if n and spread < 4.0 and min(*matches.image_size0, *matches.image_size1) >= 64:
@@ -546,7 +579,15 @@ class PoseEstimator:
         shipped checkpoint's metadata alone (without building the network) when no method
         needs it."""
         if self._settings is None:
-            self._settings = CheckpointSettings.of(self._metadata_source())
+            own = CheckpointSettings.of(self._metadata_source())
+            free = network_free_methods()
+            # without a model the source is the shipped header itself
+            if self._model is not None and any(m not in own.calibration for m in free):
+                try:  # the shipped scales of PoseLib's and OpenCV's covariances
+                    own = own.with_fallback(CheckpointSettings.of(shipped_header()), free)
+                except (OSError, ValueError, RuntimeError):
+                    pass  # no shipped weights readable: those methods say "not calibrated"
+            self._settings = own
         return self._settings
 
     @property
@@ -719,37 +760,43 @@ class PoseEstimator:
         if spec.uses_network and not matches.has_images:
             visual = getattr(getattr(self.model, "config", None), "visual", None)
             if visual is not None:
-                return (f"{name} skipped: the model reads the images (visual={visual!r}) and "
+                return (f"the model reads the images (visual={visual!r}) and "
                         "the matches carry none: attach them (PairMatches(..., image0=, "
                         "image1=) or load_external_matches(..., image0=, image1=))")
         for dep in spec.depends_on:
             dep = classical_method() if dep == "classical" else dep
             if dep in ctx.results and ctx.results[dep].status == "skipped":
-                return f"{name} skipped: it reads {dep}, which was skipped"
+                return f"it reads {dep}, which was skipped"
         return None
 
     def _calibrated(self, name: str, res: MethodResult,
                     settings: CheckpointSettings) -> MethodResult:
         """``res`` with its covariance scaled by the checkpoint's calibration where it applies
         (or a warning why not), then capped at :data:`MAX_SIGMA_DEG` per block."""
-        scale = settings.calibration.get(name)
-        fitted_boot = settings.calibration_bootstrap
+        scale, fitted_boot, shipped = settings.scale_of(name)
         spec = METHODS[name]
+        which = "the shipped weights' scale" if shipped else "the checkpoint's scale"
         if (scale is not None and spec.bootstrapped and res.covariance is not None
                 and fitted_boot != self.bootstrap):
             res.warnings.append(
-                f"{name}: covariance not calibrated (the checkpoint's scale was fitted with "
+                f"{name}: covariance not calibrated ({which} was fitted with "
                 f"bootstrap={fitted_boot}, this estimate used bootstrap={self.bootstrap})")
             scale = None
         if (scale is not None and spec.classical_base and res.covariance is not None
                 and _measured_with_missing_poselib(settings)):
             res.warnings.append(
-                f"{name}: covariance not calibrated (the checkpoint's scale was fitted with "
+                f"{name}: covariance not calibrated ({which} was fitted with "
                 "PoseLib as its classical base, which is not installed here)")
             scale = None
         if scale is not None and res.covariance is not None:
             res.covariance = res.covariance * scale
             res.info["calibration_scale"] = scale
+            if shipped:
+                res.info["calibration_from"] = "shipped"
+        elif res.covariance is not None and not any("not calibrated" in w
+                                                    for w in res.warnings):
+            res.warnings.append(f"{name}: covariance not calibrated (no scale of it in the "
+                                "checkpoint's metadata): its sigma is not a measured one")
         if res.covariance is not None:
             res.covariance, capped = cap_covariance(res.covariance)
             if capped:

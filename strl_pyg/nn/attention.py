@@ -13,7 +13,7 @@ from torch_geometric.utils import softmax
 
 from strl_pyg.data.pair_graph import CompleteEdges  # the marker is data; re-exported here
 from strl_pyg.nn.layout import DenseLayout
-from strl_pyg.nn.mlp import as_pair, mlp, reset_mlp
+from strl_pyg.nn.mlp import as_index, as_pair, mlp, reset_mlp
 
 __all__ = ["AttentionConv", "CompleteEdges"]
 
@@ -174,6 +174,10 @@ class AttentionConv(MessagePassing):
             raise ValueError(f"Expected aggr='add' (attention sums its softmax-weighted "
                              f"messages; the complete-attention path computes that sum only) "
                              f"(got aggr={aggr!r})")
+        if "out_channels" in kwargs:
+            raise TypeError(f"Expected no out_channels (the output width is the target "
+                            f"channels, as the residual needs: put a Linear(-1, C) in front "
+                            f"for another width) (got out_channels={kwargs['out_channels']!r})")
         if "node_dim" in kwargs:
             raise ValueError(f"Expected no node_dim (nodes are on dimension 0, with the heads "
                              f"after them) (got node_dim={kwargs['node_dim']!r})")
@@ -192,9 +196,12 @@ class AttentionConv(MessagePassing):
         if not isinstance(src_channels, int) or (src_channels < 1 and src_channels != -1):
             raise ValueError(f"Expected source channels >= 1 or -1 (lazy) (got {channels!r})")
         if dst_channels % heads != 0:
+            habit = (" (AttentionConv(channels, heads): the second argument is the number of "
+                     "heads, the output width is the target channels, as the residual needs)"
+                     if heads > dst_channels else "")
             raise ValueError(
                 f"Expected heads to divide the target channels (got {heads} heads for "
-                f"{dst_channels} channels)"
+                f"{dst_channels} channels){habit}"
             )
         self.channels = channels
         self.heads = heads
@@ -305,7 +312,7 @@ class AttentionConv(MessagePassing):
         if isinstance(edge_index, CompleteEdges):
             msg = self._dense(q, k, v, *_complete_layouts(edge_index, batch, layout, *size))
         else:
-            e = None
+            edge_index, e = as_index(edge_index), None
             if edge_attr is not None:
                 if edge_attr.dim() != 2 or edge_attr.shape[0] != edge_index.shape[1]:
                     raise ValueError(f"Expected edge_attr of shape [{edge_index.shape[1]}, "

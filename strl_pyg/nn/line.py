@@ -6,7 +6,7 @@ import torch
 from torch import Tensor
 from torch_geometric.nn import MessagePassing
 
-from strl_pyg.nn.mlp import as_pair, mlp, reset_mlp
+from strl_pyg.nn.mlp import as_index, as_pair, mlp, reset_mlp
 
 __all__ = ["LineEndpointConv"]
 
@@ -84,7 +84,8 @@ class LineEndpointConv(MessagePassing):
                 f"(got {line_feat.shape[0]} and {x_src.shape[0]})"
             )
         size = (x_src.shape[0], x_dst.shape[0])
-        agg = self.propagate(edge_index, x=(x_src, x_dst), line=line_feat, size=size)
+        agg = self.propagate(as_index(edge_index), x=(x_src, x_dst), line=line_feat,
+                             size=size)
         return x_dst + agg
 
     def message(self, x_i: Tensor, x_j: Tensor, line_j: Tensor) -> Tensor:

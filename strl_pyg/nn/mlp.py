@@ -37,3 +37,18 @@ def reset_mlp(module: nn.Module) -> None:
 def as_pair(x: Any) -> tuple[Any, Any]:
     """``(source, target)`` from a pair, or ``(x, x)`` from a single value."""
     return tuple(x) if isinstance(x, (tuple, list)) else (x, x)
+
+
+def as_index(edge_index: Any) -> Any:
+    """A plain integer ``edge_index`` tensor of another integer type (``int32`` from numpy
+    or another tool) as ``int64``, which PyG's scatter needs; a floating one is a one-line
+    ``ValueError``; anything else (``EdgeIndex``, a sparse adjacency) as given."""
+    import torch
+
+    if type(edge_index) is torch.Tensor and edge_index.dtype != torch.long:
+        if edge_index.is_floating_point() or edge_index.is_complex() \
+                or edge_index.dtype == torch.bool:
+            raise ValueError(f"Expected an integer edge_index (got {edge_index.dtype})")
+        return edge_index.long()
+    return edge_index
+

@@ -237,8 +237,15 @@ class TrainConfig:
         known = [f.name for f in fields(StrLPoseConfig)]
         unknown = sorted(set(overrides) - set(known))
         if unknown:
+            import difflib
+
+            close = [(k, difflib.get_close_matches(k, known, n=1, cutoff=0.75))
+                     for k in unknown]
+            hint = "; ".join(f"did you mean {c[0]} for {k}" if len(unknown) > 1
+                             else f"did you mean {c[0]}?" for k, c in close if c)
             raise ValueError(f"Expected --set keys among the StrLPoseConfig fields "
-                             f"{', '.join(known)} (got {', '.join(unknown)})")
+                             f"{', '.join(known)} (got {', '.join(unknown)})"
+                             f"{'; ' + hint if hint else ''}")
         if self.dataset == "kitti":
             overrides.setdefault("translation", "metric")
         channels = DATA_CHANNELS[self.dataset]

@@ -175,8 +175,8 @@ def build_matches(kw: dict) -> PairMatches:
     try:
         return PairMatches(**kw)
     except ValueError as err:
-        if "inside the" not in str(err):
-            raise
+        if "inside the" not in str(err) or "given as (W, H)?" in str(err):
+            raise  # not about the image, or with its hint already
         for i in (0, 1):
             size = kw.get(f"image_size{i}")
             try:
