@@ -118,3 +118,43 @@ def test_seed_validation():
         generate_pair(-1)
     with pytest.raises(TypeError, match="SceneConfig"):
         generate_pair(0, config={"kind": "street"})
+
+
+@pytest.mark.parametrize("kind", ["street", "indoor", "object"])
+def test_visibility_cull_renders_what_every_quad_would(kind, monkeypatch):
+    """The renderer's fast path skips the quads that cannot be seen (all corners behind the
+    near plane, or in front and over 2 px outside the image; stop 46: generation 24 %
+    faster); every quad drawn (the reference) gives the same views, bit for bit."""
+    from strl_pyg.synthetic import render
+    from strl_pyg.synthetic.scene import build_scene
+
+    cfg = SceneConfig(kind=kind)
+    scene = build_scene(np.random.default_rng([7, 0]), cfg)
+    K, size = cfg.intrinsics(), cfg.image_size
+    args = (scene.quads, K, scene.R_cw1, scene.t_cw1, size, cfg.near, scene.background,
+            scene.gradient)
+    fast = render.render_view(*args)
+    skipped = int((~render._maybe_visible(scene.quads, K, scene.R_cw1, scene.t_cw1, size,
+                                          cfg.near)).sum())
+    monkeypatch.setattr(render, "_maybe_visible", lambda quads, *a: np.ones(len(quads), bool))
+    ref = render.render_view(*args)
+    for a, b in zip((fast.image, fast.depth, fast.ids), (ref.image, ref.depth, ref.ids)):
+        np.testing.assert_array_equal(a, b)
+    assert kind == "object" or skipped > 0  # the fast path skips something on wide scenes
+
+
+def test_quad_segments_lie_on_their_quad():
+    """The texture's segments of a quad, [K, 2, 3] at once: origin + s u + t v per endpoint."""
+    from strl_pyg.synthetic.scene import _Builder
+
+    b = _Builder(np.random.default_rng(0), SceneConfig(kind="street"))
+    origin, u, v = np.array([1.0, 2.0, 3.0]), np.array([2.0, 0, 0]), np.array([0, 0, 5.0])
+    b.quad(origin, u, v, style="facade", edges=False)
+    got = np.asarray(b.segments)
+    assert got.ndim == 3 and got.shape[1:] == (2, 3) and len(got) == len(b.owner) > 0
+    assert b.owner == [0] * len(got)
+    # every endpoint is origin + s u + t v with (s, t) in the unit square
+    st = np.linalg.lstsq(np.stack([u, v], 1), (got - origin).reshape(-1, 3).T, rcond=None)[0]
+    np.testing.assert_allclose(np.stack([u, v], 1) @ st + origin[:, None],
+                               (got.reshape(-1, 3)).T, atol=1e-9)
+    assert st.min() >= -1e-9 and st.max() <= 1 + 1e-9

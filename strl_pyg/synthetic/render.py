@@ -72,6 +72,26 @@ def _mip_homographies(H0: np.ndarray, levels: int) -> list[np.ndarray]:
     return out
 
 
+def _maybe_visible(quads: list[Quad], K: np.ndarray, R: np.ndarray, t: np.ndarray,
+                   size: tuple[int, int], near: float) -> np.ndarray:
+    """Per quad, ``False`` where :func:`render_view` would draw nothing of it for certain,
+    all quads at once: every corner in front of ``near`` is missing, or every corner is in
+    front and the projection lies more than 2 pixels outside the image (a margin that the
+    per-quad path's rounding cannot cross); ``True`` otherwise (the per-quad path decides)."""
+    if not quads:
+        return np.zeros(0, dtype=bool)
+    Cc = np.stack([q.corners() for q in quads]) @ R.T + t  # [N, 4, 3]
+    z = Cc[..., 2]
+    behind = (z < near).all(axis=1)
+    front = (z >= near).all(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = (Cc @ K.T)[..., :2] / z[..., None]
+    h, w = size
+    lo, hi = uv.min(axis=1), uv.max(axis=1)
+    outside = ((hi[:, 0] < -2) | (lo[:, 0] > w + 1) | (hi[:, 1] < -2) | (lo[:, 1] > h + 1))
+    return ~(behind | (front & outside))
+
+
 def render_view(
     quads: list[Quad],
     K: np.ndarray,
@@ -91,7 +111,10 @@ def render_view(
     depth = np.full((h, w), np.inf, np.float32)
     ids = np.full((h, w), -1, np.int32)
     K_inv = np.linalg.inv(K)
+    visible = _maybe_visible(quads, K, R, t, size, near)
     for qi, quad in enumerate(quads):
+        if not visible[qi]:
+            continue
         corners_c = quad.corners() @ R.T + t
         poly = _clip_near(corners_c, near)
         if len(poly) < 3:

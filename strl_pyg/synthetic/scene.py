@@ -89,9 +89,11 @@ class _Builder:
         q = Quad(origin, u, v, pyramid(tex), segs, edges)
         self.quads.append(q)
         idx = len(self.quads) - 1
-        for (s0, t0), (s1, t1) in segs:
-            self.segments.append(np.stack([origin + s0 * u + t0 * v, origin + s1 * u + t1 * v]))
-            self.owner.append(idx)
+        if len(segs):  # every segment's two endpoints at once: [K, 2, 3]
+            st = np.asarray(segs, dtype=np.float64).reshape(-1, 2, 2)
+            ends = origin + st[..., 0:1] * u + st[..., 1:2] * v
+            self.segments.extend(ends)
+            self.owner.extend([idx] * len(ends))
         if edges:
             c = q.corners()
             for k in range(4):
