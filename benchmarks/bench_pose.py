@@ -348,6 +348,19 @@ def targets_markdown(ratios: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: What ``--calibrate`` fits and stores (:func:`uncalibrated` removes it before the fit).
+FITTED_KEYS = ("calibration", "recommended_order", "calibration_bootstrap",
+               "recommended_evidence", "fusion_inflation", "fusion_evidence")
+
+
+def uncalibrated(metadata: dict) -> dict:
+    """``metadata`` without what ``--calibrate`` fits, and with an empty ``calibration``: a
+    checkpoint without the entry borrows the shipped scales for PoseLib and OpenCV
+    (``CheckpointSettings.with_fallback``), and the fit must read raw covariances (scales of
+    an earlier fit would otherwise be applied during it and then overwritten by ~1)."""
+    return {**{k: v for k, v in metadata.items() if k not in FITTED_KEYS}, "calibration": {}}
+
+
 def fit_calibration(estimator, pairs):
     """On the calibration pairs: per-method variance scales (:func:`_fit_scales`: bootstrapped
     covariances matched at the 2-sigma quantile, the network's own at the 1-sigma one), the
@@ -584,10 +597,7 @@ def main(argv=None) -> int:
             cal.append((f"calib/{seed}", m, np.asarray(p.T_0to1)))
         # fit on the uncalibrated model: scales stored by an earlier --calibrate would
         # otherwise be applied during the fit and then overwritten by ~1
-        model.metadata = {k: v for k, v in model.metadata.items()
-                          if k not in ("calibration", "recommended_order",
-                                       "calibration_bootstrap", "recommended_evidence",
-                                       "fusion_inflation", "fusion_evidence")}
+        model.metadata = uncalibrated(model.metadata)
         fit_estimator = PoseEstimator(model)
         scales, order, stats, evidence, fusion = fit_calibration(fit_estimator, cal)
         for k, (r, rl, rh, t, tl, th) in fusion["evidence"].items():

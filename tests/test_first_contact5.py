@@ -42,6 +42,13 @@ def test_own_checkpoint_keeps_poselib_calibrated(pair, tmp_path):
     np.testing.assert_allclose(mine.covariance, shipped.covariance, rtol=1e-9)
     assert mine.info["calibration_from"] == "shipped"
     assert "calibration_from" not in shipped.info
+    # a checkpoint that says "calibration: none yet" (benchmarks/bench_pose.py --calibrate
+    # while it fits) gets the raw covariance: the fit must not read the shipped scale
+    own.metadata = {**own.metadata, "calibration": {}}
+    raw = PoseEstimator(own, methods="poselib").estimate(m).pose
+    assert "calibration_scale" not in raw.info
+    np.testing.assert_allclose(raw.covariance * shipped.info["calibration_scale"],
+                               shipped.covariance, rtol=1e-9)
     # a method that reads the network keeps only the checkpoint's own scale: none here
     reg = PoseEstimator(own, methods="regression").estimate(
         _pm(pair, image0=pair.image0, image1=pair.image1)).methods["regression"]
@@ -199,3 +206,21 @@ def test_mistyped_set_key_names_the_closest(capsys):
         TrainConfig(model_overrides={"hiden": 3}).model_config()
     with pytest.raises(ValueError, match=r"\(got zzz\)$"):
         TrainConfig(model_overrides={"zzz": 3}).model_config()
+
+
+def test_the_calibration_fit_reads_raw_covariances(pair):
+    """Found while fixing the above: `bench_pose.py --calibrate` fits on the checkpoint with
+    its calibration removed; with the shipped fallback, PoseLib's covariance would have been
+    scaled during the fit, and the stored scale ~1 (sigma 4-5x too small)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import bench_pose
+
+    model = StrLPose.from_pretrained()
+    md = bench_pose.uncalibrated(model.metadata)
+    assert md["calibration"] == {} and "recommended_order" not in md
+    model.metadata = md
+    rec = PoseEstimator(model, methods="poselib").estimate(_pm(pair)).pose
+    assert rec.status == "ok" and "calibration_scale" not in rec.info

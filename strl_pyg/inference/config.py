@@ -115,6 +115,9 @@ class CheckpointSettings:
     calibration_bootstrap: int = 0
     recommended_order: tuple[str, ...] = ()
     fusion_inflation: float = 1.0
+    #: whether the metadata has a ``calibration`` entry at all (an empty one included: a
+    #: calibration fit in progress reads raw covariances; :meth:`with_fallback`)
+    has_calibration: bool = False
     #: ``name -> (scale, bootstrap)`` for methods this checkpoint has no scale of and whose
     #: covariance does not depend on the network (PoseLib, OpenCV): the shipped checkpoint's
     #: (:meth:`with_fallback`)
@@ -124,7 +127,11 @@ class CheckpointSettings:
                       names: Any) -> CheckpointSettings:
         """These settings with ``shipped``'s calibration scales of ``names`` (the methods
         whose covariance does not read the network) where this checkpoint has none: a
-        checkpoint of one's own (no ``--calibrate``) does not change PoseLib's sigma."""
+        checkpoint of one's own (no ``--calibrate``) does not change PoseLib's sigma. Only
+        for a checkpoint whose metadata has no ``calibration`` entry: one that has one, even
+        empty, is taken at its word."""
+        if self.has_calibration:
+            return self
         fallback = {n: (shipped.calibration[n], shipped.calibration_bootstrap) for n in names
                     if n not in self.calibration and n in shipped.calibration}
         return dataclasses.replace(self, fallback_calibration=fallback) if fallback else self
@@ -154,7 +161,8 @@ class CheckpointSettings:
                  and all(isinstance(m, str) for m in order) else ())
         k = md.get("fusion_inflation", 1.0)
         return cls(cal, int(boot) if _is_int(boot) else 0, order,
-                   float(k) if _is_number(k) and k > 0 else 1.0)
+                   float(k) if _is_number(k) and k > 0 else 1.0,
+                   has_calibration="calibration" in md)
 
     @classmethod
     def of(cls, model: Any) -> CheckpointSettings:
