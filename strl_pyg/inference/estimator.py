@@ -485,7 +485,9 @@ class PoseEstimator:
             path; ``None``: the shipped model,
             :meth:`StrLPose.from_pretrained() <strl_pyg.model.strl_pose.StrLPose.from_pretrained>`,
             loaded on the first estimate (its metadata calibrates every method and gives the
-            recommended order, also when only classical methods run).
+            recommended order, also when only classical methods run). A checkpoint whose
+            metadata has no ``calibration`` entry keeps the shipped scales for the methods
+            that do not read the network (PoseLib, OpenCV).
         methods: names from :data:`METHODS` to run (default: all installed ones); one name
             as a ``str`` is one method.
         seed: resampling and RANSAC seed (same input, same result).
