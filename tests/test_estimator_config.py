@@ -45,8 +45,12 @@ def test_checkpoint_settings_read_what_the_metadata_says_and_default_the_rest():
     md = {"calibration": {"poselib": 2.0, "bad": "x"}, "calibration_bootstrap": 8,
           "recommended_order": ["guided", "poselib"], "fusion_inflation": -1}
     s = CheckpointSettings.from_metadata(md)
-    assert s == CheckpointSettings({"poselib": 2.0}, 8, ("guided", "poselib"), 1.0)
+    assert s == CheckpointSettings({"poselib": 2.0}, 8, ("guided", "poselib"), 1.0,
+                                   has_calibration=True)
     assert CheckpointSettings.from_metadata(None) == CheckpointSettings()
+    # whether the entry exists at all decides the shipped fallback (stop 46)
+    assert not CheckpointSettings.from_metadata({"recommended_order": []}).has_calibration
+    assert CheckpointSettings.from_metadata({"calibration": {}}).has_calibration
 
 
 def test_the_settings_are_read_once_per_estimator(monkeypatch):
