@@ -64,6 +64,12 @@ def test_uncalibrated_sigma_is_named_in_the_python_record(pair):
     assert vp.status == "ok" and "calibration_scale" not in vp.info
     assert any(w.startswith("vp: covariance not calibrated") for w in vp.warnings)
     assert not any("not calibrated" in w for w in est.methods["poselib"].warnings)
+    # vp_checked carries a classical record's calibrated covariance: no such warning
+    # (found in review)
+    chk = PoseEstimator(methods=("poselib", "vp", "vp_checked")).estimate(
+        _pm(pair)).methods["vp_checked"]
+    assert chk.info.get("calibration_scale") is not None  # PoseLib's record, kept here
+    assert not any("not calibrated" in w for w in chk.warnings)
 
 
 # ------------------------------------------------------------ K of the image before a resize
@@ -151,6 +157,9 @@ def test_attention_conv_pyg_habits_get_one_line_each():
     x = torch.randn(6, 32)
     ei = torch.tensor([[0, 1, 2, 3, 4, 5, 0], [1, 2, 3, 4, 5, 0, 3]])
     torch.testing.assert_close(conv(x, ei.int()), conv(x, ei))
+    from torch_geometric import EdgeIndex
+
+    torch.testing.assert_close(conv(x, EdgeIndex(ei.int(), sparse_size=(6, 6))), conv(x, ei))
     with pytest.raises(ValueError, match=r"^Expected an integer edge_index \(got torch.float32\)$"):
         conv(x, ei.float())
     line = LineEndpointConv(32, line_channels=8)
@@ -189,12 +198,34 @@ def test_flipped_line_endpoints_are_named(pair):
     flipped[::2] = flipped[::2, ::-1]
     est = PoseEstimator(methods="poselib").estimate(replace(m, lines1=flipped))
     n = m.num_lines
-    assert any(w.startswith(f"{(n + 1) // 2} of {n} line matches run opposite ways")
+    assert any(w.startswith(f"{n // 2} of {n} line matches run opposite ways")
                for w in est.warnings)
     # said so: no warning
     said = PoseEstimator(methods="poselib").estimate(
         replace(m, lines1=flipped, info={LINE_ENDPOINTS: ENDPOINTS_AS_DETECTED}))
     assert not any("run opposite ways" in w for w in said.warnings)
+
+
+def test_a_rolled_camera_or_outlier_lines_are_not_flipped_endpoints(pair):
+    """Found in review: the first version of the check compared directions without the
+    pair's own turning, so image 1 turned by 180 deg with rightly matched endpoints gave
+    "256 of 256 line matches run opposite ways", and 40 % random outlier lines crossed the
+    threshold too."""
+    from strl_pyg.inference.estimator import _flipped_lines
+
+    m = pair.matches
+    h, w = m.image_size1
+    turned = np.array([w - 1.0, h - 1.0]) - m.lines1  # 180 deg about the image centre
+    assert _flipped_lines(replace(m, lines1=turned)) == []
+    rng = np.random.default_rng(0)
+    noisy = m.lines1.copy()
+    k = int(0.4 * len(noisy))
+    noisy[:k] = rng.uniform([0, 0], [w - 1, h - 1], size=(k, 2, 2))
+    assert _flipped_lines(replace(m, lines1=noisy)) == []
+    # turned and half flipped: named
+    half = turned.copy()
+    half[::2] = half[::2, ::-1]
+    assert _flipped_lines(replace(m, lines1=half))
 
 
 def test_mistyped_set_key_names_the_closest(capsys):

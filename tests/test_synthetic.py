@@ -131,16 +131,19 @@ def test_visibility_cull_renders_what_every_quad_would(kind, monkeypatch):
     cfg = SceneConfig(kind=kind)
     scene = build_scene(np.random.default_rng([7, 0]), cfg)
     K, size = cfg.intrinsics(), cfg.image_size
-    args = (scene.quads, K, scene.R_cw1, scene.t_cw1, size, cfg.near, scene.background,
-            scene.gradient)
-    fast = render.render_view(*args)
-    skipped = int((~render._maybe_visible(scene.quads, K, scene.R_cw1, scene.t_cw1, size,
-                                          cfg.near)).sum())
+    views = [(scene.R_cw0, scene.t_cw0), (scene.R_cw1, scene.t_cw1),
+             (scene.R_cw1, scene.t_cw1 + [0, 0, -3.0])]  # the last: quads behind and across
+    fast = [render.render_view(scene.quads, K, R, t, size, cfg.near, scene.background,
+                               scene.gradient) for R, t in views]
+    skipped = sum(int((~render._maybe_visible(scene.quads, K, R, t, size, cfg.near)).sum())
+                  for R, t in views)
     monkeypatch.setattr(render, "_maybe_visible", lambda quads, *a: np.ones(len(quads), bool))
-    ref = render.render_view(*args)
-    for a, b in zip((fast.image, fast.depth, fast.ids), (ref.image, ref.depth, ref.ids)):
-        np.testing.assert_array_equal(a, b)
-    assert kind == "object" or skipped > 0  # the fast path skips something on wide scenes
+    for (R, t), f in zip(views, fast, strict=True):
+        ref = render.render_view(scene.quads, K, R, t, size, cfg.near, scene.background,
+                                 scene.gradient)
+        for a, b in zip((f.image, f.depth, f.ids), (ref.image, ref.depth, ref.ids)):
+            np.testing.assert_array_equal(a, b)
+    assert skipped > 0
 
 
 def test_quad_segments_lie_on_their_quad():
@@ -149,12 +152,12 @@ def test_quad_segments_lie_on_their_quad():
 
     b = _Builder(np.random.default_rng(0), SceneConfig(kind="street"))
     origin, u, v = np.array([1.0, 2.0, 3.0]), np.array([2.0, 0, 0]), np.array([0, 0, 5.0])
+    segs = [((0.1, 0.2), (0.3, 0.9)), ((0.5, 0.0), (0.5, 1.0))]  # (s, t) per endpoint
+    b.tex.make = lambda style, w, h: (np.zeros((8, 8), np.float32), segs)
     b.quad(origin, u, v, style="facade", edges=False)
+    b.quad(origin, v, u, style="facade", edges=True)  # (u, v) exchanged: other endpoints
     got = np.asarray(b.segments)
-    assert got.ndim == 3 and got.shape[1:] == (2, 3) and len(got) == len(b.owner) > 0
-    assert b.owner == [0] * len(got)
-    # every endpoint is origin + s u + t v with (s, t) in the unit square
-    st = np.linalg.lstsq(np.stack([u, v], 1), (got - origin).reshape(-1, 3).T, rcond=None)[0]
-    np.testing.assert_allclose(np.stack([u, v], 1) @ st + origin[:, None],
-                               (got.reshape(-1, 3)).T, atol=1e-9)
-    assert st.min() >= -1e-9 and st.max() <= 1 + 1e-9
+    want = [[origin + s * u + t * v for s, t in seg] for seg in segs] + \
+           [[origin + s * v + t * u for s, t in seg] for seg in segs]
+    np.testing.assert_array_equal(got[:4], np.asarray(want))
+    assert len(got) == 4 + 4 and b.owner == [0, 0, 1, 1, 1, 1, 1, 1]

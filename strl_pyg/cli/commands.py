@@ -188,7 +188,8 @@ def _print_estimate(est, indent: str = "") -> None:
         print(f"{indent}pose: ok, from {pose.method} ({label}): {_fmt_pose(pose.T_0to1)}")
         if pose.sigma is not None:
             kind = pose.info.get("covariance", "network log-variance")
-            cal = "calibrated" if "calibration_scale" in pose.info else "uncalibrated"
+            cal = ("calibrated" if pose.info.get("calibration_scale") is not None
+                   else "uncalibrated")
             print(f"{indent}  sigma ({kind}, {cal}): "
                   f"rotation {pose.sigma['rotation_deg']:.3f} deg, "
                   f"translation direction {pose.sigma['translation_deg']:.3f} deg")

@@ -23,8 +23,10 @@ FOCAL_RANGE = (0.1, 10.0)
 
 #: A principal point at this many times the image centre's coordinates or more (or as many
 #: times less), by the same factor in x and y (within ``RESIZED_AGREE``), says K was made
-#: for a resized image (:func:`intrinsics_problems`).
-RESIZED_MIN = 1.5
+#: for a resized image (:func:`intrinsics_problems`): at 1.75 the principal point sits
+#: beyond 87.5 % (or within 28.6 %) of the image in both axes, which a calibrated camera's
+#: does not; a 2x resize puts it at the corner. A 1.5x resize (1080p to 720p) is missed.
+RESIZED_MIN = 1.75
 RESIZED_AGREE = 1.25
 
 #: A K whose focal lengths are at most this and whose principal point lies within this of
@@ -62,13 +64,17 @@ def intrinsics_problems(size0: Any, size1: Any, K0: Any, K1: Any) -> list[str]:
                        "pixels (a K normalised by the image size: multiply row 0 by W and row 1 "
                        "by H)")
             continue
+        scale = _resized_by(cx, cy, w, h)
         if not (-0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5):
             swapped = -0.5 <= cy <= w - 0.5 and -0.5 <= cx <= h - 0.5
             hint = (f": cx and cy look swapped (cx is the column, at most {w - 0.5:g} here)"
-                    if swapped else ": is K for this image, in pixels?")
+                    if swapped else
+                    f": K looks made for the image {scale:.3g}x this size (a resized image "
+                    f"needs its K resized with it: K[:2] *= {1 / scale:.3g})"
+                    if scale is not None else ": is K for this image, in pixels?")
             out.append(f"{name}: principal point (cx={cx:.1f}, cy={cy:.1f}) lies outside the "
                        f"{size} image{hint}")
-        elif (scale := _resized_by(cx, cy, w, h)) is not None:
+        elif scale is not None:
             out.append(f"{name}: principal point (cx={cx:.1f}, cy={cy:.1f}) is at "
                        f"{2 * cx / (w - 1):.2f}x and {2 * cy / (h - 1):.2f}x the centre of the "
                        f"{size} "

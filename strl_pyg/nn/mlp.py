@@ -40,12 +40,13 @@ def as_pair(x: Any) -> tuple[Any, Any]:
 
 
 def as_index(edge_index: Any) -> Any:
-    """A plain integer ``edge_index`` tensor of another integer type (``int32`` from numpy
-    or another tool) as ``int64``, which PyG's scatter needs; a floating one is a one-line
-    ``ValueError``; anything else (``EdgeIndex``, a sparse adjacency) as given."""
+    """An integer ``edge_index`` (a tensor or PyG's ``EdgeIndex``) of another integer type
+    (``int32`` from numpy or another tool) as ``int64``, which PyG's scatter needs; a
+    floating one is a one-line ``ValueError``; anything else (a sparse adjacency) as given."""
     import torch
 
-    if type(edge_index) is torch.Tensor and edge_index.dtype != torch.long:
+    if (isinstance(edge_index, torch.Tensor) and edge_index.layout == torch.strided
+            and edge_index.dtype != torch.long):
         if edge_index.is_floating_point() or edge_index.is_complex() \
                 or edge_index.dtype == torch.bool:
             raise ValueError(f"Expected an integer edge_index (got {edge_index.dtype})")

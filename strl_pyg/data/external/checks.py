@@ -185,7 +185,7 @@ def build_matches(kw: dict) -> PairMatches:
             except (ValueError, TypeError):
                 continue
             if size is not None and len(xy) and not _fits(xy, size) and _fits(xy, size[::-1]):
-                raise ValueError(f"{err}: they fit a {size[0]}x{size[1]} image; was image_size{i} "
+                raise ValueError(f"{err}: they fit a {size[1]}x{size[0]} image; was image_size{i} "
                                  "given as (W, H)? Sizes are (H, W)") from err
         raise
 
