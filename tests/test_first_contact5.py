@@ -211,21 +211,21 @@ def test_a_rolled_camera_or_outlier_lines_are_not_flipped_endpoints(pair):
     pair's own turning, so image 1 turned by 180 deg with rightly matched endpoints gave
     "256 of 256 line matches run opposite ways", and 40 % random outlier lines crossed the
     threshold too."""
-    from strl_pyg.inference.estimator import _flipped_lines
+    from strl_pyg.inference.checks import flipped_lines
 
     m = pair.matches
     h, w = m.image_size1
     turned = np.array([w - 1.0, h - 1.0]) - m.lines1  # 180 deg about the image centre
-    assert _flipped_lines(replace(m, lines1=turned)) == []
+    assert flipped_lines(replace(m, lines1=turned)) == []
     rng = np.random.default_rng(0)
     noisy = m.lines1.copy()
     k = int(0.4 * len(noisy))
     noisy[:k] = rng.uniform([0, 0], [w - 1, h - 1], size=(k, 2, 2))
-    assert _flipped_lines(replace(m, lines1=noisy)) == []
+    assert flipped_lines(replace(m, lines1=noisy)) == []
     # turned and half flipped: named
     half = turned.copy()
     half[::2] = half[::2, ::-1]
-    assert _flipped_lines(replace(m, lines1=half))
+    assert flipped_lines(replace(m, lines1=half))
 
 
 def test_mistyped_set_key_names_the_closest(capsys):

@@ -122,21 +122,23 @@ def _check_image(value: Any, name: str) -> np.ndarray | None:
     return None if value is None else check_image(value, name)
 
 
+def _outside(xy: np.ndarray, h: int, w: int, tol: float) -> np.ndarray:
+    """Per ``(x, y)`` row, whether it lies outside an ``h x w`` image (+- ``tol`` px)."""
+    return ((xy[:, 0] < -tol) | (xy[:, 0] > w - 1 + tol)
+            | (xy[:, 1] < -tol) | (xy[:, 1] > h - 1 + tol))
+
+
 def _check_in_image(coords: np.ndarray, size: tuple[int, int], name: str) -> None:
     if coords.size == 0:
         return
     h, w = size
     xy = coords.reshape(-1, 2)
     tol = OUT_OF_IMAGE_TOLERANCE
-    out = (
-        (xy[:, 0] < -tol) | (xy[:, 0] > w - 1 + tol) | (xy[:, 1] < -tol) | (xy[:, 1] > h - 1 + tol)
-    )
+    out = _outside(xy, h, w, tol)
     if out.any():
         i = int(np.flatnonzero(out)[0])
-        fits_transposed = not ((xy[:, 0] < -tol) | (xy[:, 0] > h - 1 + tol) | (xy[:, 1] < -tol)
-                               | (xy[:, 1] > w - 1 + tol)).any()
         hint = (f"; they fit a {w}x{h} image: was image_size{name[-1]} given as (W, H)? "
-                "Sizes are (H, W)" if fits_transposed else "")
+                "Sizes are (H, W)" if not _outside(xy, w, h, tol).any() else "")
         raise ValueError(
             f"Expected '{name}' inside the {h}x{w} px image (H x W, +-{tol} px) "
             f"(got {int(out.sum())} coordinates outside, first {xy[i].tolist()}){hint}"

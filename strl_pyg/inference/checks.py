@@ -13,7 +13,7 @@ from strl_pyg.data.matches import PairMatches
 
 __all__ = [
     "ZERO_PARALLAX_PX", "ZERO_PARALLAX_FRACTION", "FOCAL_RANGE", "NORMALISED_K_MAX",
-    "input_warnings", "intrinsics_problems", "zero_parallax", "check_device"]
+    "input_warnings", "intrinsics_problems", "zero_parallax", "flipped_lines", "check_device"]
 
 #: pixels (image 1 re-expressed in image 0's camera when both K are known).
 ZERO_PARALLAX_PX = 0.5
@@ -114,6 +114,43 @@ def input_warnings(size0: Any, size1: Any, K0: Any, K1: Any) -> list[str]:
         return ["no intrinsics (K0, K1): the classical solvers cannot run, and a network "
                 "pose (from coordinates normalised by the image size) is not a metric one"]
     return intrinsics_problems(size0, size1, K0, K1)
+
+
+#: The share of line matches running opposite ways in the two images, against the pair's
+#: own in-plane rotation, above which their endpoints look unmatched (:func:`flipped_lines`).
+FLIPPED_LINES_SHARE = 0.2
+#: How close (deg) a line's turn must be to the pair's rotation, or to it plus 180 deg, to count.
+FLIPPED_LINES_WINDOW_DEG = 30.0
+
+
+def flipped_lines(matches: PairMatches) -> list[str]:
+    """A warning when, of the line matches whose endpoints are said to correspond, more
+    than :data:`FLIPPED_LINES_SHARE` turn by the pair's in-plane rotation plus 180 deg
+    instead of by it (at least 5 lines within :data:`FLIPPED_LINES_WINDOW_DEG` of either):
+    endpoint order as a line detector gave it, which the network reads as a half-turn of
+    the segment. The rotation is the lines' own mode of turning, taken modulo 180 deg (so a
+    rolled camera is not a flip) with the larger group as the unflipped one; lines that
+    turn otherwise (outliers) are left out."""
+    if matches.num_lines < 5 or not matches.line_endpoints_correspond:
+        return []
+    d0 = matches.lines0[:, 1] - matches.lines0[:, 0]
+    d1 = matches.lines1[:, 1] - matches.lines1[:, 0]
+    if matches.has_intrinsics:  # image 1's directions seen with image 0's camera
+        A = matches.K0[:2, :2] @ np.linalg.inv(matches.K1[:2, :2])
+        d1 = d1 @ A.T
+    turn = np.arctan2(d1[:, 1], d1[:, 0]) - np.arctan2(d0[:, 1], d0[:, 0])
+    mode = np.angle(np.exp(2j * turn).mean()) / 2  # modulo 180 deg: flip-blind
+    off = np.angle(np.exp(1j * (turn - mode)))  # (-pi, pi]: 0 as the mode, pi flipped
+    win = np.radians(FLIPPED_LINES_WINDOW_DEG)
+    same = int(np.sum(np.abs(off) < win))
+    opposite = int(np.sum(np.abs(off) > np.pi - win))
+    same, opposite = max(same, opposite), min(same, opposite)
+    if same + opposite < 5 or opposite <= FLIPPED_LINES_SHARE * (same + opposite):
+        return []
+    return [f"{opposite} of {same + opposite} line matches run opposite ways in the two "
+            "images (against how the others turn): are their endpoints matched (endpoint k "
+            "to endpoint k)? If not, say so with info={'line_endpoints': 'as detected'}, or "
+            "order them alike"]
 
 
 def zero_parallax(matches: PairMatches) -> bool:

@@ -64,6 +64,7 @@ from strl_pyg.inference.checks import (
     NORMALISED_K_MAX,  # noqa: F401  (importable from here like the module's other names)
     ZERO_PARALLAX_FRACTION,
     ZERO_PARALLAX_PX,
+    flipped_lines,
     input_warnings,
     intrinsics_problems,
     zero_parallax,
@@ -306,43 +307,6 @@ def _attach_fundamental(estimate: PoseEstimate, matches: PairMatches, threshold_
     estimate.pose.info = info
 
 
-#: The share of line matches running opposite ways in the two images, against the pair's
-#: own in-plane rotation, above which their endpoints look unmatched (:func:`_flipped_lines`).
-FLIPPED_LINES_SHARE = 0.2
-#: How close (deg) a line's turn must be to the pair's rotation, or to it plus 180 deg, to count.
-FLIPPED_LINES_WINDOW_DEG = 30.0
-
-
-def _flipped_lines(matches: PairMatches) -> list[str]:
-    """A warning when, of the line matches whose endpoints are said to correspond, more
-    than :data:`FLIPPED_LINES_SHARE` turn by the pair's in-plane rotation plus 180 deg
-    instead of by it (at least 5 lines within :data:`FLIPPED_LINES_WINDOW_DEG` of either):
-    endpoint order as a line detector gave it, which the network reads as a half-turn of
-    the segment. The rotation is the lines' own mode of turning, taken modulo 180 deg (so a
-    rolled camera is not a flip) with the larger group as the unflipped one; lines that
-    turn otherwise (outliers) are left out."""
-    if matches.num_lines < 5 or not matches.line_endpoints_correspond:
-        return []
-    d0 = matches.lines0[:, 1] - matches.lines0[:, 0]
-    d1 = matches.lines1[:, 1] - matches.lines1[:, 0]
-    if matches.has_intrinsics:  # image 1's directions seen with image 0's camera
-        A = matches.K0[:2, :2] @ np.linalg.inv(matches.K1[:2, :2])
-        d1 = d1 @ A.T
-    turn = np.arctan2(d1[:, 1], d1[:, 0]) - np.arctan2(d0[:, 1], d0[:, 0])
-    mode = np.angle(np.exp(2j * turn).mean()) / 2  # modulo 180 deg: flip-blind
-    off = np.angle(np.exp(1j * (turn - mode)))  # (-pi, pi]: 0 as the mode, pi flipped
-    win = np.radians(FLIPPED_LINES_WINDOW_DEG)
-    same = int(np.sum(np.abs(off) < win))
-    opposite = int(np.sum(np.abs(off) > np.pi - win))
-    same, opposite = max(same, opposite), min(same, opposite)
-    if same + opposite < 5 or opposite <= FLIPPED_LINES_SHARE * (same + opposite):
-        return []
-    return [f"{opposite} of {same + opposite} line matches run opposite ways in the two "
-            "images (against how the others turn): are their endpoints matched (endpoint k "
-            "to endpoint k)? If not, say so with info={'line_endpoints': 'as detected'}, or "
-            "order them alike"]
-
-
 def _checked_pair(matches: PairMatches) -> tuple[PairMatches, list[str], np.ndarray,
                                                   str | None, list[str]]:
     """The pair's one input check: the matches with each correspondence once (every decision,
@@ -355,7 +319,7 @@ def _checked_pair(matches: PairMatches) -> tuple[PairMatches, list[str], np.ndar
         matches.image_size0, matches.image_size1, None, None)
     matches, repeats, rows = matches.deduplicated()
     warnings += repeats
-    warnings += _flipped_lines(matches)
+    warnings += flipped_lines(matches)
     n, degenerate = matches.num_distinct_points, None
     spread = _spread_px(matches)
     if n and spread < 4.0 and min(*matches.image_size0, *matches.image_size1) >= 64:

@@ -52,4 +52,3 @@ def as_index(edge_index: Any) -> Any:
             raise ValueError(f"Expected an integer edge_index (got {edge_index.dtype})")
         return edge_index.long()
     return edge_index
-

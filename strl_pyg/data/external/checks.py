@@ -170,31 +170,9 @@ def image_size_from(arg, stored, order, i, has_image, fmt, source) -> tuple[int,
 
 
 def build_matches(kw: dict) -> PairMatches:
-    """``PairMatches(**kw)``; points outside the image get a hint when the size looks
-    transposed."""
-    try:
-        return PairMatches(**kw)
-    except ValueError as err:
-        if "inside the" not in str(err) or "given as (W, H)?" in str(err):
-            raise  # not about the image, or with its hint already
-        for i in (0, 1):
-            size = kw.get(f"image_size{i}")
-            try:
-                xy = np.concatenate([_as_array(kw[k], k).reshape(-1, 2)
-                                     for k in (f"points{i}", f"lines{i}") if kw.get(k) is not None])
-            except (ValueError, TypeError):
-                continue
-            if size is not None and len(xy) and not _fits(xy, size) and _fits(xy, size[::-1]):
-                raise ValueError(f"{err}: they fit a {size[1]}x{size[0]} image; was image_size{i} "
-                                 "given as (W, H)? Sizes are (H, W)") from err
-        raise
-
-
-def _fits(xy: np.ndarray, size) -> bool:
-    from strl_pyg.data.matches import OUT_OF_IMAGE_TOLERANCE as tol  # read when called
-
-    h, w = size
-    return bool(np.all((xy >= -tol) & (xy <= np.array([w - 1, h - 1]) + tol)))
+    """``PairMatches(**kw)`` (points outside the image get its hint when the size looks
+    transposed)."""
+    return PairMatches(**kw)
 
 
 def filter_scores(pm: PairMatches, min_score, min_line_score) -> PairMatches:
