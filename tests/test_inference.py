@@ -36,7 +36,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 SEED = 2_000_017  # held out from training
 HAVE_POSELIB = METHODS["poselib"].available()
 KEYS = {"method", "status", "T_0to1", "sigma", "covariance", "warnings", "time_ms",
-        "num_inliers", "info", "inliers"}
+        "num_inliers", "info", "inliers", "rotation"}
 
 def readme_python_block(must_contain: str) -> str:
     """The first ```python block of README.md that contains ``must_contain``."""
@@ -284,11 +284,11 @@ def test_a_model_of_mixed_dtypes_errors_in_one_line(pair):
 def test_a_new_method_is_one_registration(pair, monkeypatch):
     def identity_guess(matches, context):
         assert "opencv" in context.results  # runs after the ones registered before it
-        return MethodResult("guess", "ok", np.eye(4))
+        return MethodResult("guess", "ok", context.results["opencv"].T_0to1)
 
     monkeypatch.setattr(inference, "METHODS", dict(inference.METHODS))
-    # a new method's pose is support-checked by default (MethodSpec); the identity is not
-    # supported by a moving pair, so this ordering test opts out
+    # a method that is not support-checked (a learned one) is recommended only where the
+    # matches support its pose: this one repeats OpenCV's
     inference.register_method("guess", identity_guess, support_checked=False)
     monkeypatch.setattr(inference, "RECOMMENDED_ORDER", ("guess", "opencv"))
     # a model without a measured order (the shipped one records its own)
@@ -296,6 +296,19 @@ def test_a_new_method_is_one_registration(pair, monkeypatch):
     assert est.pose.method == "guess" and list(est.methods) == ["opencv", "guess"]
     with pytest.raises(ValueError, match="already registered"):
         inference.register_method("guess", identity_guess)
+
+
+def test_an_unsupported_learned_pose_is_not_recommended(pair, monkeypatch):
+    """Before: a method without the support check (the network) filled the recommended pose
+    with its own pose and status "ok" whatever the matches said."""
+    monkeypatch.setattr(inference, "METHODS", dict(inference.METHODS))
+    inference.register_method("guess", lambda m, c: MethodResult("guess", "ok", np.eye(4)),
+                              support_checked=False)
+    monkeypatch.setattr(inference, "RECOMMENDED_ORDER", ("guess",))
+    est = PoseEstimator(tiny(), methods=("guess",)).estimate(pair.matches)
+    assert est.methods["guess"].status == "ok"  # the method's own record is its answer
+    assert est.pose.status == "unreliable" and est.pose.T_0to1 is None
+    assert any("stands in for no solver" in w for w in est.pose.warnings)
 
 
 def test_the_split_modules_stay_importable_from_inference():
@@ -340,7 +353,8 @@ def test_method_results_hold_a_pose_only_when_ok():
 
 def test_to_dict_is_json_with_the_documented_keys(estimate):
     d = json.loads(json.dumps(estimate.to_dict(), allow_nan=False))
-    assert set(d) == {"pose", "methods", "num_points", "num_lines"}
+    assert set(d) == {"pose", "methods", "num_points", "num_lines", "two_view"}
+    assert d["two_view"]["configuration"] == "general"
     assert set(d["pose"]) == KEYS and np.asarray(d["pose"]["T_0to1"]).shape == (4, 4)
     assert all(set(v) == KEYS for v in d["methods"].values())
 

@@ -103,12 +103,14 @@ def test_nearly_parallel_or_single_directions_give_no_pose_even_with_a_start():
     res = vanishing_point_pose(m, starts=[Pose(R, t)])
     assert res.info["directions"] == 2 and 11 < res.info["separation_deg"] < 13
     assert not res.success
-    assert res.info["reason"].endswith("12 deg apart (needs two at least 30 deg apart)")
+    assert res.info["reason"] == ("the matched lines of both images share 2 vanishing "
+                                  "directions, only 12 deg apart: vp needs two at least 30 deg "
+                                  "apart")  # before: "2 vanishing direction(s) ... needs two"
     m, R, t = manhattan_pair(0, axes=a[:, None])
     res = vanishing_point_pose(m, starts=[Pose(R, t)])
     assert not res.success and res.info["directions"] == 1
-    assert res.info["reason"] == ("1 vanishing direction(s) shared by the matched lines of both "
-                                  "images (needs two at least 30 deg apart)")
+    assert res.info["reason"] == ("the matched lines of both images share only one vanishing "
+                                  "direction: vp needs two at least 30 deg apart")
     # the scene's orthogonal axes pass
     m, R, t = manhattan_pair(0)
     res = vanishing_point_pose(m)

@@ -170,9 +170,11 @@ EXIT_CODES = {0: "a pose: status 'ok'",
               3: "no pose to use: status 'unreliable' (a pose was computed, but the "
                  "intrinsics fail the input checks or its matches lie behind a camera: see the "
                  "warnings; T_0to1 and sigma are null)",
+              4: "a rotation only: status 'rotation_only' (the matches show no parallax, a "
+                 "pure rotation: 'rotation' and sigma.rotation_deg are given, T_0to1 is null)",
               130: "interrupted",
               141: "stdout closed early (e.g. '| head'): output stopped quietly"}
-STATUS_EXIT = {"ok": 0, "degenerate": 1, "failed": 1, "unreliable": 3}
+STATUS_EXIT = {"ok": 0, "degenerate": 1, "failed": 1, "unreliable": 3, "rotation_only": 4}
 
 
 def _print_estimate(est, indent: str = "") -> None:
@@ -193,8 +195,18 @@ def _print_estimate(est, indent: str = "") -> None:
             print(f"{indent}  sigma ({kind}, {cal}): "
                   f"rotation {pose.sigma['rotation_deg']:.3f} deg, "
                   f"translation direction {pose.sigma['translation_deg']:.3f} deg")
+    elif pose.status == "rotation_only":
+        R = "; ".join(" ".join(f"{v:+.5f}" for v in row) for row in pose.rotation)
+        sig = pose.sigma["rotation_deg"] if pose.sigma is not None else float("nan")
+        print(f"{indent}pose: rotation_only (a pure rotation: no translation direction), "
+              f"R = [{R}], sigma rotation {sig:.3f} deg")
     else:
         print(f"{indent}pose: {pose.status}, no pose given")
+    if est.geometry is not None:
+        g = est.geometry
+        print(f"{indent}two-view configuration: {g.configuration} (inliers: essential "
+              f"{g.inliers_E}, homography {g.inliers_H}, rotation alone {g.inliers_R} of "
+              f"{g.num_points})")
     if "fundamental_matrix" in pose.info:  # the route without intrinsics
         F = pose.info["fundamental_matrix"]
         if F is None:
@@ -313,6 +325,8 @@ def cmd_predict(args) -> int:
     0 when the pose's status is ``"ok"``, 1 when it is ``"degenerate"`` or ``"failed"``, 3
     when it is ``"unreliable"`` (printed either way)."""
     methods = "regression" if args.no_baseline else args.methods
+    if methods.lower() in ("recommended", "all"):
+        methods = methods.lower()
     _check_methods(methods)  # before the images and the model are read
     # one estimator for both inputs: "recommended" (estimator.RECOMMENDED) walks the
     # recommended order (the images matched once), "all" runs every installed method; torch
@@ -384,13 +398,19 @@ def _intrinsics_in_original_frame(est, inputs) -> None:
 
 
 def _method_names(methods: str) -> tuple[str, ...]:
-    return tuple(m.strip() for m in methods.split(",") if m.strip())
+    """The names of ``--methods``, matched to the registered ones without regard to case
+    (``OpenCV`` is ``opencv``)."""
+    from strl_pyg.inference.estimator import METHODS
+
+    by_lower = {m.lower(): m for m in METHODS}
+    return tuple(by_lower.get(m.strip().lower(), m.strip()) for m in methods.split(",")
+                 if m.strip())
 
 
 def _check_methods(methods: str) -> None:
     """``--methods``: 'recommended', 'all' or registered names; one line naming the closest
     registered name otherwise (checked before any image or model is read)."""
-    if methods in ("recommended", "all"):
+    if methods.lower() in ("recommended", "all"):
         return
     import difflib
 
@@ -437,7 +457,7 @@ def check_train_files(args) -> None:
     from strl_pyg.utils.io import check_output_dir
 
     check_output_dir(args.out, "a run folder for --out")
-    if args.init_from:
+    if args.init_from and not args.init_from.startswith("shipped:"):
         _check_input_file(args.init_from, "weights file for --init-from")
     if args.resume:
         _check_input_file(Path(args.out) / "last.pt", "training checkpoint for --resume")

@@ -120,6 +120,10 @@ def read_intrinsics(text_or_path: str) -> np.ndarray:
             text = " ".join(nums[:9])
         rows = {ln.split(":", 1)[0].strip(): ln.split(":", 1)[1] for ln in text.splitlines()
                 if ":" in ln}
+        bare = [ln.split() for ln in text.splitlines() if ln.strip()]
+        if not rows and len(bare) >= 2 and all(len(r) == 12 for r in bare):
+            # KITTI's calib.txt without its 'P0:' labels: rows of 3x4 projections, P0 first
+            text = " ".join(bare[0])
         body = rows.get("P0", rows.get("P2", text if not rows else None))
         if body is None:
             raise UsageError(f"Expected a 'P0:' row or bare numbers in '{path}' "

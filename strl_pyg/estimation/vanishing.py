@@ -61,6 +61,17 @@ VP_MIN_POINTS = 5
 VP_MIN_SEPARATION_DEG = 30.0
 
 
+def _directions_text(n: int, separation: float | None) -> str:
+    """What the matched lines share, in words (``vp``'s reason for failing)."""
+    if n == 0:
+        return "the matched lines of both images share no vanishing direction"
+    if n == 1:
+        return "the matched lines of both images share only one vanishing direction"
+    apart = f", only {separation:.0f} deg apart" if separation is not None and \
+        np.isfinite(separation) else ""
+    return f"the matched lines of both images share {n} vanishing directions{apart}"
+
+
 def vanishing_directions(matches: PairMatches, line_threshold_px: float = 2.0,
                          max_directions: int = 3, min_lines: int = VP_MIN_LINES,
                          max_hypotheses: int = 3000, min_angle_deg: float = 10.0,
@@ -309,16 +320,13 @@ def vanishing_point_pose(matches: PairMatches, threshold_px: float = 1.0,
             "separation_deg": _separation_deg(dirs)}
     if not info["separation_deg"] >= VP_MIN_SEPARATION_DEG:  # NaN directions too
         return _failed(n, "vp", (time.perf_counter() - start) * 1e3, **info,
-                       reason=f"{len(dirs)} vanishing direction(s) shared by the matched lines "
-                              "of both images" + (f", the widest two {info['separation_deg']:.0f}"
-                                                  " deg apart" if len(dirs) > 1 else "")
-                              + f" (needs two at least {VP_MIN_SEPARATION_DEG:g} deg apart)")
+                       reason=_directions_text(len(dirs), info["separation_deg"])
+                       + f": vp needs two at least {VP_MIN_SEPARATION_DEG:g} deg apart")
     rotations = _rotations(dirs, max_angle_error_deg)
     if not rotations:  # the lines fix no rotation: a start is not refined on them either
         return _failed(n, "vp", (time.perf_counter() - start) * 1e3, **info,
-                       reason=f"{len(dirs)} vanishing direction(s) shared by the matched "
-                              "lines of both images (needs two at an angle both images agree "
-                              "on)")
+                       reason=_directions_text(len(dirs), None)
+                       + ": vp needs two at an angle both images agree on")
     x0, x1, focal = normalised_matches(matches)
     h0, h1 = _homogeneous(x0.numpy()), _homogeneous(x1.numpy())
     thr = threshold_px / focal

@@ -13,7 +13,8 @@ from strl_pyg.data.matches import PairMatches
 
 __all__ = [
     "ZERO_PARALLAX_PX", "ZERO_PARALLAX_FRACTION", "FOCAL_RANGE", "NORMALISED_K_MAX",
-    "input_warnings", "intrinsics_problems", "zero_parallax", "flipped_lines", "check_device"]
+    "BAD_INTRINSICS", "input_warnings", "intrinsics_problems", "zero_parallax", "flipped_lines",
+    "check_device"]
 
 #: pixels (image 1 re-expressed in image 0's camera when both K are known).
 ZERO_PARALLAX_PX = 0.5
@@ -33,6 +34,9 @@ RESIZED_AGREE = 1.25
 #: the origin looks normalised (by the image width or size) rather than in pixels.
 NORMALISED_K_MAX = 10.0
 
+
+#: The reason every pose of a pair whose intrinsics fail the input checks is ``"unreliable"``.
+BAD_INTRINSICS = "computed with intrinsics that fail the input checks"
 
 def intrinsics_problems(size0: Any, size1: Any, K0: Any, K1: Any) -> list[str]:
     """Why the intrinsics do not fit the images (``[]`` when they do, or when there are

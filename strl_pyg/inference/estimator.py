@@ -60,6 +60,7 @@ from strl_pyg.estimation.classical import (
 )
 from strl_pyg.estimation.uncertainty import MAX_SIGMA_DEG, cap_covariance
 from strl_pyg.inference.checks import (
+    BAD_INTRINSICS,
     FOCAL_RANGE,
     NORMALISED_K_MAX,  # noqa: F401  (importable from here like the module's other names)
     ZERO_PARALLAX_FRACTION,
@@ -70,6 +71,12 @@ from strl_pyg.inference.checks import (
     zero_parallax,
 )
 from strl_pyg.inference.config import CheckpointSettings, EstimatorConfig
+from strl_pyg.inference.evidence import (
+    apply_configuration,
+    focal_problem,
+    learned_pose_evidence,
+    pair_geometry,
+)
 from strl_pyg.inference.methods import (  # noqa: I001
     POINT_POOR_MAX_POINTS,  # one regime, defined where vp_checked reads it (re-exported)
     MethodContext,
@@ -245,7 +252,6 @@ def recommended_order(model: Any, num_points: int | None = None) -> tuple[str, .
 
 #: Why every pose is ``"unreliable"`` when :func:`intrinsics_problems` finds any (followed by
 #: them in the method records; the recommended pose lists them once, as input warnings).
-BAD_INTRINSICS = "computed with intrinsics that fail the input checks"
 
 #: Added to the recommended pose's warnings when the order was measured with PoseLib and it is
 #: not installed here.
@@ -418,6 +424,7 @@ class _Pair:
     problems: list[str]  # intrinsics_problems, found once
     ctx: MethodContext
     memo: dict = field(default_factory=dict)
+    geometry: Any = None  # the two-view configuration (strl_pyg.inference.evidence), once
 
     def add_lines(self, lined: PairMatches) -> None:
         """Joins the line matches of ``lined`` (these point matches with lines added, e.g. by
@@ -619,13 +626,22 @@ class PoseEstimator:
         methods too, also when no network method runs; the network itself is built only
         when a method needs it."""
         checked, warnings, rows, degenerate, problems = _checked_pair(matches)
+        geometry, memo = None, {}
+        if degenerate is None and not problems and checked.has_intrinsics:
+            # the configuration and the focal check, from the same checked matches
+            with normalisation_scope(memo):
+                geometry = pair_geometry(checked, self.threshold_px, self.seed)
+            focal = focal_problem(geometry)
+            if focal is not None:
+                problems = [*problems, focal]
+                warnings.append(focal)
         ctx = MethodContext(self.seed, self.threshold_px, self.bootstrap, self.device,
                             self.resample, load_model=lambda: self.model,
                             settings=self.settings, swap_check=self.config.swap_check,
                             data_check=self.config.data_check,
                             support=(self.min_inlier_ratio, self.min_inliers,
                                      self.min_in_front))
-        return _Pair(checked, warnings, rows, degenerate, problems, ctx)
+        return _Pair(checked, warnings, rows, degenerate, problems, ctx, memo, geometry)
 
     def _run_methods(self, pair: _Pair, names: Any,
                      known: dict[str, MethodResult] | None = None) -> None:
@@ -651,7 +667,9 @@ class PoseEstimator:
         pair's fundamental matrix (``fundamental``)."""
         results = {name: pair.ctx.results[name] for name in names}  # the caller's order
         _pair_rules(results, pair.matches, pair.rows, pair.problems)
-        estimate = self._recommend(results, list(pair.warnings), pair.matches)
+        estimate = self._recommend(results, list(pair.warnings), pair.matches, pair.geometry)
+        with normalisation_scope(pair.memo):
+            estimate = apply_configuration(estimate, pair.geometry, pair.matches)
         estimate.point_rows = pair.rows
         if fundamental and not pair.matches.has_intrinsics:
             with normalisation_scope(pair.memo):
@@ -831,7 +849,7 @@ class PoseEstimator:
                              self.min_inliers, self.min_in_front)  # checked: the registry's
 
     def _recommend(self, results: dict[str, MethodResult], warnings: list[str],
-                   matches: PairMatches) -> PoseEstimate:
+                   matches: PairMatches, geometry: Any = None) -> PoseEstimate:
         """The first ``"ok"`` method of the recommended order; without one, the first
         ``"unreliable"`` one (no pose to use either, but the reason and the computed pose);
         else ``"degenerate"`` or ``"failed"``.
@@ -853,6 +871,10 @@ class PoseEstimator:
             if r.status in ("ok", "unreliable") and m == "regression" and unsupported:
                 notes.append("regression not used: the matches support no solver's pose")
                 continue
+            if r.status == "ok" and not METHODS[m].support_checked:
+                # a learned pose is recommended only with the matches' support
+                r = learned_pose_evidence(r, matches, self.threshold_px, (
+                    self.min_inlier_ratio, self.min_inliers, self.min_in_front), geometry)
             if r.status == "ok":
                 pose = replace(r, warnings=_unique(warnings + notes + r.warnings))
                 return PoseEstimate(pose, results, matches.num_points, matches.num_lines,

@@ -488,7 +488,7 @@ def _guided(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     info = {"base": base, "candidate": res.info["candidate"], "refined": res.info["refined"]}
     rec = _with_covariance("guided", res.pose, matches,
                            ctx.threshold_px, time_ms=ms, info=info, raw=res)
-    boot, n_boot = None, ctx.bootstrap
+    boot, n_boot, source = None, ctx.bootstrap, ""
     if rec.covariance is not None and n_boot:
         # the same bootstrap as the classical records, of the solve guided kept: on all the
         # matches (then it is the base method's own, computed once) or on the network's top
@@ -498,13 +498,13 @@ def _guided(matches: PairMatches, ctx: MethodContext) -> MethodResult:
         key = f"bootstrap_{base}"
         if (subset is None and res.info["candidate"] == "all" and not res.info["refined"]
                 and key in ctx.cache):
-            boot = ctx.cache[key]
+            boot, source = ctx.cache[key], f"{base} "
         else:
             sub = matches if subset is None else matches.select(point_index=subset)
             boot = bootstrap_resamples(sub, res.pose, base, n_boot,
                                        ctx.threshold_px, ctx.seed)
         rec.time_ms += (time.perf_counter() - start) * 1e3
-    return _add_bootstrap(rec, boot, n_boot, "first-order")
+    return _add_bootstrap(rec, boot, n_boot, "first-order", source)
 
 
 def _add_bootstrap(rec: MethodResult, boot: np.ndarray | None, n_boot: int, kind: str,
@@ -518,9 +518,10 @@ def _add_bootstrap(rec: MethodResult, boot: np.ndarray | None, n_boot: int, kind
         rec.covariance = rec.covariance + boot.covariance
         rec.info["covariance"] = f"{kind} + {source}bootstrap ({n_boot})"
         rec.info["bootstrap_far"] = boot.far
-        if boot.far:
+        if boot.far:  # named by the solve it resampled: said once per pose, however many
+            who = source.strip() or rec.method  # methods reuse that bootstrap
             rec.warnings.append(
-                f"{rec.method}: {boot.far} of {boot.resamples} bootstrap resamples found "
+                f"{who} bootstrap: {boot.far} of {boot.resamples} resamples found "
                 f"another pose (over {FAR_ROTATION_DEG:g} deg in rotation or "
                 f"{FAR_TRANSLATION_DEG:g} deg in translation away): the matches do not "
                 "single out this solution; its sigma includes the others")

@@ -3,7 +3,10 @@
 and a pair's estimate (:class:`PoseEstimate`: the recommended pose and every method's), both
 JSON-ready through ``to_dict``. All poses are ``T_0to1`` (``X1 = R X0 + t``).
 
-Statuses (:data:`STATUSES`): ``"ok"`` (a pose), ``"unreliable"`` (a pose was computed but must
+Statuses (:data:`STATUSES`): ``"ok"`` (a pose), ``"rotation_only"`` (the matches have no
+parallax: a pure rotation, or a translation too small to see; the rotation is in
+:attr:`MethodResult.rotation` with its ``sigma["rotation_deg"]``, there is no translation
+direction, and ``T_0to1`` is ``None``), ``"unreliable"`` (a pose was computed but must
 not be used: the intrinsics fail the input checks, or many of the matches that fit its epipolar
 geometry lie behind a camera; the reasons are in ``warnings`` and ``info["unreliable"]``, the
 computed pose, for inspection only, in ``info["unreliable_T_0to1"]``), ``"degenerate"`` (the
@@ -41,7 +44,7 @@ from strl_pyg.geometry.pose import Pose
 
 __all__ = ["STATUSES", "MethodResult", "PoseEstimate"]
 
-STATUSES = ("ok", "unreliable", "degenerate", "failed", "skipped")
+STATUSES = ("ok", "rotation_only", "unreliable", "degenerate", "failed", "skipped")
 
 
 @dataclass
@@ -75,10 +78,23 @@ class MethodResult:
     info: dict[str, Any] = field(default_factory=dict)
     raw: Any = field(default=None, repr=False)
     inliers: np.ndarray | None = field(default=None, repr=False)
+    rotation: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
             raise ValueError(f"Expected status in {STATUSES} (got {self.status!r})")
+        if self.status == "rotation_only":
+            R = None if self.rotation is None else np.asarray(self.rotation, dtype=np.float64)
+            if R is None or R.shape != (3, 3) or not np.isfinite(R).all():
+                raise ValueError("Expected a finite rotation [3, 3] with status "
+                                 f"'rotation_only' (got {None if R is None else R.shape})")
+            cov = self.covariance
+            if cov is not None and np.asarray(cov).shape != (3, 3):
+                raise ValueError(f"Expected a [3, 3] rotation covariance with status "
+                                 f"'rotation_only' (got {np.asarray(cov).shape})")
+            self.rotation, self.T_0to1 = R, None
+            self._pose = self._pose_of = None
+            return
         pose = self.T_0to1 if isinstance(self.T_0to1, Pose) else None
         if pose is not None:  # a method's own Pose: kept for as_pose(), the matrix from it
             if pose.R.shape != (3, 3):
@@ -97,8 +113,9 @@ class MethodResult:
             self.T_0to1 = T
             if pose is not None:
                 self._pose, self._pose_of = pose, T.copy()
+            self.rotation = T[:3, :3].copy()
         else:
-            self.T_0to1 = self.covariance = None
+            self.T_0to1 = self.covariance = self.rotation = None
 
     def as_pose(self) -> Pose | None:
         """``T_0to1`` as a float64 :class:`~strl_pyg.geometry.Pose` (``None`` unless
@@ -117,11 +134,13 @@ class MethodResult:
         further reasons; any other is returned unchanged): no ``T_0to1`` nor covariance, the
         pose moved to ``info["unreliable_T_0to1"]``, ``reasons`` added to ``warnings`` and to
         ``info["unreliable"]``."""
-        if self.status not in ("ok", "unreliable") or not reasons:
+        if self.status not in ("ok", "rotation_only", "unreliable") or not reasons:
             return self
         info = {**self.info, "unreliable": list(self.info.get("unreliable", [])) + reasons}
         if self.status == "ok":
             info["unreliable_T_0to1"] = self.T_0to1
+        if self.status == "rotation_only":
+            info["unreliable_rotation"] = self.rotation
         return MethodResult(self.method, "unreliable", None, None, self.warnings + reasons,
                             self.time_ms, self.num_inliers, info, self.raw, self.inliers)
 
@@ -132,11 +151,12 @@ class MethodResult:
             return None
         d = np.clip(np.diag(self.covariance), 0.0, None)
         return {"rotation_deg": math.degrees(math.sqrt(d[:3].sum())),
-                "translation_deg": math.degrees(math.sqrt(d[3:].sum()))}
+                "translation_deg": math.degrees(math.sqrt(d[3:].sum())) if len(d) > 3
+                else None}  # a rotation alone has no translation direction
 
     def to_dict(self) -> dict[str, Any]:
         return _jsonable({"method": self.method, "status": self.status, "T_0to1": self.T_0to1,
-                          "sigma": self.sigma, "covariance": self.covariance,
+                          "rotation": self.rotation, "sigma": self.sigma, "covariance": self.covariance,
                           "warnings": list(self.warnings), "time_ms": self.time_ms,
                           "num_inliers": self.num_inliers, "info": self.info,
                           "inliers": self.inliers})
@@ -157,6 +177,15 @@ class PoseEstimate:
     matches: PairMatches | None = field(default=None, repr=False)
     #: For every input point row, its row in :attr:`matches` (``None`` when unknown).
     point_rows: np.ndarray | None = field(default=None, repr=False)
+    #: The pair's two-view configuration and focal check
+    #: (:class:`~strl_pyg.estimation.two_view.TwoViewGeometry`; ``None`` without intrinsics).
+    geometry: Any = field(default=None, repr=False)
+
+    @property
+    def configuration(self) -> str | None:
+        """``"general"``, ``"planar"``, ``"rotation"`` or ``"degenerate"`` (``None``: not
+        decided, e.g. without intrinsics)."""
+        return None if self.geometry is None else self.geometry.configuration
 
     def inliers_of_matches(self, record: MethodResult | None = None) -> np.ndarray | None:
         """The inlier mask of ``record`` (default: the recommended pose), whose
@@ -186,12 +215,14 @@ class PoseEstimate:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: ``{"pose": {...}, "methods": {name: {...}}, "num_points",
-        "num_lines"}``; each record has ``method``, ``status``, ``T_0to1`` (nested lists or
+        "num_lines", "two_view"}`` (the configuration, :attr:`geometry`); each record has ``method``, ``status``, ``T_0to1`` (nested lists or
         ``None``), ``sigma``, ``covariance``, ``warnings``, ``time_ms``, ``num_inliers``,
         ``info``; non-finite numbers become ``None``."""
         return {"pose": self.pose.to_dict(),
                 "methods": {k: v.to_dict() for k, v in self.methods.items()},
-                "num_points": self.num_points, "num_lines": self.num_lines}
+                "num_points": self.num_points, "num_lines": self.num_lines,
+                "two_view": None if self.geometry is None else _jsonable(
+                    self.geometry.to_dict())}
 
 
 def _jsonable(v: Any) -> Any:

@@ -189,6 +189,33 @@ def _mismatch(model: Any, state: dict[str, Any], saved_config: dict[str, Any] | 
     return "; ".join(parts)
 
 
+SHIPPED_PREFIX = "shipped:"
+
+
+def resolve_weights(spec: str | os.PathLike) -> Path:
+    """The file of ``--init-from``: a path, or ``shipped:NAME`` for a checkpoint shipped with
+    the package (``shipped:synthetic``, ``shipped:geometric``)."""
+    text = str(spec)
+    if not text.startswith(SHIPPED_PREFIX):
+        return Path(text)
+    from strl_pyg.model.strl_pose import StrLPose
+
+    name = text[len(SHIPPED_PREFIX):]
+    with StrLPose._shipped_path(name) as path:
+        return Path(path)
+
+
+def saved_model_config(spec: str | os.PathLike) -> dict[str, Any] | None:
+    """The model config stored with the weights of ``spec`` (:func:`resolve_weights`):
+    ``model.pt``'s ``config`` or ``last.pt``'s ``model_config``; ``None`` if it has none."""
+    path = resolve_weights(spec)
+    payload = safe_torch_load(path, "weights file (model.pt or last.pt)")
+    if not isinstance(payload, dict):
+        return None
+    config = payload.get("config") if "format" in payload else payload.get("model_config")
+    return dict(config) if isinstance(config, dict) else None
+
+
 def init_weights(model: Any, path: str | os.PathLike) -> None:
     """Loads the weights of a model checkpoint (``model.pt``) or training checkpoint
     (``last.pt``) into ``model``; the architectures must match (else a ``ValueError`` naming
@@ -196,7 +223,7 @@ def init_weights(model: Any, path: str | os.PathLike) -> None:
     Both load with ``weights_only=True`` (a file that would run code is refused)."""
     from strl_pyg.model.strl_pose import StrLPose
 
-    path = Path(path)
+    path = resolve_weights(path)
     payload = safe_torch_load(path, "weights file (model.pt or last.pt)")
     if isinstance(payload, dict) and "format" in payload:
         state = StrLPose.load(path).state_dict()

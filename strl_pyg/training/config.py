@@ -26,23 +26,28 @@ __all__ = [
     "add_train_arguments",
 ]
 
-DATASETS = ("synthetic", "kitti", "demon")
+DATASETS = ("synthetic", "kitti", "demon", "posed")
 
 #: Image channels of each dataset's graphs: generated scenes are rendered grey, KITTI's
-#: ``image_0`` camera is grey, DeMoN is RGB. The default model's ``patch_features`` and
+#: ``image_0`` camera is grey, DeMoN is RGB, posed photographs are read grey (the shipped
+#: weights' channels; ``--set patch_features=3 --set image_channels=3`` for colour). The default model's ``patch_features`` and
 #: ``image_channels`` follow them, so the default model accepts the default data.
-DATA_CHANNELS = {"synthetic": 1, "kitti": 1, "demon": 3}
+DATA_CHANNELS = {"synthetic": 1, "kitti": 1, "demon": 3, "posed": 1}
 
 #: The keys of :data:`strl_pyg.model.ABLATIONS` (a test keeps them equal), for ``--model``.
 ABLATION_NAMES = ("baseline", "L", "LP", "R", "V", "LP+R", "LP+V", "V+W", "full")
 
+
+#: Validation metrics that can keep ``best_model.pt`` (``TrainConfig.best_metric``; lower is
+#: better).
+BEST_METRICS = ("pose_err_med", "rot_err_med", "trans_err_med", "loss")
 
 #: Learning-rate schedules (``TrainConfig.lr_schedule``, ``--lr-schedule``).
 LR_SCHEDULES = ("constant", "cosine")
 
 
 #: Float settings where ``inf`` means "never" / "off" (the clip, the checkpoint interval).
-_INF_FIELDS = ("grad_clip", "checkpoint_minutes")
+_INF_FIELDS = ("grad_clip", "checkpoint_minutes", "budget_minutes")
 #: The paper's optimiser settings (Adam at a constant 1e-4, no warm-up); with
 #: ``loss="paper"`` and ``model_overrides={"inputs": "paper"}`` the paper's whole recipe.
 PAPER_RECIPE = {"lr": 1e-4, "lr_schedule": "constant", "warmup_steps": 0}
@@ -56,8 +61,10 @@ STORED_BEFORE = {**PAPER_RECIPE, "beta": 0.5, "grad_clip_relative": 0.0}
 class TrainConfig:
     """Everything that decides a training run (stored in each checkpoint)."""
 
-    dataset: str = "synthetic"  # synthetic | kitti | demon
-    data_root: str | None = None  # dataset root (kitti: the odometry root; demon: DeepSfM root)
+    dataset: str = "synthetic"  # synthetic | kitti | demon | posed
+    # dataset root (kitti: the odometry root; demon: DeepSfM root; posed: a folder of scene
+    # folders, each in a format of strl_pyg.datasets.posed.read_posed_folder)
+    data_root: str | None = None
     cache_dir: str = "outputs/match_cache"  # front-end match cache of real datasets
     scene: dict[str, Any] = field(default_factory=dict)  # SceneConfig fields (synthetic)
     scene_kinds: list[str] = field(default_factory=lambda: list(LINE_SCENE_KINDS))
@@ -71,6 +78,21 @@ class TrainConfig:
     kitti_k: int = 1  # kitti: frame gap of a pair
     train_sequences: list[str] | None = None  # kitti: override the standard split (00-08)
     val_sequences: list[str] | None = None  # kitti: override the standard split (09-10)
+    # posed: the training and validation scenes (folder names under data_root); None: the
+    # fixed split of real_scenes (strl_pyg.datasets.REAL_SCENES_SPLIT)
+    train_scenes: list[str] | None = None
+    val_scenes: list[str] | None = None
+    posed_gaps: list[int] = field(default_factory=lambda: [1, 2, 3])  # posed: training pairs
+    posed_max_rotation: float = 60.0  # posed: largest relative rotation of a pair (degrees)
+    # posed: validation pairs (i, i + val_gap) for every val_stride-th i
+    val_gap: int = 2
+    val_stride: int = 4
+    # posed: share of generated pairs in the training set (--scene / --scene-kinds /
+    # --scene-mix, generator's matches); 0: posed photographs only
+    synthetic_share: float = 0.0
+    # posed: distinct generated pairs (None: as many as the share needs); fewer are cycled to
+    # reach the share (each is generated once, on first use: the slow part on a CPU)
+    synthetic_pairs: int | None = None
     limit: int | None = None  # real datasets: keep only the first pairs (smoke runs)
     model: str = "full"  # ablation row of the paper (StrLPoseConfig.ablation)
     model_overrides: dict[str, Any] = field(default_factory=dict)  # other StrLPoseConfig fields
@@ -93,7 +115,9 @@ class TrainConfig:
     # both cameras of a training pair rolled about their optical axes by U(-roll, roll) degrees
     # (strl_pyg.data.RandomRoll; 0: off, the paper): generated scenes are always upright
     roll_augment: float = 0.0
-    init_from: str | None = None  # start from these weights (model.pt or last.pt); fine-tuning
+    # start from these weights (model.pt, last.pt or shipped:NAME), fine-tuning: the model is
+    # then theirs (architecture, inputs; `model` is not read), with model_overrides on top
+    init_from: str | None = None
     grad_clip: float | None = 10.0  # max gradient norm (None: off); see grad_clip_relative
     # > 0: the clip is this many times the median gradient norm of the last clip.WINDOW steps,
     # once clip.MIN_HISTORY are seen (grad_clip before; strl_pyg.training.clip); 0: grad_clip
@@ -118,6 +142,12 @@ class TrainConfig:
     # (0: off), besides every validation and on SIGINT / SIGTERM
     checkpoint_every: int = 0
     checkpoint_minutes: float = 10.0
+    # wall-clock budget: the run validates, checkpoints and stops after this many minutes of
+    # training (inf: none); resume with a larger budget or --steps to go on
+    budget_minutes: float = math.inf
+    # the validation metric whose best value keeps best_model.pt (lower is better):
+    # "pose_err_med" (median of max(rotation, translation) error), "rot_err_med", "loss"
+    best_metric: str = "pose_err_med"
     in_memory: bool = True  # keep generated / loaded graphs in memory after first access
     # Geometric head (model_overrides={"geometric": True}): strl_pyg.training.loss.GeometricLoss
     geo_threshold_px: float = 2.0  # inlier label threshold on the true Sampson distance
@@ -200,8 +230,35 @@ class TrainConfig:
         if self.warmup_steps is not None and not 0 <= self.warmup_steps < self.steps:
             raise ValueError(f"Expected warmup_steps an integer in [0, steps={self.steps}) "
                              f"or None (got {self.warmup_steps!r})")
+        self._check_posed_and_budget()
         if self.dataset != "synthetic" and not self.data_root:
             raise ValueError(f"Expected --data-root for dataset '{self.dataset}' (got none)")
+
+    def _check_posed_and_budget(self) -> None:
+        """The posed-photograph settings, the budget and the best-checkpoint metric."""
+        if not 0.0 <= self.synthetic_share < 1.0:
+            raise ValueError(f"Expected synthetic_share in [0, 1) (got {self.synthetic_share!r})")
+        if self.synthetic_share > 0 and self.dataset != "posed":
+            raise ValueError(f"Expected synthetic_share 0 unless dataset is 'posed' (got "
+                             f"{self.synthetic_share!r} with dataset {self.dataset!r})")
+        if self.synthetic_pairs is not None and (not isinstance(self.synthetic_pairs, int)
+                                                 or self.synthetic_pairs < 1):
+            raise ValueError(f"Expected a positive integer synthetic_pairs or None "
+                             f"(got {self.synthetic_pairs!r})")
+        if not self.budget_minutes > 0:
+            raise ValueError(f"Expected budget_minutes > 0 (got {self.budget_minutes!r})")
+        if self.best_metric not in BEST_METRICS:
+            raise ValueError(f"Expected best_metric in {BEST_METRICS} (got {self.best_metric!r})")
+        if not self.posed_gaps or any(not isinstance(g, int) or isinstance(g, bool) or g < 1
+                                      for g in self.posed_gaps):
+            raise ValueError(f"Expected posed_gaps as positive integers (got {self.posed_gaps!r})")
+        for name in ("val_gap", "val_stride"):
+            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
+                raise ValueError(f"Expected a positive integer '{name}' "
+                                 f"(got {getattr(self, name)!r})")
+        if not 0 < self.posed_max_rotation <= 180:
+            raise ValueError(f"Expected posed_max_rotation in (0, 180] degrees "
+                             f"(got {self.posed_max_rotation!r})")
 
     def learning_rate(self, step: int) -> float:
         """The learning rate of optimiser step ``step`` (0-based): a linear warm-up over
@@ -246,6 +303,14 @@ class TrainConfig:
             raise ValueError(f"Expected --set keys among the StrLPoseConfig fields "
                              f"{', '.join(known)} (got {', '.join(unknown)})"
                              f"{'; ' + hint if hint else ''}")
+        if self.init_from:
+            # fine-tuning continues the architecture and inputs of the weights it starts from
+            # (the ablation row is theirs); --set changes fields on top of them
+            from strl_pyg.training.checkpoints import saved_model_config
+
+            saved = saved_model_config(self.init_from)
+            if saved is not None:
+                return StrLPoseConfig.from_dict({**saved, **overrides})
         if self.dataset == "kitti":
             overrides.setdefault("translation", "metric")
         channels = DATA_CHANNELS[self.dataset]
@@ -288,12 +353,44 @@ def _add_loss_and_clip_arguments(ap: argparse.ArgumentParser, d: TrainConfig) ->
                     f"steps (--grad-clip for the first {MIN_HISTORY}; 0: off)")
 
 
+def _add_posed_arguments(ap: argparse.ArgumentParser, d: TrainConfig) -> None:
+    """The flags of posed-photograph runs, the generated share, the budget and the best
+    checkpoint."""
+    ap.add_argument("--train-scenes", default=None,
+                    help="posed: training scene folders, comma-separated (default: the "
+                         "real_scenes split)")
+    ap.add_argument("--val-scenes", default=None,
+                    help="posed: validation scene folders, comma-separated")
+    ap.add_argument("--posed-gaps", default=",".join(map(str, d.posed_gaps)),
+                    help="posed: capture-order gaps k of the training pairs (i, i + k)")
+    ap.add_argument("--posed-max-rotation", type=float, default=d.posed_max_rotation,
+                    metavar="DEG", help="posed: largest relative rotation of a pair")
+    ap.add_argument("--val-gap", type=int, default=d.val_gap,
+                    help="posed: validation pairs (i, i + val_gap)")
+    ap.add_argument("--val-stride", type=int, default=d.val_stride,
+                    help="posed: validation pairs for every this many i")
+    ap.add_argument("--synthetic-share", type=float, default=d.synthetic_share,
+                    help="posed: share of generated pairs mixed into the training set (e.g. "
+                         "0.5 for 1:1; 0: photographs only)")
+    ap.add_argument("--synthetic-pairs", type=int, default=None,
+                    help="posed: distinct generated pairs, cycled to reach --synthetic-share "
+                         "(default: as many as the share needs)")
+    ap.add_argument("--budget-minutes", type=float, default=d.budget_minutes,
+                    help="stop (validated and checkpointed) after this many minutes of "
+                         "training; --resume goes on")
+    ap.add_argument("--best-metric", choices=BEST_METRICS, default=d.best_metric,
+                    help="validation metric that keeps best_model.pt (lower is better)")
+
+
 def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Adds the training flags (one per :class:`TrainConfig` field that users set) to ``ap``."""
     d = TrainConfig()
     ap.add_argument("--dataset", choices=DATASETS, default=d.dataset)
-    ap.add_argument("--data-root", default=None, help="dataset root (kitti, demon)")
+    ap.add_argument("--data-root", default=None,
+                    help="dataset root (kitti, demon; posed: a folder of scene folders, e.g. "
+                         "real_scenes)")
     ap.add_argument("--cache-dir", default=d.cache_dir, help="front-end match cache")
+    _add_posed_arguments(ap, d)
     ap.add_argument("--model", choices=ABLATION_NAMES, default=d.model,
                     help="ablation row of the paper (default: full)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -338,7 +435,9 @@ def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
                     help="roll both cameras of a training pair by up to this many degrees "
                          "(0: off; 180: any orientation)")
     ap.add_argument("--init-from", default=None,
-                    help="start from these weights (model.pt or last.pt), e.g. to fine-tune")
+                    help="start from these weights (model.pt, last.pt, or shipped:synthetic / "
+                         "shipped:geometric), e.g. to fine-tune; the model is theirs (--set "
+                         "changes fields on top)")
     ap.add_argument("--seed", type=int, default=d.seed,
                     help="model initialisation (and the data, unless --data-seed is given)")
     ap.add_argument("--data-seed", type=int, default=None,

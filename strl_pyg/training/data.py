@@ -133,6 +133,8 @@ def build_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
 
     if cfg.dataset == "synthetic" and cfg.scene_mix is not None:
         return _mixed_datasets(cfg, progress)
+    if cfg.dataset == "posed":
+        return _posed_datasets(cfg, progress)
     if cfg.dataset == "synthetic":
         from strl_pyg.synthetic import SceneConfig
 
@@ -177,6 +179,107 @@ def build_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
         ds.build_cache(num_workers=max(1, cfg.num_workers), progress=progress)
     check_sources(cfg, train, val, matched=True)
     return train, val
+
+
+def posed_scenes(cfg: TrainConfig) -> tuple[list[str], list[str]]:
+    """The training and validation scene names of a ``posed`` run: the config's, or the fixed
+    real_scenes split where ``data_root`` holds its scenes. A scene in both lists, an absent
+    scene and an empty list are errors naming the flag."""
+    from strl_pyg.datasets.posed import REAL_SCENES_SPLIT
+
+    root = Path(cfg.data_root)
+    on_disk = sorted(p.name for p in root.iterdir() if p.is_dir()) if root.is_dir() else []
+    train, val = cfg.train_scenes, cfg.val_scenes
+    if train is None and val is None and set(REAL_SCENES_SPLIT["train"]) <= set(on_disk):
+        train, val = list(REAL_SCENES_SPLIT["train"]), list(REAL_SCENES_SPLIT["val"])
+    for flag, names in (("--train-scenes", train), ("--val-scenes", val)):
+        if not names:
+            raise ValueError(f"Expected {flag} with scene folders under '{root}' (got none; "
+                             f"on disk: {', '.join(on_disk[:12]) or 'nothing'})")
+        missing = [n for n in names if n not in on_disk]
+        if missing:
+            raise ValueError(f"Expected {flag} scenes under '{root}' (got {', '.join(missing)}, "
+                             f"not there; on disk: {', '.join(on_disk[:12]) or 'nothing'})")
+    both = sorted(set(train) & set(val))
+    if both:
+        raise ValueError(f"Expected training and validation scenes apart (got {', '.join(both)} "
+                         "in both): validation would measure training photographs")
+    return list(train), list(val)
+
+
+def drop_match_scores(data: HeteroData) -> HeteroData:
+    """The graph without the front end's match scores (``score`` of points and endpoints),
+    which generated pairs do not have (the model does not read them)."""
+    for store in (data[keys_.POINT], data[keys_.ENDPOINT]):
+        if keys_.SCORE in store:
+            del store[keys_.SCORE]
+    return data
+
+
+def _posed_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
+    """Posed photographs (training scenes, pairs by overlap; validation scenes, pairs
+    ``(i, i + val_gap)``), with generated pairs mixed into training at ``synthetic_share``."""
+    from strl_pyg import datasets as D
+    from strl_pyg.datasets.posed import PosedImagePairs, PosedPairOptions
+
+    model_cfg = cfg.model_config()
+    keep = model_cfg.visual == "cnn"
+    grey = model_input_channels(model_cfg, cfg.patch_size) == 1
+    train_names, val_names = posed_scenes(cfg)
+    root = Path(cfg.data_root)
+    common = dict(cache_dir=cfg.cache_dir, patch_size=cfg.patch_size, keep_images=keep,
+                  grayscale=grey)
+    # generated graphs carry no front-end scores: a mixed batch collates the keys both have
+    mixed = dict(transform=drop_match_scores) if cfg.synthetic_share > 0 else {}
+    train = PosedImagePairs([root / n for n in train_names], limit=cfg.limit, **mixed, pairs=
+                            PosedPairOptions(gaps=tuple(cfg.posed_gaps),
+                                             max_rotation_deg=cfg.posed_max_rotation), **common)
+    val = PosedImagePairs([root / n for n in val_names], pairs=PosedPairOptions(
+        gaps=(cfg.val_gap,), stride=cfg.val_stride, max_rotation_deg=180.0,
+        max_axis_angle_deg=180.0, min_covisible=0.0), **common)
+    for ds in (train, val):
+        ds.build_cache(num_workers=max(1, cfg.num_workers), progress=progress)
+    for role, ds in (("training", train), ("validation", val)):
+        if len(ds) == 0:
+            raise ValueError(f"Expected {role} pairs the front end can match (got none of "
+                             f"{ds.num_pairs}; markers in '{ds.cache.dir}')")
+    if cfg.synthetic_share == 0:
+        return train, val
+    from strl_pyg.synthetic import SceneConfig
+
+    n_share = round(len(train) * cfg.synthetic_share / (1.0 - cfg.synthetic_share))
+    n_gen = n_share if cfg.synthetic_pairs is None else min(cfg.synthetic_pairs, n_share)
+    if cfg.scene_mix is not None:
+        from strl_pyg.synthetic.distributions import scene_distribution
+
+        scenes = [scene_distribution(cfg.scene_mix)]
+    else:
+        scenes = [SceneConfig(**{**cfg.scene, "kind": k})
+                  for k in (cfg.scene_kinds or [SceneConfig().kind])]
+    base = cfg.resolved_data_seed * 10_000_000
+    sizes = [n_gen // len(scenes) + (j < n_gen % len(scenes)) for j in range(len(scenes))]
+    gen = [D.SyntheticPairs(n, seed=base + j * 100_000, scene_config=sc,
+                            patch_size=cfg.patch_size, keep_images=keep)
+           for j, (sc, n) in enumerate(zip(scenes, sizes, strict=True)) if n > 0]
+    gen = ConcatDataset(gen)
+    if len(gen) < n_share:
+        gen = _Cycled(_InMemory(gen, cfg.in_memory), n_share)
+    return ConcatDataset([train, gen]), val
+
+
+class _Cycled(Dataset):
+    """``length`` items cycling through ``base`` (item ``i`` is ``base[i % len(base)]``)."""
+
+    def __init__(self, base: Any, length: int) -> None:
+        self.base, self.length = base, length
+
+    def __len__(self) -> int:
+        return self.length
+
+    def __getitem__(self, i: int) -> HeteroData:
+        if not 0 <= i < self.length:
+            raise IndexError(f"Expected an index in [0, {self.length}) (got {i})")
+        return self.base[i % len(self.base)]
 
 
 def model_input_channels(model_cfg: Any, patch_size: int) -> int | None:

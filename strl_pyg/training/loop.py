@@ -97,7 +97,7 @@ _Logger = TrainLogger
 #: TrainConfig fields that may differ between a checkpoint and the run that resumes it: they
 #: do not change what is computed.
 RESUME_FREE_FIELDS = ("steps", "out_dir", "num_workers", "device", "tensorboard", "val_every",
-                      "checkpoint_every", "checkpoint_minutes")
+                      "checkpoint_every", "checkpoint_minutes", "budget_minutes")
 
 #: Consecutive optimiser steps with a non-finite loss or gradient (each one skipped) after
 #: which training stops with :class:`TrainingDiverged`: it is not one bad batch then.
@@ -234,6 +234,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
     last_save = time.monotonic()
     bar = tqdm(total=cfg.steps, initial=start_step, desc="train", disable=not progress or rank)
     skipped_in_a_row = dumps = 0
+    best = best_value(history, cfg.best_metric)
     for batch in loader:
         ddp_model.train()
         batch = batch.to(device)
@@ -249,7 +250,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         bar.update(1)
         bar.set_postfix({k: f"{float(logs[v].detach()):.3g}" for k, v in _SHOWN.items()})
         logger.log(step, "train", {k: float(v.detach()) for k, v in logs.items()})
-        if step % cfg.val_every == 0 or step == cfg.steps:
+        over_budget = time.perf_counter() - t_start > 60.0 * cfg.budget_minutes
+        if step % cfg.val_every == 0 or step == cfg.steps or over_budget:
             metrics = {}
             if rank == 0:
                 metrics = {**evaluate_model(model, val_loader, loss_fn, mean_pose(
@@ -260,17 +262,39 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
                 save_last(metrics_done=True)
                 last_save = time.monotonic()
                 _write_validation(bar, step, metrics)
+                best = _keep_best(model, out_dir, metrics, cfg.best_metric, best, bar, step)
             if world > 1:
                 torch.distributed.barrier()
             result.update(metrics)
         elif rank == 0 and _checkpoint_due(cfg, step, last_save, stop):
             save_last(metrics_done=False)
             last_save = time.monotonic()
-        if stop is not None and stop.received:
-            result["interrupted"] = stop.received
+        if (stop is not None and stop.received) or over_budget:
+            result.update({"interrupted": stop.received} if stop is not None and stop.received
+                          else {"budget_reached": True})
             break
     _close(bar, stop, logger, own_group)
     return {**result, "step": step, "history": history, "model": model}
+
+
+def _keep_best(model: StrLPose, out_dir: Path, metrics: dict[str, float], metric: str,
+               best: float, bar: Any, step: int) -> float:
+    """Writes ``best_model.pt`` when this validation's ``metric`` beats ``best``; returns the
+    best value so far."""
+    value = metrics.get(metric, math.nan)
+    if not (math.isfinite(value) and value < best):
+        return best
+    model.save(out_dir / "best_model.pt")
+    bar.write(f"step {step}: best {metric} so far ({value:.3g}): '{out_dir / 'best_model.pt'}'")
+    return value
+
+
+def best_value(history: Sequence[dict[str, Any]], metric: str) -> float:
+    """The lowest finite ``metric`` among the validations of ``history`` (``inf``: none), the
+    value a new validation must beat to replace ``best_model.pt``."""
+    values = [float(h[metric]) for h in history
+              if metric in h and math.isfinite(float(h[metric]))]
+    return min(values, default=math.inf)
 
 
 def _close(bar: Any, stop: Any, logger: Any, own_group: bool) -> None:
@@ -661,6 +685,12 @@ def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> T
         grad_clip_relative=args.grad_clip_relative,
         angle_weight=args.angle_weight, rot_weight=args.rot_weight, beta=args.beta,
         lr_schedule=args.lr_schedule, warmup_steps=args.warmup_steps,
+        train_scenes=split(args.train_scenes), val_scenes=split(args.val_scenes),
+        posed_gaps=[int(g) for g in split(args.posed_gaps)],
+        posed_max_rotation=args.posed_max_rotation, val_gap=args.val_gap,
+        val_stride=args.val_stride, synthetic_share=args.synthetic_share,
+        synthetic_pairs=args.synthetic_pairs,
+        budget_minutes=args.budget_minutes, best_metric=args.best_metric,
     )
 
 
@@ -745,14 +775,21 @@ def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser,
         print(f"stopped by {result['interrupted']} at step {result['step']} of {cfg.steps}: "
               f"kept '{last}' (model, optimiser, RNG, step); continue with the same command "
               f"and --resume", file=sys.stderr)
+    if result.get("budget_reached"):
+        print(f"stopped at step {result['step']} of {cfg.steps}: the budget of "
+              f"{cfg.budget_minutes:g} minutes is spent; kept '{last}' (continue with the same "
+              f"command and --resume)", file=sys.stderr)
     if result.get("history"):
         png = plot_history(result["history"], Path(cfg.out_dir) / "curves.png",
                            log=Path(cfg.out_dir) / "log.csv")
         print(f"curves: {png}")
     keys = ("rot_err_deg", "trans_err_deg", "auc10", "trivial_rot_err_deg",
             "trivial_trans_err_deg", "pairs_per_s")
-    print(json.dumps({"step": result["step"], **{k: result[k] for k in keys if k in result}}))
-    return 130 if result.get("interrupted") else 0
+    summary = json.dumps({"step": result["step"], **{k: result[k] for k in keys if k in result}})
+    if result.get("interrupted"):  # stdout carries the summary of a finished run only
+        return 130
+    print(summary)
+    return 0
 
 
 def check_device(device: str) -> None:

@@ -57,12 +57,21 @@ def _summary(rot: Tensor, trans: Tensor, prefix: str) -> dict[str, float]:
     }
 
 
+def pose_error_median(rot: Tensor, trans: Tensor) -> float:
+    """The median over pairs of the larger of the rotation and translation errors (a missing
+    translation direction counts as 180 deg): what ``best_model.pt`` is kept by."""
+    pose = torch.maximum(rot.double(), torch.nan_to_num(trans.double(), nan=180.0))
+    pose = pose[torch.isfinite(pose)]
+    return float(np.median(pose.numpy())) if pose.numel() else float("nan")
+
+
 @torch.no_grad()
 def evaluate_model(model: torch.nn.Module, loader, loss_fn: PoseLoss | None = None,
                    trivial: tuple[Tensor, Tensor] | None = None, device: str = "cpu",
                    progress: bool = False) -> dict[str, float]:
-    """Mean / median rotation and translation-direction errors (degrees) and pose AUC at
-    5/10/20 degrees of ``model`` over ``loader``; with ``trivial`` (a mean pose), the same
+    """Mean / median rotation and translation-direction errors (degrees), the median of the
+    larger of the two (``pose_err_med``) and pose AUC at 5/10/20 degrees of ``model`` over
+    ``loader``; with ``trivial`` (a mean pose), the same
     metrics of that constant predictor, prefixed ``trivial_``."""
     model.eval()
     rots, transs, t_rots, t_transs, losses = [], [], [], [], []
@@ -91,6 +100,7 @@ def evaluate_model(model: torch.nn.Module, loader, loss_fn: PoseLoss | None = No
     if not rots:
         raise ValueError("Expected at least one validation batch (got an empty loader)")
     res = _summary(torch.cat(rots), torch.cat(transs), "")
+    res["pose_err_med"] = pose_error_median(torch.cat(rots), torch.cat(transs))
     if losses:
         res["loss"] = float(np.mean(losses))
     if trivial is not None:

@@ -168,13 +168,19 @@ def safe_torch_load(path: str | os.PathLike, what: str = "checkpoint",
     try:
         return torch.load(path, map_location=map_location, weights_only=True)
     except pickle.UnpicklingError as err:
-        found = re.search(r"Unsupported global: GLOBAL (\S+)", str(err))
+        # torch names the global one of two ways (2.4-2.5: "Unsupported global: GLOBAL x",
+        # 2.6 on: "unsupported GLOBAL x whose module ... is blocked")
+        found = re.search(r"[Uu]nsupported (?:global: )?GLOBAL (\S+)", str(err))
         if found:
             raise UnsafeFileError(f"Expected a {what} of tensors and plain containers at "
                                   f"'{path}' (got a pickle that would run '{found.group(1)}'; "
                                   "refused, nothing was run)") from None
-        raise ValueError(f"Expected a readable {what} at '{path}' (got a file torch cannot "
-                         f"read: {one_line(str(err).split('error:')[-1])})") from None
+        # torch's own text suggests weights_only=False: never passed on
+        lines = [ln for ln in str(err).split("error:")[-1].splitlines() if ln.strip()
+                 and "weights_only" not in ln and "trusted source" not in ln]
+        raise ValueError(f"Expected a readable {what} at '{path}' (got a pickle the safe "
+                         f"loader refuses: {one_line(lines[0]) if lines else 'unreadable'})"
+                         ) from None
     except Exception as err:  # zip / stream / EOF errors of corrupt or foreign files
         raise ValueError(f"Expected a readable {what} at '{path}' (got {type(err).__name__}: "
                          f"{one_line(err)})") from None

@@ -1,0 +1,195 @@
+"""What the matches say about a pair before any pose is believed: its two-view configuration,
+whether its focal lengths fit, and whether a learned pose has the matches' support.
+
+One step of the estimator's pass over a pair (:func:`pair_geometry`, run once on the checked
+matches) and two rules on the recommended pose:
+
+* :func:`apply_configuration`: a pure rotation is answered as a rotation
+  (``"rotation_only"``: the rotation, its sigma, no translation direction); a planar pair keeps
+  its pose only where it is one of the plane's homography decompositions, and says which other
+  decomposition the matches cannot rule out.
+* :func:`learned_pose_evidence`: the network's pose (``regression``, the only learned method
+  of the recommended order) stands in for the classical solvers only when the point matches
+  support it as they would a solver's pose: enough of them within the support band of its
+  epipolar geometry and in front of both cameras (:func:`~strl_pyg.inference.support.check_support`
+  with ``checked=True``). Otherwise it is ``"unreliable"``, with the reason: its sigma was
+  calibrated on generated scenes and is far too small where the solvers fail.
+
+The focal check (:func:`focal_consistency`): with a right ``K0``, ``K1`` the essential matrix
+implied by the fundamental matrix, ``K1^T F K0``, has two equal singular values; their ratio
+(``s2 / s1``, 1 for a perfect fit) drops when a focal length is off. The threshold
+:data:`FOCAL_SV_RATIO_MIN` was measured on the real slices with the true focal lengths and
+with x0.5, x2 and x10 (``benchmarks/bench_two_view.py``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+import cv2
+import numpy as np
+
+from strl_pyg.data.matches import PairMatches
+from strl_pyg.estimation.classical import normalised_matches
+from strl_pyg.inference.checks import BAD_INTRINSICS
+from strl_pyg.estimation.two_view import TwoViewGeometry, classify_two_view, planar_candidates
+from strl_pyg.inference.record import MethodResult, PoseEstimate
+from strl_pyg.inference.support import check_support
+
+__all__ = ["LEARNED_SUPPORT_SHARE", "FOCAL_SV_RATIO_MIN", "FOCAL_MIN_INLIERS", "PLANAR_AGREE_DEG", "pair_geometry",
+           "focal_consistency", "apply_configuration", "learned_pose_evidence"]
+
+#: Below this ratio of the implied essential matrix's two singular values, the intrinsics do
+#: not fit the matches (module docstring).
+FOCAL_SV_RATIO_MIN = 0.6
+#: The focal check reads a fundamental matrix with at least this many inliers, on a pair
+#: whose configuration is ``"general"`` (a plane or a rotation does not fix F).
+FOCAL_MIN_INLIERS = 30
+#: The network's pose stands in for the solvers only where it explains at least this share of
+#: the matches that the pair's best essential matrix explains (its inliers within the support
+#: band, against the essential matrix's within the inlier threshold).
+LEARNED_SUPPORT_SHARE = 0.8
+#: A planar pair's pose agrees with a decomposition of its homography when their rotations
+#: are within this angle and their translation directions within 4x it.
+PLANAR_AGREE_DEG = 5.0
+
+
+def focal_consistency(matches: PairMatches, threshold_px: float = 1.0,
+                      seed: int = 0) -> tuple[float | None, int]:
+    """``(s2 / s1, inliers)`` of the essential matrix ``K1^T F K0`` implied by the
+    fundamental matrix of the point matches (OpenCV RANSAC in pixels); ``(None, 0)`` where no
+    F is found."""
+    p0 = np.asarray(matches.points0, dtype=np.float64)
+    p1 = np.asarray(matches.points1, dtype=np.float64)
+    if len(p0) < 8:
+        return None, 0
+    cv2.setRNGSeed(int(seed))
+    try:
+        F, mask = cv2.findFundamentalMat(p0, p1, cv2.FM_RANSAC, threshold_px, 0.999, 2000)
+    except cv2.error:
+        return None, 0
+    if F is None or F.shape != (3, 3) or mask is None:
+        return None, 0
+    E = np.asarray(matches.K1, dtype=np.float64).T @ F @ np.asarray(matches.K0, np.float64)
+    s = np.linalg.svd(E, compute_uv=False)
+    return (float(s[1] / s[0]) if s[0] > 0 else None), int(mask.ravel().astype(bool).sum())
+
+
+def pair_geometry(matches: PairMatches, threshold_px: float = 1.0,
+                  seed: int = 0) -> TwoViewGeometry | None:
+    """The pair's two-view configuration (:func:`~strl_pyg.estimation.two_view.
+    classify_two_view`) with the focal check in ``info`` style attributes; ``None`` without
+    intrinsics."""
+    if not matches.has_intrinsics or matches.num_points == 0:
+        return None
+    x0, x1, focal = normalised_matches(matches)
+    geo = classify_two_view(x0.numpy(), x1.numpy(), focal, threshold_px, seed,
+                            np.asarray(matches.points0), np.asarray(matches.points1))
+    if geo.configuration == "general":
+        geo.focal_sv_ratio, geo.focal_inliers = focal_consistency(matches, threshold_px, seed)
+    return geo
+
+
+def focal_problem(geo: TwoViewGeometry | None) -> str | None:
+    """Why the intrinsics do not fit the matches (``None`` where they do or cannot be told)."""
+    ratio = None if geo is None else geo.focal_sv_ratio
+    if ratio is None or geo.focal_inliers < FOCAL_MIN_INLIERS or ratio >= FOCAL_SV_RATIO_MIN:
+        return None
+    return (f"the focal lengths do not fit the matches: the essential matrix they imply, "
+            f"K1^T F K0, has singular values in the ratio {ratio:.2f} (a right K gives 1; "
+            f"below {FOCAL_SV_RATIO_MIN} on {geo.focal_inliers} inliers): check K0 and K1")
+
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    c = float(np.dot(a, b) / max(np.linalg.norm(a) * np.linalg.norm(b), 1e-300))
+    return math.degrees(math.acos(max(-1.0, min(1.0, c))))
+
+
+def learned_pose_evidence(res: MethodResult, matches: PairMatches, threshold_px: float,
+                          support: tuple[float, int, float],
+                          geo: TwoViewGeometry | None = None) -> MethodResult:
+    """The network's pose as the recommended one: unchanged where the point matches support
+    it (module docstring; with the pair's configuration ``geo``, at least
+    :data:`LEARNED_SUPPORT_SHARE` of its essential matrix's inliers), else ``"unreliable"``
+    with the reason (the pose kept in ``info`` for inspection)."""
+    if res.status != "ok" or not matches.has_intrinsics:
+        return res
+    ratio, floor, in_front = support
+    checked = check_support(replace(res, info=dict(res.info)), matches, threshold_px, ratio,
+                            floor, in_front, checked=True)
+    k = checked.info.get("support_inliers", 0)
+    best = 0 if geo is None else geo.inliers_E
+    if checked.status == "ok" and k >= LEARNED_SUPPORT_SHARE * best:
+        return res
+    if checked.status == "ok":
+        why = (f"it explains {k} point matches within the support band, the pair's essential "
+               f"matrix {best} (below {100 * LEARNED_SUPPORT_SHARE:.0f} %)")
+    else:
+        why = checked.warnings[-1] if checked.warnings else "the matches do not support it"
+    return res.unreliable([
+        f"the network's pose stands in for no solver here: {why} (its sigma is calibrated on "
+        "generated scenes; where the classical solvers fail it is not evidence)"])
+
+
+def apply_configuration(estimate: PoseEstimate, geo: TwoViewGeometry | None,
+                        matches: PairMatches) -> PoseEstimate:
+    """The recommended pose under the pair's configuration (module docstring); records the
+    configuration in ``estimate.geometry`` and the pose's ``info["configuration"]``."""
+    estimate.geometry = geo
+    if geo is None:
+        return estimate
+    pose = estimate.pose
+    info = {**pose.info, "configuration": geo.configuration}
+    if geo.configuration == "rotation" and pose.status in ("ok", "failed", "unreliable") \
+            and geo.rotation is not None and not _bad_intrinsics(pose):
+        sigma = geo.rotation_sigma_deg if geo.rotation_sigma_deg is not None else float("nan")
+        s = math.radians(max(sigma, 1e-3)) if math.isfinite(sigma) else None
+        cov = None if s is None else np.eye(3) * s * s / 3.0
+        note = (f"pure rotation: a rotation alone explains {geo.inliers_R} of the "
+                f"{geo.num_points} point matches (the essential matrix {geo.inliers_E}), so "
+                "the translation direction is not determined: the rotation is given "
+                "(rotation, sigma['rotation_deg']), T_0to1 is None")
+        if pose.status == "ok":
+            info["rotation_vs_method_deg"] = _rot_deg(pose.T_0to1[:3, :3], geo.rotation)
+        estimate.pose = MethodResult("rotation", "rotation_only", None, cov,
+                                     pose.warnings + [note], pose.time_ms, geo.inliers_R,
+                                     info, None, None, rotation=geo.rotation)
+        return estimate
+    if geo.configuration == "planar" and pose.status == "ok" and geo.H is not None:
+        x0, x1, _ = normalised_matches(matches)
+        cands = planar_candidates(geo.H, np.asarray(matches.K0), np.asarray(matches.K1),
+                                  x0.numpy(), x1.numpy())
+        R, t = pose.T_0to1[:3, :3], pose.T_0to1[:3, 3]
+        agree = [i for i, (Rc, tc) in enumerate(cands)
+                 if _rot_deg(R, Rc) < PLANAR_AGREE_DEG
+                 and _angle_deg(t, tc) < 4 * PLANAR_AGREE_DEG]
+        info["planar_candidates"] = [{"R": Rc, "t": tc, "rotation_from_pose_deg":
+                                      _rot_deg(R, Rc), "translation_from_pose_deg":
+                                      _angle_deg(t, tc)} for Rc, tc in cands]
+        others = [c for i, c in enumerate(cands) if i not in agree
+                  and not any(_rot_deg(c[0], cands[j][0]) < PLANAR_AGREE_DEG for j in agree)]
+        if cands and not agree:
+            estimate.pose = replace(pose, info=info).unreliable([
+                f"planar scene: the pose is none of the {len(cands)} decompositions of the "
+                "plane's homography that put the matches in front of the cameras "
+                "(info['planar_candidates'])"])
+            return estimate
+        warn = []
+        if others:
+            warn = [f"planar scene: {len(others)} other decomposition(s) of the plane's "
+                    "homography also put the matches in front of both cameras and the matches "
+                    "cannot rule them out (info['planar_candidates'])"]
+        estimate.pose = replace(pose, info=info, warnings=pose.warnings + warn)
+        return estimate
+    estimate.pose = replace(pose, info=info)
+    return estimate
+
+
+def _rot_deg(A: np.ndarray, B: np.ndarray) -> float:
+    c = (np.trace(A @ B.T) - 1.0) / 2.0
+    return math.degrees(math.acos(max(-1.0, min(1.0, float(c)))))
+
+
+def _bad_intrinsics(pose: MethodResult) -> bool:
+    return any(w.startswith(BAD_INTRINSICS) for w in pose.warnings)
+

@@ -1,0 +1,142 @@
+"""Training on posed photographs (``dataset="posed"``) mixed with generated pairs: the
+flags, what config.json records, the best checkpoint kept by validation, the wall-clock
+budget, fine-tuning the shipped weights, and the summary line of an interrupted run."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+
+import cv2
+import numpy as np
+import pytest
+
+from strl_pyg.synthetic import SceneConfig, generate_pair
+from strl_pyg.training.config import TrainConfig
+from strl_pyg.training.data import build_datasets, posed_scenes
+from strl_pyg.training.loop import best_value, train
+
+
+@pytest.fixture(scope="module")
+def posed_root(tmp_path_factory):
+    """Three scenes in the real_scenes format, each two generated views of a street."""
+    root = tmp_path_factory.mktemp("posed")
+    for k, name in enumerate(("a", "b", "c")):
+        p = generate_pair(40 + k, SceneConfig(kind="street", image_size=(96, 256)))
+        d = root / name
+        (d / "images").mkdir(parents=True)
+        T1 = np.linalg.inv(np.asarray(p.T_0to1, dtype=np.float64))  # camera 1 to camera 0
+        ims = []
+        for i, (img, T) in enumerate(((p.image0, np.eye(4)), (p.image1, T1))):
+            cv2.imwrite(str(d / "images" / f"{i}.png"), img)
+            ims.append({"file": f"images/{i}.png", "K": np.asarray(p.K).tolist(),
+                        "T_cam_to_world": T.tolist(), "width": 256, "height": 96})
+        (d / "cameras.json").write_text(json.dumps({"images": ims}))
+    return root
+
+
+def posed_config(root, out_dir, **kw) -> TrainConfig:
+    base = TrainConfig(
+        dataset="posed", data_root=str(root), cache_dir=str(out_dir / "cache"),
+        train_scenes=["a", "b"], val_scenes=["c"], posed_gaps=[1], val_gap=1, val_stride=1,
+        batch_size=2, steps=2, val_every=1, num_points=32, num_lines=16,
+        out_dir=str(out_dir / "run"), tensorboard=False, seed=1,
+        scene={"image_size": [96, 256], "max_points": 64, "max_lines": 32},
+        model_overrides={"hidden": 16, "layers": 1, "heads": 2, "patch_features": 1},
+        lr=1e-4, lr_schedule="constant")
+    return replace(base, **kw)
+
+
+@pytest.mark.slow
+def test_posed_and_generated_pairs_train_together(posed_root, tmp_path):
+    cfg = posed_config(posed_root, tmp_path, synthetic_share=0.5)
+    train_ds, val_ds = build_datasets(cfg, progress=False)
+    assert len(train_ds) == 4 and len(val_ds) == 1  # 2 photograph pairs + 2 generated
+    assert val_ds.subsets() == ["c"]
+    result = train(cfg, progress=False)
+    run = tmp_path / "run"
+    stored = json.loads((run / "config.json").read_text())
+    assert stored["dataset"] == "posed" and stored["synthetic_share"] == 0.5
+    assert stored["train_scenes"] == ["a", "b"] and stored["val_scenes"] == ["c"]
+    assert (run / "best_model.pt").is_file() and len(result["history"]) == 2
+    assert all("pose_err_med" in h for h in result["history"])
+
+
+def test_generated_pairs_can_be_cycled_to_the_share(posed_root, tmp_path):
+    cfg = posed_config(posed_root, tmp_path, synthetic_share=0.75, synthetic_pairs=2)
+    train_ds, _ = build_datasets(cfg, progress=False)
+    assert len(train_ds) == 2 + 6  # 6 generated items for the 3:1 share, 2 distinct
+    a, b = train_ds[2], train_ds[4]
+    assert np.array_equal(a["point"]["pos0"].numpy(), b["point"]["pos0"].numpy())
+
+
+@pytest.mark.slow
+def test_the_budget_stops_a_run_with_its_checkpoint(posed_root, tmp_path):
+    cfg = posed_config(posed_root, tmp_path, steps=50, val_every=25, budget_minutes=1e-9)
+    result = train(cfg, progress=False)
+    assert result["step"] == 1 and result["budget_reached"]
+    assert (tmp_path / "run" / "last.pt").is_file() and len(result["history"]) == 1
+    with pytest.raises(ValueError, match="Expected budget_minutes > 0"):
+        replace(cfg, budget_minutes=0.0)
+
+
+def test_best_value_reads_the_history():
+    hist = [{"step": 1, "pose_err_med": 9.0}, {"step": 2, "pose_err_med": math.nan},
+            {"step": 3, "pose_err_med": 4.0}, {"step": 4}]
+    assert best_value(hist, "pose_err_med") == 4.0
+    assert best_value([], "pose_err_med") == math.inf
+    with pytest.raises(ValueError, match="Expected best_metric in"):
+        TrainConfig(best_metric="auc")
+
+
+def test_scenes_must_exist_and_stay_apart(posed_root, tmp_path):
+    with pytest.raises(ValueError, match="Expected training and validation scenes apart"):
+        posed_scenes(posed_config(posed_root, tmp_path, val_scenes=["a"]))
+    with pytest.raises(ValueError, match=r"Expected --val-scenes scenes under .* \(got zz"):
+        posed_scenes(posed_config(posed_root, tmp_path, val_scenes=["zz"]))
+    with pytest.raises(ValueError, match="Expected synthetic_share 0 unless dataset is"):
+        TrainConfig(synthetic_share=0.5)
+
+
+def test_the_real_scenes_split_is_the_default(shared_data, tmp_path):
+    root = shared_data / "real_scenes"
+    if not root.is_dir():
+        pytest.skip("real_scenes not found")
+    train_names, val_names = posed_scenes(TrainConfig(dataset="posed", data_root=str(root)))
+    assert "fruit" in val_names and "fruit" not in train_names and len(train_names) == 11
+
+
+def test_init_from_shipped_weights_takes_their_model():
+    """Before: the shipped weights could not be continued with today's defaults (flow
+    inputs, a bigger model): --init-from named 176 mis-shaped keys."""
+    from strl_pyg.model.strl_pose import StrLPose
+
+    shipped, _ = StrLPose.pretrained_header("synthetic")
+    cfg = TrainConfig(init_from="shipped:synthetic")
+    assert cfg.model_config() == shipped and cfg.model_config().inputs == "paper"
+    tuned = TrainConfig(init_from="shipped:synthetic", model_overrides={"dropout": 0.1})
+    assert tuned.model_config().dropout == 0.1 and tuned.model_config().hidden == shipped.hidden
+    with pytest.raises(ValueError, match="Expected a pretrained name"):
+        TrainConfig(init_from="shipped:nope").model_config()
+
+
+def test_an_interrupted_run_prints_no_summary_line(monkeypatch, tmp_path, capsys):
+    """Before: a stray '{"step": 32}' line on stdout after Ctrl-C."""
+    import argparse
+
+    from strl_pyg.training import loop
+    from strl_pyg.training.config import add_train_arguments
+
+    def interrupted(cfg, **kw):
+        return {"step": 32, "history": [], "interrupted": "SIGINT"}
+
+    monkeypatch.setattr(loop, "train", interrupted)
+    ap = add_train_arguments(argparse.ArgumentParser())
+    args = ap.parse_args(["--out", str(tmp_path / "run"), "--no-tensorboard"])
+    assert loop.run_from_args(args, ap, []) == 130
+    out, err = capsys.readouterr()
+    assert out == "" and "stopped by SIGINT at step 32" in err
+    monkeypatch.setattr(loop, "train", lambda cfg, **kw: {"step": 4, "history": []})
+    assert loop.run_from_args(args, ap, []) == 0
+    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1]) == {"step": 4}
