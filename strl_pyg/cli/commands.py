@@ -85,7 +85,8 @@ def _predict_estimator(args, names):
     made once the inputs are read (torch is imported here)."""
     from strl_pyg.inference.estimator import PoseEstimator
 
-    return PoseEstimator(_predict_model(args), methods=names, bootstrap=args.bootstrap)
+    return PoseEstimator(_predict_model(args), methods=names, bootstrap=args.bootstrap,
+                         threshold_px=args.threshold_px)
 
 
 # ----------------------------------------------------------------------------- the pipeline
@@ -303,6 +304,76 @@ def _check_file_arg(path: str, flag: str, example: str) -> None:
     check_output_file(path, f"a file path for {flag}")
 
 
+def read_pairs_file(path: str, image_dir: str) -> list[tuple[str, str]]:
+    """The pairs of a pairs file: one ``name0 name1`` line each (extra columns ignored, blank
+    lines and ``#`` comments skipped), names joined to ``image_dir``."""
+    from strl_pyg.cli.readers import _check_input_file
+
+    _check_input_file(path, "pairs file for --pairs")
+    out = []
+    for n, line in enumerate(Path(path).read_text().splitlines(), 1):
+        fields = line.split()
+        if not fields or fields[0].startswith("#"):
+            continue
+        if len(fields) < 2:
+            raise UsageError(f"Expected 'image0 image1' on line {n} of '{path}' (got "
+                             f"{line.strip()!r})")
+        out.append((str(Path(image_dir) / fields[0]), str(Path(image_dir) / fields[1])))
+    if not out:
+        raise UsageError(f"Expected at least one 'image0 image1' line in '{path}' (got none)")
+    return out
+
+
+def _predict_pairs(args, methods: str) -> int:
+    """``predict --pairs``: every pair of the file with one estimator, one JSON line each on
+    stdout (``{"image0", "image1", ...the record}`` or ``{"image0", "image1", "error"}``); a
+    bad pair is its error line and the rest go on. Exit 0 when every pair gave a record, 1
+    when some gave an error."""
+    from copy import copy
+
+    from tqdm.auto import tqdm
+
+    from strl_pyg.frontend import FrontendConfig
+
+    pairs = read_pairs_file(args.pairs, args.image_dir)
+    names = (methods if methods == "recommended" else None if methods == "all"
+             else _method_names(methods))
+    estimator, errors = None, 0
+    for a, b in tqdm(pairs, desc="pairs", file=sys.stderr):
+        one = copy(args)
+        one.image0, one.image1 = a, b
+        try:
+            inputs = read_pair(one)
+            estimator = estimator or _predict_estimator(args, names)
+            img0, img1, K0, K1 = inputs
+            est = estimator.estimate_images(img0, img1, K0, K1,
+                                            FrontendConfig(detector=args.detector))
+            if inputs.downscaled:
+                _intrinsics_in_original_frame(est, inputs)
+            record = {"image0": a, "image1": b, **est.to_dict()}
+        except (UsageError, OSError, ValueError, TypeError, KeyError) as err:  # as run_guarded
+            errors += 1
+            record = {"image0": a, "image1": b, "error": str(err)}
+        print(json.dumps(record), flush=True)
+    return 1 if errors else 0
+
+
+def _draw_estimate(path: str, est) -> None:
+    """``predict --png``: the matches coloured by the recommended pose's support (inliers
+    within its support band and in front of both cameras)."""
+    from strl_pyg.viz.matches import save_matches_png
+
+    m = est.matches
+    if m is None or not m.has_images:
+        print("note: --png needs the images (a match file without them draws nothing)")
+        return
+    mask = est.inliers_of_matches()
+    what = (f"green: {int(mask.sum())} of {m.num_points} point matches support the "
+            f"recommended pose ({est.pose.method}, {est.status})" if mask is not None
+            else f"recommended pose: {est.status}; no inlier mask (every match drawn grey)")
+    print(f"drawing -> {save_matches_png(path, m, point_inliers=mask, title=what, legend=True)}")
+
+
 def cmd_match(args) -> int:
     _check_file_arg(args.out, "--out", "matches.npz")  # before any work
     if args.png:
@@ -314,8 +385,28 @@ def cmd_match(args) -> int:
     path = matches.save(args.out)
     print(f"{matches.num_points} points, {matches.num_lines} lines -> {path}")
     if args.png:
-        print(f"drawing -> {save_matches_png(args.png, matches)}")
+        inliers = fundamental_inliers(matches)
+        title = ("no fundamental matrix found: every match drawn as an outlier" if inliers is None
+                 else f"green: {int(inliers.sum())} of {matches.num_points} point matches fit "
+                      "the pair's fundamental matrix (RANSAC, 1 px)")
+        mask = inliers if inliers is not None else np.zeros(matches.num_points, bool)
+        png = save_matches_png(args.png, matches, point_inliers=mask, title=title, legend=True)
+        print(f"drawing -> {png}")
     return 0
+
+
+def fundamental_inliers(matches) -> np.ndarray | None:
+    """The point matches within 1 px of the pair's fundamental matrix (OpenCV RANSAC, pixels),
+    as ``match --png`` colours them; ``None`` with fewer than 8 matches or no F."""
+    import cv2
+
+    if matches.num_points < 8:
+        return None
+    cv2.setRNGSeed(0)
+    F, mask = cv2.findFundamentalMat(np.asarray(matches.points0, np.float64),
+                                     np.asarray(matches.points1, np.float64), cv2.FM_RANSAC,
+                                     1.0, 0.999, 2000)
+    return None if F is None or mask is None else mask.ravel().astype(bool)
 
 
 def cmd_predict(args) -> int:
@@ -324,10 +415,16 @@ def cmd_predict(args) -> int:
     recommended pose needs, :mod:`strl_pyg.inference.recommended`). Exit status (:data:`EXIT_CODES`)
     0 when the pose's status is ``"ok"``, 1 when it is ``"degenerate"`` or ``"failed"``, 3
     when it is ``"unreliable"`` (printed either way)."""
+    if args.png:
+        _check_file_arg(args.png, "--png", "pose.png")  # before any work
+    if not (np.isfinite(args.threshold_px) and args.threshold_px > 0):
+        raise UsageError(f"Expected a positive --threshold-px (got {args.threshold_px})")
     methods = "regression" if args.no_baseline else args.methods
     if methods.lower() in ("recommended", "all"):
         methods = methods.lower()
     _check_methods(methods)  # before the images and the model are read
+    if args.pairs:
+        return _predict_pairs(args, methods)
     # one estimator for both inputs: "recommended" (estimator.RECOMMENDED) walks the
     # recommended order (the images matched once), "all" runs every installed method; torch
     # is imported only once the inputs are read
@@ -362,6 +459,8 @@ def cmd_predict(args) -> int:
         return code
     print(f"matches: {est.num_points} points, {est.num_lines} lines")
     _print_estimate(est)
+    if args.png:
+        _draw_estimate(args.png, est)
     if args.checkpoint and methods == "recommended":
         from strl_pyg.inference.estimator import METHODS
 
@@ -542,6 +641,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--methods", default="recommended", metavar="M",
                    help="'recommended' (default: the checkpoint's recommended order, stopping "
                         "at the first 'ok' method), 'all', or names, e.g. 'regression,opencv'")
+    p.add_argument("--pairs", default=None, metavar="FILE",
+                   help="many pairs: a text file of 'image0 image1' lines (hloc's pairs "
+                        "format), names relative to --image-dir; one JSON line per pair")
+    p.add_argument("--image-dir", default=".", metavar="DIR",
+                   help="with --pairs: the folder the names are relative to")
+    p.add_argument("--png", default=None,
+                   help="also draw the matches, coloured by the recommended pose's support")
+    p.add_argument("--threshold-px", type=float, default=1.0, metavar="PX",
+                   help="inlier threshold of the solvers and the support check (default 1)")
     p.add_argument("--bootstrap", type=bootstrap_count, default=8, metavar="N",
                    help="resamples behind the PoseLib/OpenCV covariance (default 8, the "
                         "calibrated setting; 0: first-order covariance only, faster)")

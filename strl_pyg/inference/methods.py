@@ -275,7 +275,8 @@ def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     from strl_pyg.estimation.vanishing import vanishing_point_pose
 
     if matches.num_lines == 0:
-        return MethodResult("vp", "failed", warnings=[
+        # the input lacks what vp reads: "skipped", as for a model without its pixels
+        return MethodResult("vp", "skipped", warnings=[
             "vp needs line matches (got none: FrontendConfig(lines=True), or lines0/lines1)"])
     # the 5-point solver's supported pose is a second start of the joint refinement with the
     # lines: its record of this run when it ran before, else solved and support-checked here

@@ -33,3 +33,54 @@ def test_method_names_ignore_case():
     _check_methods("ALL")
     with pytest.raises(UsageError, match="did you mean 'poselib'"):
         _check_methods("poselibb")
+
+
+@pytest.fixture(scope="module")
+def image_dir(tmp_path_factory):
+    import cv2
+
+    from strl_pyg.synthetic import SceneConfig, generate_pair
+
+    d = tmp_path_factory.mktemp("imgs")
+    p = generate_pair(7, SceneConfig(kind="street"))
+    cv2.imwrite(str(d / "a.png"), p.image0)
+    cv2.imwrite(str(d / "b.png"), p.image1)
+    K = p.K
+    return d, f"{K[0, 0]},{K[1, 1]},{K[0, 2]},{K[1, 2]}"
+
+
+def test_predict_pairs_gives_one_json_line_per_pair_and_goes_on(image_dir, capsys):
+    """What hloc users reach for: a pairs file over an image folder; one bad pair (a missing
+    image) is its error line and the others still run."""
+    import json
+
+    from strl_pyg import cli
+
+    d, K = image_dir
+    (d / "pairs.txt").write_text("a.png b.png\n# a comment\na.png nope.png\nb.png a.png\n")
+    code = cli.main(["predict", "--pairs", str(d / "pairs.txt"), "--image-dir", str(d),
+                     "--K", K, "--methods", "opencv", "--bootstrap", "0"])
+    lines = [json.loads(ln) for ln in capsys.readouterr().out.splitlines()]
+    assert code == 1 and len(lines) == 3
+    assert lines[0]["pose"]["status"] == "ok" and lines[2]["pose"]["status"] == "ok"
+    assert lines[1]["image1"].endswith("nope.png") and "Expected an image file" in lines[1][
+        "error"]
+    (d / "bad.txt").write_text("a.png\n")
+    assert cli.main(["predict", "--pairs", str(d / "bad.txt"), "--K", K]) == 2
+    assert "Expected 'image0 image1' on line 1" in capsys.readouterr().err
+
+
+def test_predict_png_colours_the_support_and_threshold_is_a_flag(image_dir, tmp_path, capsys):
+    """Before: the drawing coloured every match green, with no legend; no --threshold-px."""
+    from strl_pyg import cli
+
+    d, K = image_dir
+    out = tmp_path / "pose.png"
+    code = cli.main(["predict", str(d / "a.png"), str(d / "b.png"), "--K", K, "--methods",
+                     "opencv", "--bootstrap", "0", "--png", str(out), "--threshold-px", "2"])
+    text = capsys.readouterr().out
+    assert code == 0 and out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "two-view configuration: general" in text and f"drawing -> {out}" in text
+    assert cli.main(["predict", str(d / "a.png"), str(d / "b.png"), "--K", K,
+                     "--threshold-px", "0"]) == 2
+    assert "Expected a positive --threshold-px" in capsys.readouterr().err
