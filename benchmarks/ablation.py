@@ -380,7 +380,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     import json
 
     import ablation_eval as ae
-    from common import banner
+    from strl_bench_common import banner
 
     ev = Path(args.results)
     if not (ev / "sets.json").exists() or not (ev / "poselib.json").exists():
@@ -490,7 +490,7 @@ def _histories(results: Path, root: Path | None = None) -> dict[str, list[dict]]
 def cmd_curves(args: argparse.Namespace) -> int:
     """The validation history of every run so far (finished or not) as a markdown table, and
     the curves figure: what a partial study can already say (are the curves still falling?)."""
-    from common import banner
+    from strl_bench_common import banner
 
     hists = _histories(Path(args.results), Path(args.root))
     lines = ["# Ablation runs so far: validation curves", "", "```", banner(), "```", "",

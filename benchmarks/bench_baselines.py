@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import banner  # noqa: E402
+from strl_bench_common import banner  # noqa: E402
 
 from strl_pyg.data.matches import PairMatches  # noqa: E402
 from strl_pyg.estimation.classical import estimate_relative_pose  # noqa: E402

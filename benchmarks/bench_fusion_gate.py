@@ -37,7 +37,7 @@ from tqdm.auto import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_pose as bp  # noqa: E402
-from common import banner  # noqa: E402
+from strl_bench_common import banner  # noqa: E402
 
 from strl_pyg.metrics.stats import median_ratio_interval  # noqa: E402
 

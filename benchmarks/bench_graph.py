@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from common import banner, time_it
+from strl_bench_common import banner, time_it
 from torch_geometric.loader import DataLoader
 
 from strl_pyg.data import PairMatches, build_pair_graph, materialize_complete_edges

@@ -30,7 +30,7 @@ from tqdm.auto import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_pose as bp  # noqa: E402
-from common import banner  # noqa: E402
+from strl_bench_common import banner  # noqa: E402
 
 #: chi-square 95.45 % quantiles (2 sigma) with 5, 3 and 2 degrees of freedom.
 CHI2_2SIGMA = {5: 11.3141, 3: 8.0249, 2: 6.1801}

@@ -244,7 +244,7 @@ def main(argv=None) -> int:
     }
     import cv2
     import torch
-    from common import banner
+    from strl_bench_common import banner
 
     lines = ["# Line matchers with and without a fundamental matrix "
              "(`benchmarks/bench_line_matchers.py`)", "",

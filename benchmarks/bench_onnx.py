@@ -30,14 +30,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
 def _median_ms(fn, repeat: int) -> float:
-    from common import time_it
+    from strl_bench_common import time_it
 
     return time_it(fn, repeat, warmup=1)["median_ms"]
 
 
 def main(argv: list[str] | None = None) -> int:
     import onnxruntime as ort
-    from common import banner
+    from strl_bench_common import banner
 
     from strl_pyg.inference.export import INPUT_NAMES, DensePoseModule, export_onnx, onnx_inputs
     from strl_pyg.inference.network import forward_pose, prepare_graph

@@ -56,7 +56,7 @@ import torch
 from tqdm.auto import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import banner  # noqa: E402
+from strl_bench_common import banner  # noqa: E402
 
 from strl_pyg.inference import BOOTSTRAPPED  # noqa: E402  (derived from the registry)
 from strl_pyg.metrics.stats import coverage_interval, median_ratio_interval  # noqa: E402

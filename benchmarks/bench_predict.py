@@ -47,7 +47,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 sys.path.insert(0, str(ROOT))
 
-from common import banner  # noqa: E402
+from strl_bench_common import banner  # noqa: E402
 
 from strl_pyg import frontend as fe  # noqa: E402
 from strl_pyg.utils.images import read_image_file  # noqa: E402

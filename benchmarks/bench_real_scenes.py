@@ -26,7 +26,7 @@ from tqdm.auto import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_pose as bp  # noqa: E402
 import bench_two_view as btv  # noqa: E402
-from common import banner  # noqa: E402
+from strl_bench_common import banner  # noqa: E402
 
 VAL_SCENES = ("drone_hall", "fruit", "ethiopian_head", "office_drink")
 

@@ -33,7 +33,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=None, help="JSON of the figures")
     args = ap.parse_args(argv)
     import bench_pose as bp
-    from common import banner
+    from strl_bench_common import banner
 
     from strl_pyg.inference import PoseEstimator
     from strl_pyg.metrics.stats import coverage_interval

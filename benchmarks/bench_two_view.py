@@ -40,7 +40,7 @@ from tqdm.auto import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_pose as bp  # noqa: E402
-from common import banner  # noqa: E402
+from strl_bench_common import banner  # noqa: E402
 
 DATA = bp.DATA
 SCALES = (0.5, 2.0, 10.0)
@@ -268,6 +268,62 @@ def evidence_verdicts(est, m, threshold_px: float = 1.0) -> str | None:
     return "kept" if out.status == "ok" else "withheld"
 
 
+def _auc(rows: list[dict], t: float) -> float:
+    """Pose AUC at ``t`` deg of the recommended pose (max of the two errors; a pose that is
+    not ``ok`` counts as failed)."""
+    from strl_pyg.metrics.stats import pose_error_stats
+
+    rot = [r.get("rot", np.nan) if r["status"] == "ok" else np.nan for r in rows]
+    tr = [r.get("trans", np.nan) if r["status"] == "ok" else np.nan for r in rows]
+    ok = [r["status"] == "ok" for r in rows]
+    return pose_error_stats(rot, tr, ok, thresholds=(t,))[f"auc{t:g}"]
+
+
+def compare(before: list[dict], after: list[dict]) -> str:
+    """The before / after table of two runs' per-pair records (same pairs)."""
+    key = lambda r: (r["set"], r["pair"])  # noqa: E731
+    b = {key(r): r for r in before}
+    a = {key(r): r for r in after}
+    common = [k for k in a if k in b]
+    L = ["## Before / after (the same pairs; before: the previous release's code)", "",
+         "| set | pairs | ok before | ok after | rotation_only after | confident wrong before | "
+         "confident wrong after | from regression before | from regression after |",
+         "|---|---|---|---|---|---|---|---|---|"]
+    for s in dict.fromkeys(k[0] for k in common):
+        ks = [k for k in common if k[0] == s]
+        L.append(f"| {s} | {len(ks)} | {sum(b[k]['status'] == 'ok' for k in ks)} | "
+                 f"{sum(a[k]['status'] == 'ok' for k in ks)} | "
+                 f"{sum(a[k]['status'] == 'rotation_only' for k in ks)} | "
+                 f"{sum(confident_wrong(b[k]) for k in ks)} | "
+                 f"{sum(confident_wrong(a[k]) for k in ks)} | "
+                 f"{sum(b[k]['status'] == 'ok' and b[k]['method'] == 'regression' for k in ks)} | "
+                 f"{sum(a[k]['status'] == 'ok' and a[k]['method'] == 'regression' for k in ks)} |")
+    L += ["", "Recommended pose AUC@5/10/20 on the real slices (general set), before and after, "
+          "with a 95 % bootstrap interval of the difference (after - before) over pairs:", "",
+          "| slice | pairs | AUC@5 | AUC@10 | AUC@20 | difference of AUC@10 [95 %] |",
+          "|---|---|---|---|---|---|"]
+    rng = np.random.default_rng(0)
+    gen = [k for k in common if k[0] == "general"]
+    for sl in dict.fromkeys(k[1].split("/")[0] for k in gen):
+        ks = [k for k in gen if k[1].split("/")[0] == sl]
+        rb, ra = [b[k] for k in ks], [a[k] for k in ks]
+        cells = [f"{_auc(rb, t):.3f} -> {_auc(ra, t):.3f}" for t in (5, 10, 20)]
+        diffs = []
+        for _ in range(500):
+            idx = rng.integers(0, len(ks), len(ks))
+            diffs.append(_auc([ra[i] for i in idx], 10) - _auc([rb[i] for i in idx], 10))
+        lo, hi = np.percentile(diffs, [2.5, 97.5])
+        L.append(f"| {sl} | {len(ks)} | {' | '.join(cells)} | {_auc(ra, 10) - _auc(rb, 10):+.3f}"
+                 f" [{lo:+.3f}, {hi:+.3f}] |")
+    changed = [k for k in gen if (a[k]["status"], a[k]["method"]) != (b[k]["status"],
+                                                                         b[k]["method"])]
+    L += ["", f"Real pairs whose recommended status or method changed: {len(changed)} of "
+          f"{len(gen)}" + (": " + "; ".join(
+              f"{k[1]} {b[k]['status']}/{b[k]['method']} -> {a[k]['status']}/{a[k]['method']}"
+              for k in changed[:20]) if changed else "") + "."]
+    return "\n".join(L) + "\n"
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", default=None, help="markdown report")
@@ -275,7 +331,16 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", default="outputs/bench_cache")
     ap.add_argument("--sets", default="general,rotation,planar,focal,hard")
     ap.add_argument("--limit", type=int, default=None, help="pairs per set (smoke runs)")
+    ap.add_argument("--compare", nargs=2, metavar=("BEFORE", "AFTER"), default=None,
+                    help="no run: the before / after table of two --json files")
     args = ap.parse_args(argv)
+    if args.compare:
+        text = compare(*(json.loads(Path(p).read_text()) for p in args.compare))
+        print(text)
+        if args.out:
+            with open(args.out, "a") as f:
+                f.write("\n" + text)
+        return 0
     import torch
 
     from strl_pyg.inference import PoseEstimator

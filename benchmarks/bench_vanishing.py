@@ -258,7 +258,7 @@ def paired_auc_diff(a: np.ndarray, b: np.ndarray, resamples: int = 1000, seed: i
 def main(argv: list[str] | None = None) -> int:
     import ablation_eval as ae
     import bench_pose as bp
-    from common import banner
+    from strl_bench_common import banner
 
     from strl_pyg.estimation import line_refine as L
     from strl_pyg.frontend import FrontendConfig

@@ -58,7 +58,7 @@ def main() -> None:
     ap.add_argument("--out", default=None, help="also write the table to this Markdown file")
     args = ap.parse_args()
     from bench_predict import _pairs, _point_poor_pair
-    from common import banner
+    from strl_bench_common import banner
 
     from strl_pyg.frontend import FrontendConfig
     from strl_pyg.inference.recommended import estimate_methods

@@ -20,7 +20,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import bench_pose as bp  # noqa: E402
-from common import banner  # noqa: E402
+from strl_bench_common import banner  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:

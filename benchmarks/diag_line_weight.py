@@ -25,7 +25,7 @@ def main(argv: list[str] | None = None) -> int:
     import ablation_eval as ae
     import bench_pose as bp
     import bench_vanishing as bv
-    from common import banner
+    from strl_bench_common import banner
 
     from strl_pyg.estimation.classical import estimate_relative_pose
     from strl_pyg.estimation.vanishing import vanishing_directions, vanishing_point_pose

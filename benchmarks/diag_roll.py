@@ -203,7 +203,7 @@ def report() -> int:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from common import banner
+    from strl_bench_common import banner
 
     # the measured runs (verify/ holds the --verify ones)
     runs = {p.stem: json.loads(p.read_text()) for p in sorted(RESULTS.glob("*.json"))}
@@ -268,7 +268,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.report:
         return report()
     import torch
-    from common import banner
+    from strl_bench_common import banner
 
     from strl_pyg.model.strl_pose import StrLPose
 

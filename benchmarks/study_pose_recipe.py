@@ -515,7 +515,7 @@ def table3_claims(runs: dict[str, dict], variant: str) -> list[str]:
 def cmd_table3(args: argparse.Namespace) -> int:
     """Table 3 of the study's scored runs (``t3-[ROW-]VARIANT-sS``): per row and recipe, and
     the paper's claims as paired ratios for each recipe, with a figure."""
-    from common import banner
+    from strl_bench_common import banner
 
     runs = _load()
     missing = [v for v in args.variants if not pooled_errors(runs, t3_name("baseline", v))]
@@ -822,7 +822,7 @@ def _med(rows: list, which: int):
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from common import banner
+    from strl_bench_common import banner
 
     runs = _load()
     if not runs:

@@ -50,7 +50,7 @@ FOCAL_MIN_INLIERS = 30
 #: band, against the essential matrix's within the inlier threshold).
 LEARNED_SUPPORT_SHARE = 0.8
 #: A planar pair's pose agrees with a decomposition of its homography when their rotations
-#: are within this angle and their translation directions within 4x it.
+#: are within this angle.
 PLANAR_AGREE_DEG = 5.0
 
 
@@ -160,9 +160,10 @@ def apply_configuration(estimate: PoseEstimate, geo: TwoViewGeometry | None,
         cands = planar_candidates(geo.H, np.asarray(matches.K0), np.asarray(matches.K1),
                                   x0.numpy(), x1.numpy())
         R, t = pose.T_0to1[:3, :3], pose.T_0to1[:3, 3]
-        agree = [i for i, (Rc, tc) in enumerate(cands)
-                 if _rot_deg(R, Rc) < PLANAR_AGREE_DEG
-                 and _angle_deg(t, tc) < 4 * PLANAR_AGREE_DEG]
+        # the rotation decides: a plane seen with little parallax fixes its rotation well and
+        # its translation poorly (measured: a right pose of office_drink, 0.04 / 3.9 deg off,
+        # was 30 deg from the decomposition's translation)
+        agree = [i for i, (Rc, _) in enumerate(cands) if _rot_deg(R, Rc) < PLANAR_AGREE_DEG]
         info["planar_candidates"] = [{"R": Rc, "t": tc, "rotation_from_pose_deg":
                                       _rot_deg(R, Rc), "translation_from_pose_deg":
                                       _angle_deg(t, tc)} for Rc, tc in cands]

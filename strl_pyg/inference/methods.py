@@ -43,7 +43,7 @@ from strl_pyg.estimation.uncertainty import (
     bootstrap_resamples,
 )
 from strl_pyg.inference.config import CheckpointSettings
-from strl_pyg.inference.network import network_pose
+from strl_pyg.inference.network import network_pose, network_pose_both_ways
 from strl_pyg.inference.record import MethodResult
 
 __all__ = ["MethodContext", "MethodFn"]
@@ -95,7 +95,15 @@ def _regression(matches: PairMatches, ctx: MethodContext) -> MethodResult:
 
     model = ctx.model
     start = time.perf_counter()
-    out = network_pose(model, matches, ctx.seed, ctx.resample, ctx.device)
+    back = None  # the swapped pair's output, from the same batched pass (the swap check)
+    if ctx.swap_check:
+        try:
+            out, back = network_pose_both_ways(model, matches, ctx.seed, ctx.resample,
+                                               ctx.device)
+        except Exception:  # noqa: BLE001 - the pair alone below, its error is the check's
+            out = network_pose(model, matches, ctx.seed, ctx.resample, ctx.device)
+    else:
+        out = network_pose(model, matches, ctx.seed, ctx.resample, ctx.device)
     ms = (time.perf_counter() - start) * 1e3
     q, t, lv = (x[0].detach().cpu().double() for x in (out.quaternion, out.translation,
                                                        out.log_var))
@@ -111,7 +119,7 @@ def _regression(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     if ctx.swap_check:
         start = time.perf_counter()
         try:
-            found = _swap_disagreement(model, matches, ctx, pose)
+            found = _swap_disagreement(model, matches, ctx, pose, back)
         except Exception as err:  # the forward pose stands; only its check is missing
             found = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
         # its own time: time_ms stays the forward pass's, comparable with runs without it
@@ -214,12 +222,14 @@ def swap_term(regression: MethodResult) -> np.ndarray | None:
 
 
 def _swap_disagreement(model: torch.nn.Module, matches: PairMatches, ctx: MethodContext,
-                       pose: Any) -> tuple[float, float] | None:
+                       pose: Any, back: Any = None) -> tuple[float, float] | None:
     """Angles (rad) between ``pose`` and the inverse of the network's pose of the swapped
-    pair: rotation, translation direction; ``None`` when that pose is not finite."""
+    pair (``back``, its ``PoseOutput``, or computed here): rotation, translation direction;
+    ``None`` when that pose is not finite."""
     from strl_pyg.geometry import Pose
 
-    back = network_pose(model, matches.swapped(), ctx.seed, ctx.resample, ctx.device)
+    if back is None:
+        back = network_pose(model, matches.swapped(), ctx.seed, ctx.resample, ctx.device)
     qb, tb = (x[0].detach().cpu().double() for x in (back.quaternion, back.translation))
     if not (bool(torch.isfinite(qb).all()) and bool(torch.isfinite(tb).all())
             and float(tb.norm()) > 1e-12):
