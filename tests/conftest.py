@@ -62,3 +62,15 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture
+def method_registry():
+    """The method registry (``strl_pyg.inference.registry``), restored after the test: a test
+    may register or replace methods in it."""
+    from strl_pyg.inference import registry
+
+    saved = dict(registry.METHODS)
+    yield registry
+    registry.METHODS.clear()
+    registry.METHODS.update(saved)

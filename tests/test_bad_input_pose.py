@@ -211,11 +211,10 @@ def test_a_device_this_machine_lacks_is_refused_at_construction(model, monkeypat
 
 
 def test_a_network_method_that_cannot_run_is_named_in_the_recommended_pose(model, pair,
-                                                                           monkeypatch):
+                                                                           method_registry):
     def no_device(matches, ctx):
         raise RuntimeError("Expected all tensors to be on the same device\nmore")
 
-    monkeypatch.setattr(inference, "METHODS", dict(inference.METHODS))
     spec = inference.METHODS["regression"]
     inference.METHODS["regression"] = replace(spec, fn=no_device)
     est = PoseEstimator(model, methods=["regression", "opencv"]).estimate(pair.matches)

@@ -251,9 +251,9 @@ def test_a_failing_swap_pass_leaves_the_regression_with_a_warning(monkeypatch):
 def test_methods_all_and_comma_separated_as_the_cli_takes_them():
     # reproduction: PoseEstimator(methods="all") raised "Expected methods from ... (got
     # ['all'])" although `strl-pose predict --methods all` is the documented way
-    from strl_pyg.inference.estimator import _checked_names
+    from strl_pyg.inference.registry import checked_method_names
 
-    assert PoseEstimator(methods="all").method_names == _checked_names(None)
+    assert PoseEstimator(methods="all").method_names == checked_method_names(None)
     assert PoseEstimator(methods="opencv, poselib").method_names == ("opencv", "poselib")
     with pytest.raises(ValueError, match=r"'all' or 'recommended' \(got \['opencv', 'nope'\]\)"):
         PoseEstimator(methods="opencv,nope")

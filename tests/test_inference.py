@@ -270,7 +270,7 @@ def test_low_and_high_precision_models_run_on_the_float32_graph(pair, dtype, tol
     r = est.methods["regression"]
     assert r.status == "ok" and np.isfinite(r.T_0to1).all()
     base = PoseEstimator(ref, methods=("regression",)).estimate(pair.matches)
-    rot, _ = relative_pose_error(r.T_0to1[None], base.T_0to1[None])
+    rot, _ = relative_pose_error(r.T_0to1[None], base.methods["regression"].T_0to1[None])
     assert float(rot[0]) < tol
 
 
@@ -281,12 +281,11 @@ def test_a_model_of_mixed_dtypes_errors_in_one_line(pair):
         forward_pose(m, prepare_graph(pair.matches, m))
 
 
-def test_a_new_method_is_one_registration(pair, monkeypatch):
+def test_a_new_method_is_one_registration(pair, monkeypatch, method_registry):
     def identity_guess(matches, context):
         assert "opencv" in context.results  # runs after the ones registered before it
         return MethodResult("guess", "ok", context.results["opencv"].T_0to1)
 
-    monkeypatch.setattr(inference, "METHODS", dict(inference.METHODS))
     # a method that is not support-checked (a learned one) is recommended only where the
     # matches support its pose: this one repeats OpenCV's
     inference.register_method("guess", identity_guess, support_checked=False)
@@ -298,10 +297,9 @@ def test_a_new_method_is_one_registration(pair, monkeypatch):
         inference.register_method("guess", identity_guess)
 
 
-def test_an_unsupported_learned_pose_is_not_recommended(pair, monkeypatch):
+def test_an_unsupported_learned_pose_is_not_recommended(pair, monkeypatch, method_registry):
     """Before: a method without the support check (the network) filled the recommended pose
     with its own pose and status "ok" whatever the matches said."""
-    monkeypatch.setattr(inference, "METHODS", dict(inference.METHODS))
     inference.register_method("guess", lambda m, c: MethodResult("guess", "ok", np.eye(4)),
                               support_checked=False)
     monkeypatch.setattr(inference, "RECOMMENDED_ORDER", ("guess",))

@@ -14,8 +14,7 @@ from strl_pyg.synthetic import generate_pair
 
 
 @pytest.fixture()
-def toy(monkeypatch):
-    monkeypatch.setattr(est_mod, "METHODS", dict(est_mod.METHODS))
+def toy(method_registry):
 
     def identity(matches, ctx):
         return MethodResult("toy", "ok", np.eye(4))

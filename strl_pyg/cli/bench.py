@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 import time
 
-from strl_pyg.cli.commands import DEMO_SEED, load_model
+from strl_pyg.cli.readers import DEMO_SEED, load_model
 from strl_pyg.cli.readers import UsageError
 
 __all__ = ["cmd_bench"]

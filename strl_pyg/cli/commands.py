@@ -36,11 +36,13 @@ import numpy as np
 
 from strl_pyg.cli.guard import OneLineArgumentParser, run_guarded
 from strl_pyg.cli.readers import (  # noqa: F401  (re-exported: the readers' public home)
+    DEMO_SEED,
     MAX_SIDE,
     PairInputs,
     UsageError,
     _check_input_file,
     _intrinsics,
+    load_model,
     bootstrap_count,
     downscale_for_matching,
     non_negative_int,
@@ -54,21 +56,6 @@ from strl_pyg.training.checkpoints import DEFAULT_WEIGHTS, WEIGHTS_DIR, default_
 __all__ = ["main", "run_guarded", "check_train_files", "build_parser", "read_intrinsics",
            "read_image_file", "default_checkpoint", "predict_pair", "downscale_for_matching",
            "PairInputs", "MAX_SIDE"]
-
-DEMO_SEED = 2_000_017  # held out: training uses seeds < 2,000,000
-
-
-def load_model(path: str | os.PathLike | None):
-    from strl_pyg.model.strl_pose import StrLPose
-
-    path = Path(path) if path else default_checkpoint()
-    if path.is_dir():
-        raise UsageError(f"Expected a model checkpoint file at '{path}' (got a folder)")
-    if not path.is_file():
-        raise UsageError(f"Expected a model checkpoint at '{path}' (got no such file); train one "
-                         "with 'strl-pose train' or pass --checkpoint")
-    return StrLPose.load(path).eval()
-
 
 def _predict_model(args):
     """``predict``'s model: the ``--checkpoint`` (or ``STRL_POSE_WEIGHTS``) file, loaded now

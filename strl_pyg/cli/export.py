@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from strl_pyg.cli.commands import load_model
+from strl_pyg.cli.readers import load_model
 from strl_pyg.cli.readers import UsageError
 
 __all__ = ["cmd_export"]

@@ -18,7 +18,7 @@ from strl_pyg.utils.commandline import UsageError
 
 __all__ = ["UsageError", "MAX_SIDE", "read_image_file", "read_intrinsics",
            "downscale_for_matching", "PairInputs", "read_pair", "non_negative_int",
-           "bootstrap_count"]
+           "bootstrap_count", "DEMO_SEED", "load_model"]
 
 #: Default longest image side for matching (``--max-side``); larger images are downscaled.
 #: A 6000x4000 pair at full resolution took 5.6 GB and 48 s in `strl-pose match`; 0.5 GB and
@@ -265,3 +265,21 @@ def bootstrap_count(text: str) -> int:
     if value in (1, 2):
         raise argparse.ArgumentTypeError(f"Expected 0 or an integer >= 3 (got {text!r})")
     return value
+
+
+#: The demo's pair: held out (training uses seeds < 2,000,000).
+DEMO_SEED = 2_000_017
+
+
+def load_model(path: str | os.PathLike | None):
+    """The model of ``--checkpoint`` (default: the shipped weights), one-line errors."""
+    from strl_pyg.model.strl_pose import StrLPose
+    from strl_pyg.training.checkpoints import default_checkpoint
+
+    path = Path(path) if path else default_checkpoint()
+    if path.is_dir():
+        raise UsageError(f"Expected a model checkpoint file at '{path}' (got a folder)")
+    if not path.is_file():
+        raise UsageError(f"Expected a model checkpoint at '{path}' (got no such file); train one "
+                         "with 'strl-pose train' or pass --checkpoint")
+    return StrLPose.load(path).eval()

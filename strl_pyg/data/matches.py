@@ -514,12 +514,3 @@ def _load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
             why = "an object array; pickled data is never read"
         raise ValueError(f"Expected a readable .npz match file at '{path}' (got {why})") from err
 
-
-def __getattr__(name: str) -> Any:
-    # ``load_external_matches`` lives in :mod:`strl_pyg.data.external.formats` (which imports this
-    # module); it stays importable from here.
-    if name == "load_external_matches":
-        from strl_pyg.data.external.formats import load_external_matches
-
-        return load_external_matches
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -15,6 +15,7 @@ import numpy as np
 
 from strl_pyg.estimation.uncertainty import MIN_BOOTSTRAP
 from strl_pyg.inference.checks import check_device
+from strl_pyg.inference.registry import checked_method_names
 from strl_pyg.inference.support import CHEIRALITY_MIN, MIN_INLIER_RATIO, MIN_SUPPORT_INLIERS
 
 __all__ = ["EstimatorConfig", "CheckpointSettings"]
@@ -53,9 +54,7 @@ class EstimatorConfig:
 
     def __post_init__(self) -> None:
         if self.methods is not None:
-            from strl_pyg.inference.estimator import _checked_names  # imports this module
-
-            object.__setattr__(self, "methods", _checked_names(self.methods))
+            object.__setattr__(self, "methods", checked_method_names(self.methods))
         if not _is_int(self.seed):
             raise ValueError(f"Expected seed as an integer (got {self.seed!r})")
         object.__setattr__(self, "seed", int(self.seed))

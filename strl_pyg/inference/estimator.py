@@ -97,6 +97,18 @@ from strl_pyg.inference.network import (
     prepare_matches,
 )
 from strl_pyg.inference.record import STATUSES, MethodResult, PoseEstimate
+from strl_pyg.inference.registry import (  # noqa: F401  (the registry's names, importable here)
+    DERIVED,
+    METHODS,
+    RECOMMENDED,
+    MethodSpec,
+    checked_method_names,
+    classical_method,
+    methods_needed,
+    methods_where,
+    network_free_methods,
+    register_method,
+)
 from strl_pyg.inference.support import (
     check_support,
 )
@@ -109,9 +121,6 @@ __all__ = [
     "input_warnings", "zero_parallax", "RECOMMENDED", "methods_needed",
 ]
 
-#: ``methods="recommended"``: the recommended pose with only the methods it needs
-#: (:meth:`PoseEstimator.estimate`; ``strl-pose predict``'s default); not a method name.
-RECOMMENDED = "recommended"
 
 #: Which method fills the recommended pose: the first ``"ok"`` one (unavailable ones skipped).
 RECOMMENDED_ORDER: tuple[str, ...] = ("poselib", "opencv", "regression")
@@ -124,111 +133,10 @@ RECOMMENDED_ORDER: tuple[str, ...] = ("poselib", "opencv", "regression")
 POINT_POOR_ORDER: tuple[str, ...] = ("vp",)
 
 
-# ----------------------------------------------------------------------------- registry
-@dataclass(frozen=True)
-class MethodSpec:
-    """Everything about one registered method, the one record every other table is derived
-    from (:func:`methods_where`): ``fn``; the point matches it needs (fewer:
-    ``"degenerate"``); whether it needs ``K0``/``K1`` (missing: ``"failed"``) and whether it is
-    installed; ``label``, what it is in words (the CLI prints it); whether it ``reads_lines``
-    (the front end then matches lines for it) and ``uses_network`` (the model is loaded for
-    it); ``depends_on``, the methods whose results it reads (``"classical"``: PoseLib if
-    installed, else OpenCV); ``support_checked``, whether its pose must be supported by the
-    point matches (:func:`~strl_pyg.inference.support.check_support`); ``bootstrapped``,
-    whether its covariance carries the classical bootstrap (its calibration then holds only
-    for the bootstrap count it was fitted with); ``classical_base``, whether it starts from
-    the classical solver's pose (its calibration was fitted with PoseLib as that base);
-    ``needs_geometric_head``, whether it reads the network's geometric head (a checkpoint
-    without one cannot run it)."""
-
-    fn: MethodFn
-    min_points: int = MIN_POINTS
-    needs_intrinsics: bool = True
-    available: Callable[[], bool] = lambda: True
-    label: str = ""
-    reads_lines: bool = False
-    uses_network: bool = False
-    depends_on: tuple[str, ...] = ()
-    support_checked: bool = True
-    bootstrapped: bool = False
-    classical_base: bool = False
-    needs_geometric_head: bool = False
-
-
-#: ``name -> MethodSpec``, run in this order.
-METHODS: dict[str, MethodSpec] = {}
-
-
-def register_method(name: str, fn: MethodFn, *, min_points: int = MIN_POINTS,
-                    needs_intrinsics: bool = True, available: Callable[[], bool] | None = None,
-                    replace_existing: bool = False, **spec: Any) -> None:
-    """Adds a method to :data:`METHODS` (run after the ones registered before it); ``spec``:
-    the other fields of :class:`MethodSpec` (``label``, ``reads_lines``, ...). The method is
-    then in ``strl-pose predict --methods``, ``evaluate``, the support check and the labels."""
-    if name in METHODS and not replace_existing:
-        raise ValueError(f"Expected a new method name (got {name!r}, already registered)")
-    if name == RECOMMENDED:
-        raise ValueError(f"Expected a method name other than {RECOMMENDED!r} (it selects the "
-                         "recommended methods)")
-    known = {f for f in MethodSpec.__dataclass_fields__} - {"fn", "min_points",
-                                                             "needs_intrinsics", "available"}
-    unknown = sorted(set(spec) - known)
-    if unknown:
-        raise ValueError(f"Expected MethodSpec fields {sorted(known)} (got {unknown})")
-    METHODS[name] = MethodSpec(fn, min_points, needs_intrinsics, available or (lambda: True),
-                               **{"label": name, **spec})
-
-
-def methods_where(**flags: Any) -> tuple[str, ...]:
-    """The registered methods whose :class:`MethodSpec` has these field values, in
-    registration order: ``methods_where(uses_network=True)``."""
-    return tuple(n for n, s in METHODS.items()
-                 if all(getattr(s, k) == v for k, v in flags.items()))
-
-
-#: Tables derived from the registry (module ``__getattr__``: always the registry's current
-#: state, a method registered later included).
-DERIVED = {
-    "SUPPORT_CHECKED": lambda: methods_where(support_checked=True),
-    "BOOTSTRAPPED": lambda: methods_where(bootstrapped=True),
-    "NETWORK_METHODS": lambda: methods_where(uses_network=True),
-    "LINE_METHODS": lambda: methods_where(reads_lines=True),
-    "DEPENDENCIES": lambda: {n: s.depends_on for n, s in METHODS.items() if s.depends_on},
-    "METHOD_LABELS": lambda: {n: s.label for n, s in METHODS.items()},
-}
-
-
 def __getattr__(name: str) -> Any:
-    if name in DERIVED:
+    if name in DERIVED:  # the registry's derived tables (always its current state)
         return DERIVED[name]()
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def methods_needed(names: Any) -> tuple[str, ...]:
-    """``names`` with the methods they depend on, in registration order (the order
-    :class:`PoseEstimator` runs them)."""
-    want, todo = set(), list(names)
-    while todo:  # dependencies of dependencies too
-        name = todo.pop()
-        if name in want:
-            continue
-        want.add(name)
-        deps = METHODS[name].depends_on if name in METHODS else ()
-        todo.extend(classical_method() if d == "classical" else d for d in deps)
-    return tuple(m for m in METHODS if m in want)
-
-
-def network_free_methods() -> tuple[str, ...]:
-    """The registered methods whose result does not read the network, not even through a
-    method they depend on (PoseLib, OpenCV, ``vp``): their calibration does not depend on
-    the checkpoint."""
-    return tuple(n for n in METHODS
-                 if not any(METHODS[m].uses_network for m in methods_needed((n,))))
-
-
-def classical_method() -> str:
-    """The classical solver other methods start from: PoseLib if installed, else OpenCV."""
-    return "poselib" if METHODS["poselib"].available() else "opencv"
 
 
 def recommended_order(model: Any, num_points: int | None = None) -> tuple[str, ...]:
@@ -388,28 +296,6 @@ def _unique(items: list[str]) -> list[str]:
     return list(dict.fromkeys(items))
 
 
-def _checked_names(methods: Any) -> tuple[str, ...] | str:
-    """Method names to run (``None`` or ``"all"``: every installed one; one ``str``: one
-    method, or comma-separated names as ``strl-pose predict --methods`` takes them;
-    :data:`RECOMMENDED` stays as it is)."""
-    if isinstance(methods, str) and methods == RECOMMENDED:
-        return RECOMMENDED
-    if isinstance(methods, str) and methods == "all":
-        methods = None
-    if isinstance(methods, str):
-        methods = tuple(n.strip() for n in methods.split(","))
-    names = tuple(methods) if methods is not None else tuple(
-        n for n, s in METHODS.items() if s.available())
-    unknown = [n for n in names if n not in METHODS]
-    if unknown or not names:
-        raise ValueError(f"Expected methods from {tuple(METHODS)}, 'all' or "
-                         f"'{RECOMMENDED}' (got {list(names)})")
-    missing = [n for n in names if not METHODS[n].available()]
-    if missing:
-        raise ValueError(f"Expected installed methods (got {missing}: not importable here)")
-    return names
-
-
 @dataclass
 class _Pair:
     """One pair's run, the estimator's one context per pair: the matches checked once
@@ -531,11 +417,11 @@ class PoseEstimator:
         cfg = (config or EstimatorConfig()).replace(**options) if options else (
             config or EstimatorConfig())
         self.config = cfg
-        names = _checked_names(cfg.methods)
+        names = checked_method_names(cfg.methods)
         #: whether estimate() walks the recommended order by default (methods="recommended")
         self.recommended_only = names == RECOMMENDED
         #: the methods this estimator may run (all installed ones for "recommended")
-        self.method_names = _checked_names(None) if self.recommended_only else names
+        self.method_names = checked_method_names(None) if self.recommended_only else names
         self._model = model
         self._settings: CheckpointSettings | None = None
         if cfg.device is not None and self._model is not None:
@@ -617,7 +503,7 @@ class PoseEstimator:
         """The names to run: ``methods`` checked, or the estimator's own (:data:`RECOMMENDED`
         for an estimator made with it)."""
         if methods is not None:
-            return _checked_names(methods)
+            return checked_method_names(methods)
         return RECOMMENDED if self.recommended_only else self.method_names
 
     def _pair(self, matches: PairMatches) -> _Pair:

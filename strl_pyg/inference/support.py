@@ -14,6 +14,7 @@ from strl_pyg.estimation.classical import normalised_matches
 from strl_pyg.geometry import pose_sampson
 from strl_pyg.geometry.essential import triangulated_depths
 from strl_pyg.inference.record import MethodResult
+from strl_pyg.inference.registry import METHODS
 
 __all__ = ["MIN_INLIER_RATIO", "MIN_SUPPORT_INLIERS", "SUPPORT_BAND", "CHEIRALITY_MIN",
            "check_support"]
@@ -47,8 +48,6 @@ def check_support(res: MethodResult, matches: PairMatches, threshold_px: float =
     own ``MethodSpec.support_checked`` (false for the regression; true for a method the
     registry does not know)."""
     if checked is None:
-        from strl_pyg.inference.estimator import METHODS  # the registry imports this module
-
         spec = METHODS.get(res.method)
         checked = spec is None or spec.support_checked
     n = matches.num_points
