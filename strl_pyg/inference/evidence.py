@@ -65,7 +65,7 @@ def focal_consistency(matches: PairMatches, threshold_px: float = 1.0,
         return None, 0
     cv2.setRNGSeed(int(seed))
     try:
-        F, mask = cv2.findFundamentalMat(p0, p1, cv2.FM_RANSAC, threshold_px, 0.999, 2000)
+        F, mask = cv2.findFundamentalMat(p0, p1, cv2.FM_RANSAC, threshold_px, 0.999, 300)
     except cv2.error:
         return None, 0
     if F is None or F.shape != (3, 3) or mask is None:

@@ -130,21 +130,3 @@ def network_pose(model: torch.nn.Module, matches: PairMatches, seed: int = 0,
     ``strl-pose predict`` and ``evaluate`` all call it)."""
     return forward_pose(model, prepare_graph(matches, model, seed, resample), device)
 
-
-def network_pose_both_ways(model: torch.nn.Module, matches: PairMatches, seed: int = 0,
-                           resample: Any = "model", device: Any = None):
-    """The model's ``PoseOutput`` of the pair and of the pair with its images exchanged
-    (:meth:`PairMatches.swapped`), from one batched forward pass: the regression's swap
-    check without a second pass. Each output is that of :func:`network_pose` on its pair
-    (a test holds them equal)."""
-    from dataclasses import replace
-
-    from torch_geometric.data import Batch
-
-    graphs = [prepare_graph(m, model, seed, resample) for m in (matches, matches.swapped())]
-    out = forward_pose(model, Batch.from_data_list(graphs), device)
-    if out.geometric is not None:  # the geometric head's batch is not split here
-        return (forward_pose(model, graphs[0], device), forward_pose(model, graphs[1], device))
-    return tuple(replace(out, quaternion=out.quaternion[i:i + 1],
-                         translation=out.translation[i:i + 1], log_var=out.log_var[i:i + 1])
-                 for i in (0, 1))

@@ -1,0 +1,99 @@
+"""Calibrates the network's own uncertainty on real photographs and writes a shippable
+checkpoint: the regression's covariance scale fitted on the real_scenes validation scenes'
+``(i, i+2)`` pairs so that its 2-sigma region holds 95.45 % of them (the 5-dof Mahalanobis
+distance of the error under the covariance, chi-square quantile), with the coverage that scale
+gives on each scene when it is fitted on the other three (leave one scene out: the honest
+figure), and the classical methods' scales of the shipped weights (they do not read the
+network).
+
+    python benchmarks/calibrate_regression.py --model runs/real/best_model.pt \\
+        --out strl_pyg/weights/strl_pose_real.pt --training-data "..."
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench_pose as bp  # noqa: E402
+import bench_two_view as btv  # noqa: E402
+from strl_bench_common import banner  # noqa: E402
+
+QUANTILE = 0.9545  # the 2-sigma region's share under a calibrated covariance
+
+
+def mahalanobis(model, pairs) -> tuple[np.ndarray, list[str]]:
+    """The regression's squared 5-dof Mahalanobis error of every pair (uncalibrated: scale 1)
+    and each pair's scene."""
+    from strl_pyg.inference import PoseEstimator
+
+    model.metadata = {**model.metadata, "calibration": {
+        **(model.metadata.get("calibration") or {}), "regression": 1.0}}
+    est = PoseEstimator(model, methods=("regression", "poselib"))
+    d2, scenes = [], []
+    for pid, m, T in pairs:
+        reg = est.estimate(m).methods["regression"]
+        if reg.status != "ok" or reg.covariance is None:
+            d2.append(np.inf)
+        else:
+            e = bp.tangent_error(reg.T_0to1, T)
+            d2.append(float(e @ np.linalg.pinv(reg.covariance) @ e))
+        scenes.append(pid.split("/")[0])
+    return np.asarray(d2), scenes
+
+
+def fit(d2: np.ndarray) -> float:
+    return float(max(np.quantile(d2, QUANTILE) / bp.CHI2_5[2], 1e-6))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--model", required=True, help="model.pt to calibrate")
+    ap.add_argument("--out", default=None, help="write the calibrated checkpoint here")
+    ap.add_argument("--training-data", default=None, help="metadata: what it was trained on")
+    ap.add_argument("--cache", default="outputs/bench_cache")
+    args = ap.parse_args(argv)
+    import torch
+
+    from strl_pyg.metrics.stats import coverage_interval
+    from strl_pyg.model.strl_pose import StrLPose
+
+    torch.set_num_threads(1)
+    model = StrLPose.load(args.model)
+    pairs = btv.real_val_pairs(Path(args.cache), 2, 4)
+    d2, scenes = mahalanobis(model, pairs)
+    scale = fit(d2)
+    print(banner())
+    print(f"\nregression scale (pooled, {len(d2)} pairs): {scale:.4g}\n")
+    print("| scene | pairs | 2-sigma coverage, scale fitted on the other scenes | "
+          "coverage at the pooled scale |\n|---|---|---|---|")
+    for s in dict.fromkeys(scenes):
+        own = np.array([x == s for x in scenes])
+        other = fit(d2[~own])
+        hit = int((d2[own] / other < bp.CHI2_5[2]).sum())
+        lo, hi = coverage_interval(hit, int(own.sum()))
+        pooled = float((d2[own] / scale < bp.CHI2_5[2]).mean())
+        print(f"| {s} | {int(own.sum())} | {hit / own.sum():.0%} [{lo:.0%}, {hi:.0%}] "
+              f"(scale {other:.3g}) | {pooled:.0%} |")
+    if args.out:
+        _, shipped = StrLPose.pretrained_header("geometric")
+        calibration = {k: v for k, v in shipped["calibration"].items()
+                       if k in ("poselib", "opencv")}
+        calibration["regression"] = scale
+        model.metadata = {**{k: v for k, v in model.metadata.items()
+                             if k not in ("calibration", "recommended_order")},
+                          "calibration": calibration,
+                          "recommended_order": ["poselib", "opencv", "regression"],
+                          **({"training_data": args.training_data}
+                             if args.training_data else {})}
+        model.save(args.out)
+        print(f"\nwrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
