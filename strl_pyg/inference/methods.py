@@ -493,7 +493,7 @@ def _guided(matches: PairMatches, ctx: MethodContext) -> MethodResult:
     info = {"base": base, "candidate": res.info["candidate"], "refined": res.info["refined"]}
     rec = _with_covariance("guided", res.pose, matches,
                            ctx.threshold_px, time_ms=ms, info=info, raw=res)
-    boot, n_boot, source = None, ctx.bootstrap, ""
+    boot, n_boot, resampled = None, ctx.bootstrap, None
     if rec.covariance is not None and n_boot:
         # the same bootstrap as the classical records, of the solve guided kept: on all the
         # matches (then it is the base method's own, computed once) or on the network's top
@@ -503,17 +503,17 @@ def _guided(matches: PairMatches, ctx: MethodContext) -> MethodResult:
         key = f"bootstrap_{base}"
         if (subset is None and res.info["candidate"] == "all" and not res.info["refined"]
                 and key in ctx.cache):
-            boot, source = ctx.cache[key], f"{base} "
+            boot, resampled = ctx.cache[key], base
         else:
             sub = matches if subset is None else matches.select(point_index=subset)
             boot = bootstrap_resamples(sub, res.pose, base, n_boot,
                                        ctx.threshold_px, ctx.seed)
         rec.time_ms += (time.perf_counter() - start) * 1e3
-    return _add_bootstrap(rec, boot, n_boot, "first-order", source)
+    return _add_bootstrap(rec, boot, n_boot, "first-order", resampled=resampled)
 
 
 def _add_bootstrap(rec: MethodResult, boot: np.ndarray | None, n_boot: int, kind: str,
-                   source: str = "") -> MethodResult:
+                   source: str = "", resampled: str | None = None) -> MethodResult:
     """``rec`` with the bootstrap term ``boot`` added to its covariance (if both exist) and
     ``info["covariance"]`` saying which covariance it carries (``kind``, ``+ <source>bootstrap
     (n)``); a warning when the bootstrap was asked for but gave too few poses."""
@@ -524,7 +524,7 @@ def _add_bootstrap(rec: MethodResult, boot: np.ndarray | None, n_boot: int, kind
         rec.info["covariance"] = f"{kind} + {source}bootstrap ({n_boot})"
         rec.info["bootstrap_far"] = boot.far
         if boot.far:  # named by the solve it resampled: said once per pose, however many
-            who = source.strip() or rec.method  # methods reuse that bootstrap
+            who = resampled or source.strip() or rec.method  # methods reuse it
             rec.warnings.append(
                 f"{who} bootstrap: {boot.far} of {boot.resamples} resamples found "
                 f"another pose (over {FAR_ROTATION_DEG:g} deg in rotation or "

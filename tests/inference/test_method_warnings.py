@@ -23,20 +23,3 @@ def test_a_reused_bootstrap_warns_in_one_sentence():
     assert own.warnings[0].startswith("poselib bootstrap: 3 of 16 resamples found another")
     assert fused.info["covariance"] == "information form + poselib bootstrap (16)"
 
-
-def test_vp_without_lines_is_skipped_as_documented():
-    """Before: 'failed' (docs/api.md: a method whose input lacks what it reads is
-    'skipped')."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from test_evidence import make_pair
-
-    from strl_pyg.inference import PoseEstimator
-
-    m, _, _ = make_pair("general")
-    est = PoseEstimator(methods=("opencv", "vp"), bootstrap=0).estimate(m)
-    assert est.methods["vp"].status == "skipped"
-    assert "vp needs line matches" in est.methods["vp"].warnings[0]
-    assert est.pose.status == "ok" and est.pose.method == "opencv"
