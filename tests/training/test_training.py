@@ -18,7 +18,7 @@ from strl_pyg.training.loop import (
     train,
 )
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def tiny_config(out_dir, **kw) -> TrainConfig:

@@ -19,7 +19,7 @@ from strl_pyg.synthetic.distributions import scene_distribution
 from strl_pyg.training import TrainConfig, train
 from strl_pyg.training.data import StepBatchSampler
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _tiny(row: str, tmp_path: Path, **kw) -> TrainConfig:
@@ -170,7 +170,7 @@ def test_the_results_that_must_outlive_the_machine_are_not_git_ignored():
     import shutil
     import subprocess
 
-    repo = Path(__file__).resolve().parents[1]
+    repo = Path(__file__).resolve().parents[2]
     if shutil.which("git") is None or not (repo / ".git").exists():
         pytest.skip("not a git checkout")
     for rel in ("runs/full-s0.json", "history/full-s0.json", "sets.json", "poselib.json"):

@@ -59,7 +59,6 @@ def test_noise_free_recovers_gt(method):
     assert float(res.pose.t.norm()) == pytest.approx(1.0)
     assert res.inliers.shape == (200,) and res.inliers.dtype == bool
     assert res.num_inliers >= 195
-    assert res.time_ms > 0
 
 
 @pytest.mark.parametrize("method", METHODS)

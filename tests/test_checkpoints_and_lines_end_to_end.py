@@ -1,5 +1,5 @@
-"""A newcomer trial after round 4 (stop 46): each item reproduced as the user met it, then
-its fix."""
+"""Own checkpoints, intrinsics of resized images, match files without K, line segments in
+other conventions: each case as a user met it, then what it gets."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""Issue "First contact, round 4": each item reproduced as a user met it, then its fix."""
+"""Inputs as users give them, end to end: repeated matches, normalised coordinates, other
+tools' files, odd images and flags; each case as a user met it, then what it gets."""
 
 from __future__ import annotations
 

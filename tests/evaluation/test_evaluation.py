@@ -23,7 +23,7 @@ from strl_pyg.evaluation.run import (
 )
 from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")

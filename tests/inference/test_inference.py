@@ -32,7 +32,7 @@ from strl_pyg.metrics.two_view import relative_pose_error
 from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
 from strl_pyg.synthetic import generate_pair
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+REPO_ROOT = Path(__file__).resolve().parents[2]
 SEED = 2_000_017  # held out from training
 HAVE_POSELIB = METHODS["poselib"].available()
 KEYS = {"method", "status", "T_0to1", "sigma", "covariance", "warnings", "time_ms",

@@ -25,7 +25,7 @@ from strl_pyg.training.checkpoints import (
 )
 from strl_pyg.utils.images import check_image, read_image_file
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def tiny(**kw) -> StrLPose:

@@ -30,7 +30,7 @@ from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.synthetic import generate_pair
 
 SEED = 2_000_017  # held out from training
-DINO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "middlebury_dino"
+DINO = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "middlebury_dino"
 
 
 @pytest.fixture(scope="module")

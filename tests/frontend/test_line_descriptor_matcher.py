@@ -74,7 +74,7 @@ def test_generated_pair_matches_follow_the_true_geometry(monkeypatch):
     assert len(l0) >= 10
     from pathlib import Path
 
-    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2] / "benchmarks"))
     from bench_line_matchers import consistent
 
     from strl_pyg.geometry.epipolar import fundamental_from_pose

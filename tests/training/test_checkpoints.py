@@ -23,7 +23,7 @@ from strl_pyg.training.loop import (
 )
 from strl_pyg.utils.io import UnsafeFileError, one_line, safe_torch_load
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 UNSAFE_ADVICE = ("weights_only", "allow_pickle", "safe_globals", "trust the source")
 
 

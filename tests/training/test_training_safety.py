@@ -20,7 +20,7 @@ import torch
 from strl_pyg.training import TrainConfig, train
 from strl_pyg.training.loop import check_device, check_run_folder
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _cfg(out: Path, **kw) -> TrainConfig:
@@ -274,7 +274,7 @@ def test_a_skipped_step_keeps_its_batch_and_weights_to_reproduce_it(tmp_path, mo
     import importlib.util
 
     spec = importlib.util.spec_from_file_location(
-        "replay", Path(__file__).resolve().parents[1] / "benchmarks" / "replay_skipped_step.py")
+        "replay", Path(__file__).resolve().parents[2] / "benchmarks" / "replay_skipped_step.py")
     replay = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(replay)
     _nan_gradients_on(monkeypatch, {-1})

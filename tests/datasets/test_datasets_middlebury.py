@@ -7,7 +7,7 @@ import pytest
 
 from strl_pyg.datasets.middlebury import middlebury_pairs, read_middlebury_parameters
 
-DINO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "middlebury_dino"
+DINO = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "middlebury_dino"
 
 
 def _write(tmp_path, lines):
