@@ -1,4 +1,4 @@
-"""strl_pyg.datasets.posed: each format written from a known camera set reads back the same
+"""strl_pyg.datasets.camera_files and posed: each format written from a known camera set reads back the same
 intrinsics and relative poses; pairs by overlap; clear errors on bad files."""
 
 from __future__ import annotations
@@ -10,16 +10,18 @@ import cv2
 import numpy as np
 import pytest
 
-from strl_pyg.datasets.posed import (
-    REAL_SCENES_SPLIT,
+from strl_pyg.datasets.camera_files import (
     PosedImage,
-    PosedImagePairs,
-    PosedPairOptions,
     read_colmap_model,
     read_llff_poses,
     read_nerf_transforms,
     read_posed_folder,
     read_real_scene,
+)
+from strl_pyg.datasets.posed import (
+    REAL_SCENES_SPLIT,
+    PosedImagePairs,
+    PosedPairOptions,
     select_pairs,
 )
 
