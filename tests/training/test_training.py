@@ -219,7 +219,7 @@ def test_torchrun_two_ranks_identical_and_equal_to_single_process(tmp_path, monk
     script = tmp_path / "ddp_train.py"
     script.write_text(textwrap.dedent(f"""
         import os, sys, torch
-        sys.path.insert(0, {str(REPO / "tests")!r})
+        sys.path.insert(0, {str(Path(__file__).resolve().parent)!r})
         from test_training import tiny_config
         from strl_pyg.training import clip
         from strl_pyg.training.loop import train
