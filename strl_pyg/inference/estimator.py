@@ -96,6 +96,13 @@ from strl_pyg.inference.network import (
     prepare_graph,
     prepare_matches,
 )
+from strl_pyg.inference.policy import (  # noqa: F401  (the policy's names, importable here)
+    POINT_POOR_ORDER,
+    POSELIB_MISSING,
+    RECOMMENDED_ORDER,
+    measured_with_missing_poselib,
+    recommended_order,
+)
 from strl_pyg.inference.record import STATUSES, MethodResult, PoseEstimate
 from strl_pyg.inference.registry import (  # noqa: F401  (the registry's names, importable here)
     DERIVED,
@@ -122,61 +129,10 @@ __all__ = [
 ]
 
 
-#: Which method fills the recommended pose: the first ``"ok"`` one (unavailable ones skipped).
-RECOMMENDED_ORDER: tuple[str, ...] = ("poselib", "opencv", "regression")
-#: Where a pair has at most :data:`POINT_POOR_MAX_POINTS` point matches, these methods come
-#: before the recommended order. Fitted on the point-poor calibration split of
-#: ``benchmarks/bench_vanishing.py --sets calibration`` (100 generated pairs of other seeds than
-#: the evaluation's, <= 30 point and >= 20 line matches; the bound 30 is that split's
-#: definition, not a fit): the recommended pose with ``vp`` first beats PoseLib beyond the
-#: paired-bootstrap noise, without it it does not (``benchmarks/results_vanishing.md``).
-POINT_POOR_ORDER: tuple[str, ...] = ("vp",)
-
-
 def __getattr__(name: str) -> Any:
     if name in DERIVED:  # the registry's derived tables (always its current state)
         return DERIVED[name]()
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def recommended_order(model: Any, num_points: int | None = None) -> tuple[str, ...]:
-    """The order in which methods fill the recommended pose (``model``: a model, its
-    :class:`CheckpointSettings` or ``None``): the checkpoint's
-    ``metadata["recommended_order"]`` (measured on held-out data when the checkpoint was
-    calibrated, see ``benchmarks/bench_pose.py --calibrate``), else :data:`RECOMMENDED_ORDER`;
-    with ``num_points`` at most :data:`POINT_POOR_MAX_POINTS`, :data:`POINT_POOR_ORDER` first.
-    Methods that are not installed are skipped when the estimate is made."""
-    order = _stored_order(model) or RECOMMENDED_ORDER
-    if num_points is not None and num_points <= POINT_POOR_MAX_POINTS:
-        order = POINT_POOR_ORDER + tuple(m for m in order if m not in POINT_POOR_ORDER)
-    if "poselib" in order and not METHODS["poselib"].available():
-        # measured with PoseLib, which fused and guided also start from: without it those are
-        # other, unmeasured methods, so OpenCV (the remaining classical default) takes its place
-        i = order.index("poselib")
-        order = tuple(m for m in order[:i] if m != "opencv") + ("opencv",) + tuple(
-            m for m in order[i + 1:] if m != "opencv")
-    return order
-
-
-#: Why every pose is ``"unreliable"`` when :func:`intrinsics_problems` finds any (followed by
-#: them in the method records; the recommended pose lists them once, as input warnings).
-
-#: Added to the recommended pose's warnings when the order was measured with PoseLib and it is
-#: not installed here.
-POSELIB_MISSING = ("PoseLib is not installed: the recommended order was measured with it, so "
-                   "OpenCV takes its place (pip install 'strl-pyg[poselib]' for the measured "
-                   "default)")
-
-
-def _stored_order(model: Any) -> tuple[str, ...]:
-    """The checkpoint's measured ``metadata["recommended_order"]`` (``()`` when absent);
-    ``model`` may also be its :class:`CheckpointSettings`."""
-    settings = model if isinstance(model, CheckpointSettings) else CheckpointSettings.of(model)
-    return settings.recommended_order
-
-
-def _measured_with_missing_poselib(model: Any) -> bool:
-    return "poselib" in _stored_order(model) and not METHODS["poselib"].available()
 
 
 register_method("regression", _regression, needs_intrinsics=False, uses_network=True,
@@ -666,7 +622,7 @@ class PoseEstimator:
                 f"bootstrap={fitted_boot}, this estimate used bootstrap={self.bootstrap})")
             scale = None
         if (scale is not None and spec.classical_base and res.covariance is not None
-                and _measured_with_missing_poselib(settings)):
+                and measured_with_missing_poselib(settings)):
             res.warnings.append(
                 f"{name}: covariance not calibrated ({which} was fitted with "
                 "PoseLib as its classical base, which is not installed here)")
@@ -743,7 +699,7 @@ class PoseEstimator:
         could not run at all (an exception: e.g. the network on a device it cannot use)."""
         chosen = recommended_order(self.settings, matches.num_distinct_points)
         order = [m for m in chosen if m in results]
-        notes = [POSELIB_MISSING] if _measured_with_missing_poselib(self.settings) else []
+        notes = [POSELIB_MISSING] if measured_with_missing_poselib(self.settings) else []
         raised = [m for m, r in results.items() if r.info.get("raised")]
         notes += [f"{m} could not run: {'; '.join(results[m].warnings)}" for m in raised]
         # the regression stands in only while some solver's pose is supported or none was

@@ -21,6 +21,7 @@ from strl_pyg.estimation.classical import BaselineResult
 from strl_pyg.geometry import Pose
 from strl_pyg.inference import estimator as inference
 from strl_pyg.inference import methods as pose_methods
+from strl_pyg.inference import policy
 from strl_pyg.inference.estimator import (
     METHODS,
     MethodResult,
@@ -289,7 +290,7 @@ def test_a_new_method_is_one_registration(pair, monkeypatch, method_registry):
     # a method that is not support-checked (a learned one) is recommended only where the
     # matches support its pose: this one repeats OpenCV's
     inference.register_method("guess", identity_guess, support_checked=False)
-    monkeypatch.setattr(inference, "RECOMMENDED_ORDER", ("guess", "opencv"))
+    monkeypatch.setattr(policy, "RECOMMENDED_ORDER", ("guess", "opencv"))
     # a model without a measured order (the shipped one records its own)
     est = PoseEstimator(tiny(), methods=("opencv", "guess")).estimate(pair.matches)
     assert est.pose.method == "guess" and list(est.methods) == ["opencv", "guess"]
@@ -302,7 +303,7 @@ def test_an_unsupported_learned_pose_is_not_recommended(pair, monkeypatch, metho
     with its own pose and status "ok" whatever the matches said."""
     inference.register_method("guess", lambda m, c: MethodResult("guess", "ok", np.eye(4)),
                               support_checked=False)
-    monkeypatch.setattr(inference, "RECOMMENDED_ORDER", ("guess",))
+    monkeypatch.setattr(policy, "RECOMMENDED_ORDER", ("guess",))
     est = PoseEstimator(tiny(), methods=("guess",)).estimate(pair.matches)
     assert est.methods["guess"].status == "ok"  # the method's own record is its answer
     assert est.pose.status == "unreliable" and est.pose.T_0to1 is None
