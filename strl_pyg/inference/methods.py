@@ -13,7 +13,7 @@ the context they share; :mod:`strl_pyg.inference.estimator` registers them in :d
 * ``vp``: the vanishing-point rotation of the matched lines and a 2-point translation
   (:func:`~strl_pyg.estimation.vanishing.vanishing_point_pose`); first in the recommended order
   where a pair has at most 30 point matches
-  (:data:`~strl_pyg.inference.estimator.POINT_POOR_ORDER`, ``benchmarks/results_vanishing.md``).
+  (:data:`~strl_pyg.inference.policy.POINT_POOR_ORDER`, ``benchmarks/results_vanishing.md``).
 * ``vp_checked`` (:func:`_vp_checked`): the classical pose, replaced by ``vp``'s where the
   points are few and the lines' strongest vanishing direction contradicts its rotation; opt-in.
 

@@ -2,7 +2,7 @@
 
 :class:`~strl_pyg.inference.PoseEstimator` with its default runs every installed method and
 then picks the recommended pose: the first ``"ok"`` method of the checkpoint's recommended
-order (:func:`~strl_pyg.inference.recommended_order`). With ``methods="recommended"``
+order (:func:`~strl_pyg.inference.policy.recommended_order`). With ``methods="recommended"``
 (:data:`~strl_pyg.inference.estimator.RECOMMENDED`; :func:`estimate_recommended` here) it gives
 the same recommended pose in one pass over the pair: the images matched once (the points
 first, the line segments added to them only once a method that reads them, the network's or
@@ -11,7 +11,7 @@ normalised once, and the methods of that order run one at a time, stopping at th
 ``"ok"`` one (with the methods it needs: ``fused`` reads ``regression`` and a classical
 estimate, ``guided`` reuses the classical one; or at the first ``"unreliable"`` one when the
 intrinsics fail the input checks: every later pose would be too). With few point matches the
-order starts with :data:`~strl_pyg.inference.estimator.POINT_POOR_ORDER`.
+order starts with :data:`~strl_pyg.inference.policy.POINT_POOR_ORDER`.
 
 Same pose: every method is deterministic in the matches and the seed, the point matches do not
 depend on whether lines are matched (``filter_points`` off), and a method's result depends only
