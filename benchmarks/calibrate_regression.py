@@ -26,14 +26,16 @@ from strl_bench_common import banner  # noqa: E402
 QUANTILE = 0.9545  # the 2-sigma region's share under a calibrated covariance
 
 
-def mahalanobis(model, pairs) -> tuple[np.ndarray, list[str]]:
+def mahalanobis(model, pairs, own: bool = False) -> tuple[np.ndarray, list[str]]:
     """The regression's squared 5-dof Mahalanobis error of every pair (uncalibrated: scale 1)
-    and each pair's scene."""
+    and each pair's scene; ``own``: the network's own covariance (its log-variances alone,
+    without the swap and data checks the estimator adds)."""
     from strl_pyg.inference import PoseEstimator
 
     model.metadata = {**model.metadata, "calibration": {
         **(model.metadata.get("calibration") or {}), "regression": 1.0}}
-    est = PoseEstimator(model, methods=("regression", "poselib"))
+    est = PoseEstimator(model, methods=("regression", "poselib"), swap_check=not own,
+                        data_check=not own)
     d2, scenes = [], []
     for pid, m, T in pairs:
         reg = est.estimate(m).methods["regression"]
@@ -56,7 +58,11 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=None, help="write the calibrated checkpoint here")
     ap.add_argument("--training-data", default=None, help="metadata: what it was trained on")
     ap.add_argument("--cache", default="outputs/bench_cache")
+    ap.add_argument("--own", action="store_true",
+                    help="the network's own covariance (no swap / data check); no --out")
     args = ap.parse_args(argv)
+    if args.own and args.out:
+        ap.error("--own measures the network's own covariance; the estimator's is calibrated")
     import torch
 
     from strl_pyg.metrics.stats import coverage_interval
@@ -65,10 +71,11 @@ def main(argv=None) -> int:
     torch.set_num_threads(1)
     model = StrLPose.load(args.model)
     pairs = btv.real_val_pairs(Path(args.cache), 2, 4)
-    d2, scenes = mahalanobis(model, pairs)
+    d2, scenes = mahalanobis(model, pairs, own=args.own)
     scale = fit(d2)
     print(banner())
-    print(f"\nregression scale (pooled, {len(d2)} pairs): {scale:.4g}\n")
+    what = "the network's own covariance" if args.own else "the estimator's covariance"
+    print(f"\nregression scale (pooled, {len(d2)} pairs, {what}): {scale:.4g}\n")
     print("| scene | pairs | 2-sigma coverage, scale fitted on the other scenes | "
           "coverage at the pooled scale |\n|---|---|---|---|")
     for s in dict.fromkeys(scenes):
