@@ -49,6 +49,7 @@ def image_dir(tmp_path_factory):
     return d, f"{K[0, 0]},{K[1, 1]},{K[0, 2]},{K[1, 2]}"
 
 
+@pytest.mark.slow
 def test_predict_pairs_gives_one_json_line_per_pair_and_goes_on(image_dir, capsys):
     """What hloc users reach for: a pairs file over an image folder; one bad pair (a missing
     image) is its error line and the others still run."""
@@ -70,6 +71,7 @@ def test_predict_pairs_gives_one_json_line_per_pair_and_goes_on(image_dir, capsy
     assert "Expected 'image0 image1' on line 1" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_predict_png_colours_the_support_and_threshold_is_a_flag(image_dir, tmp_path, capsys):
     """Before: the drawing coloured every match green, with no legend; no --threshold-px."""
     from strl_pyg import cli

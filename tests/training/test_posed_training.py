@@ -63,6 +63,7 @@ def test_posed_and_generated_pairs_train_together(posed_root, tmp_path):
     assert all("pose_err_med" in h for h in result["history"])
 
 
+@pytest.mark.slow
 def test_generated_pairs_can_be_cycled_to_the_share(posed_root, tmp_path):
     cfg = posed_config(posed_root, tmp_path, synthetic_share=0.75, synthetic_pairs=2)
     train_ds, _ = build_datasets(cfg, progress=False)
