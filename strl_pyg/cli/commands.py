@@ -375,7 +375,7 @@ def cmd_match(args) -> int:
         inliers = fundamental_inliers(matches)
         title = ("no fundamental matrix found: every match drawn as an outlier" if inliers is None
                  else f"green: {int(inliers.sum())} of {matches.num_points} point matches fit "
-                      "the pair's fundamental matrix (RANSAC, 1 px)")
+                      "the pair's fundamental matrix (MAGSAC, 1 px)")
         mask = inliers if inliers is not None else np.zeros(matches.num_points, bool)
         png = save_matches_png(args.png, matches, point_inliers=mask, title=title, legend=True)
         print(f"drawing -> {png}")
@@ -383,17 +383,13 @@ def cmd_match(args) -> int:
 
 
 def fundamental_inliers(matches) -> np.ndarray | None:
-    """The point matches within 1 px of the pair's fundamental matrix (OpenCV RANSAC, pixels),
-    as ``match --png`` colours them; ``None`` with fewer than 8 matches or no F."""
-    import cv2
+    """The point matches within 1 px of the pair's fundamental matrix
+    (:func:`~strl_pyg.estimation.classical.fundamental_matrix`), as ``match --png`` colours
+    them; ``None`` with too few matches or no F."""
+    from strl_pyg.estimation.classical import fundamental_matrix
 
-    if matches.num_points < 8:
-        return None
-    cv2.setRNGSeed(0)
-    F, mask = cv2.findFundamentalMat(np.asarray(matches.points0, np.float64),
-                                     np.asarray(matches.points1, np.float64), cv2.FM_RANSAC,
-                                     1.0, 0.999, 2000)
-    return None if F is None or mask is None else mask.ravel().astype(bool)
+    found = fundamental_matrix(matches)
+    return None if found is None else found[1]
 
 
 def cmd_predict(args) -> int:

@@ -318,9 +318,8 @@ def read_nerf_transforms(path: str | os.PathLike) -> list[PosedImage]:
         cx = float(cam.get("cx", w / 2)) - 0.5
         cy = float(cam.get("cy", h / 2)) - 0.5
         dist = tuple(float(cam.get(k, 0.0)) for k in ("k1", "k2", "p1", "p2"))
-        T = _check_pose(np.asarray(fr["transform_matrix"], dtype=np.float64) @ _GL_TO_CV
-                        if np.asarray(fr["transform_matrix"]).shape == (4, 4)
-                        else np.asarray(fr["transform_matrix"]), where)
+        T = np.asarray(fr["transform_matrix"], dtype=np.float64)
+        T = _check_pose(T @ _GL_TO_CV if T.shape == (4, 4) else T, where)  # else: its error
         out.append(PosedImage(str(file), _check_K(_pinhole(fx, fy, cx, cy), where), T, size,
                               dist if any(dist) else ()))
     return out

@@ -26,11 +26,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-import cv2
+
 import numpy as np
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.estimation.classical import normalised_matches
+from strl_pyg.estimation.classical import fundamental_matrix, normalised_matches
 from strl_pyg.inference.checks import BAD_INTRINSICS
 from strl_pyg.estimation.two_view import TwoViewGeometry, classify_two_view, planar_candidates
 from strl_pyg.inference.record import MethodResult, PoseEstimate
@@ -57,29 +57,22 @@ PLANAR_AGREE_DEG = 5.0
 def focal_consistency(matches: PairMatches, threshold_px: float = 1.0,
                       seed: int = 0) -> tuple[float | None, int]:
     """``(s2 / s1, inliers)`` of the essential matrix ``K1^T F K0`` implied by the
-    fundamental matrix of the point matches (OpenCV RANSAC in pixels); ``(None, 0)`` where no
-    F is found."""
-    p0 = np.asarray(matches.points0, dtype=np.float64)
-    p1 = np.asarray(matches.points1, dtype=np.float64)
-    if len(p0) < 8:
+    fundamental matrix of the point matches (:func:`~strl_pyg.estimation.classical.
+    fundamental_matrix`); ``(None, 0)`` where no F is found."""
+    found = fundamental_matrix(matches, threshold_px, seed)
+    if found is None:
         return None, 0
-    cv2.setRNGSeed(int(seed))
-    try:
-        F, mask = cv2.findFundamentalMat(p0, p1, cv2.FM_RANSAC, threshold_px, 0.999, 300)
-    except cv2.error:
-        return None, 0
-    if F is None or F.shape != (3, 3) or mask is None:
-        return None, 0
+    F, mask = found
     E = np.asarray(matches.K1, dtype=np.float64).T @ F @ np.asarray(matches.K0, np.float64)
     s = np.linalg.svd(E, compute_uv=False)
-    return (float(s[1] / s[0]) if s[0] > 0 else None), int(mask.ravel().astype(bool).sum())
+    return (float(s[1] / s[0]) if s[0] > 0 else None), int(mask.sum())
 
 
 def pair_geometry(matches: PairMatches, threshold_px: float = 1.0,
                   seed: int = 0) -> TwoViewGeometry | None:
     """The pair's two-view configuration (:func:`~strl_pyg.estimation.two_view.
-    classify_two_view`) with the focal check in ``info`` style attributes; ``None`` without
-    intrinsics."""
+    classify_two_view`) with the focal check of a general one (``focal_sv_ratio``,
+    ``focal_inliers``); ``None`` without intrinsics."""
     if not matches.has_intrinsics or matches.num_points == 0:
         return None
     x0, x1, focal = normalised_matches(matches)

@@ -214,7 +214,8 @@ class TrainConfig:
                              f"(got {self.checkpoint_every!r})")
         if not self.checkpoint_minutes >= 0:
             raise ValueError(f"Expected checkpoint_minutes >= 0 (got {self.checkpoint_minutes!r})")
-        for name in ("batch_size", "steps", "val_every", "train_pairs", "val_pairs", "kitti_k"):
+        for name in ("batch_size", "steps", "val_every", "train_pairs", "val_pairs", "kitti_k",
+                     "val_gap", "val_stride"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"Expected a positive integer '{name}' (got {value!r})")
@@ -252,10 +253,6 @@ class TrainConfig:
         if not self.posed_gaps or any(not isinstance(g, int) or isinstance(g, bool) or g < 1
                                       for g in self.posed_gaps):
             raise ValueError(f"Expected posed_gaps as positive integers (got {self.posed_gaps!r})")
-        for name in ("val_gap", "val_stride"):
-            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
-                raise ValueError(f"Expected a positive integer '{name}' "
-                                 f"(got {getattr(self, name)!r})")
         if not 0 < self.posed_max_rotation <= 180:
             raise ValueError(f"Expected posed_max_rotation in (0, 180] degrees "
                              f"(got {self.posed_max_rotation!r})")

@@ -145,13 +145,10 @@ def build_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
         kw = dict(matches="frontend", cache_dir=cfg.cache_dir) if cfg.matches == "frontend" \
             else {}
 
+        scenes = [SceneConfig(**{**cfg.scene, "kind": kind}) for kind in kinds]
+
         def part(total: int, base: int) -> ConcatDataset:
-            # kind j gets seeds base + j * 100_000 + i; sizes split as evenly as possible
-            sizes = [total // len(kinds) + (j < total % len(kinds)) for j in range(len(kinds))]
-            parts = [D.SyntheticPairs(n, seed=base + j * 100_000,
-                                      scene_config=SceneConfig(**{**cfg.scene, "kind": kind}),
-                                      patch_size=cfg.patch_size, keep_images=keep, **kw)
-                     for j, (kind, n) in enumerate(zip(kinds, sizes, strict=True)) if n > 0]
+            parts = generated_parts(cfg, scenes, total, base, keep, **kw)
             for ds in parts if kw else ():
                 ds.build_cache(num_workers=cfg.num_workers, progress=progress)
             return ConcatDataset(parts)
@@ -207,6 +204,19 @@ def posed_scenes(cfg: TrainConfig) -> tuple[list[str], list[str]]:
     return list(train), list(val)
 
 
+def generated_parts(cfg: TrainConfig, scenes: list, total: int, base: int, keep: bool,
+                    **kw: Any) -> list:
+    """``total`` generated pairs split as evenly as possible over the scene configurations
+    ``scenes``: configuration ``j`` gets the seeds ``base + j * 100_000 + i`` (``kw``: more
+    :class:`~strl_pyg.datasets.SyntheticPairs` options, e.g. front-end matches)."""
+    from strl_pyg import datasets as D
+
+    sizes = [total // len(scenes) + (j < total % len(scenes)) for j in range(len(scenes))]
+    return [D.SyntheticPairs(n, seed=base + j * 100_000, scene_config=sc,
+                             patch_size=cfg.patch_size, keep_images=keep, **kw)
+            for j, (sc, n) in enumerate(zip(scenes, sizes, strict=True)) if n > 0]
+
+
 def drop_match_scores(data: HeteroData) -> HeteroData:
     """The graph without the front end's match scores (``score`` of points and endpoints),
     which generated pairs do not have (the model does not read them)."""
@@ -256,12 +266,8 @@ def _posed_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
     else:
         scenes = [SceneConfig(**{**cfg.scene, "kind": k})
                   for k in (cfg.scene_kinds or [SceneConfig().kind])]
-    base = cfg.resolved_data_seed * 10_000_000
-    sizes = [n_gen // len(scenes) + (j < n_gen % len(scenes)) for j in range(len(scenes))]
-    gen = [D.SyntheticPairs(n, seed=base + j * 100_000, scene_config=sc,
-                            patch_size=cfg.patch_size, keep_images=keep)
-           for j, (sc, n) in enumerate(zip(scenes, sizes, strict=True)) if n > 0]
-    gen = ConcatDataset(gen)
+    gen = ConcatDataset(generated_parts(cfg, scenes, n_gen, cfg.resolved_data_seed * 10_000_000,
+                                        keep))
     if len(gen) < n_share:
         gen = _Cycled(_InMemory(gen, cfg.in_memory), n_share)
     return ConcatDataset([train, gen]), val
