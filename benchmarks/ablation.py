@@ -86,15 +86,18 @@ _BASE_ARGS = list(TRAIN_ARGS)
 TRAIN_SCRIPT = Path(__file__).resolve().parents[1] / "examples" / "train.py"
 #: Where the results that outlive the machine go (committed): see the module docstring.
 RESULTS = Path(__file__).resolve().parent / "results_ablation"
+#: Another recipe's Table 3 is a study: its results go under ``benchmarks/studies/``.
+STUDIES = Path(__file__).resolve().parent / "studies"
 
 
 #: The two training recipes (issue "A network that learns its pose"): ``paper`` is the paper's
 #: (its four coordinates per node, the aleatoric loss on all 7 components), the recipe of the
 #: first Table 3 (``results_ablation/``); ``balanced`` is the flow node inputs and beta-NLL
-#: with an angular translation term (``benchmarks/results_pose_recipe.md``), at this
+#: with an angular translation term (``benchmarks/studies/results_pose_recipe.md``), at this
 #: protocol's constant 3e-4 and beta 0.5 (the package's defaults moved on to the study's
 #: winner in 0.4; :data:`TRAIN_ARGS` pins these)
-#: and is scored into ``results_ablation_balanced/``. Everything else is the same protocol.
+#: and is scored into ``studies/results_ablation_balanced/``. Everything else is the same
+#: protocol.
 RECIPES = {"paper": ["--loss", "paper", "--set", "inputs=paper"],
            "balanced": ["--loss", "balanced", "--set", "inputs=flow"]}
 #: The balanced recipe's plan: 3 seeds of baseline, LP, V and full, and L (seed 0 of every
@@ -111,7 +114,7 @@ def use_recipe(name: str, root: Path) -> Path:
     TRAIN_ARGS[:] = [a for a in _BASE_ARGS] + RECIPES[name]
     if name == "paper":
         return root
-    RESULTS = Path(__file__).resolve().parent / f"results_ablation_{name}"
+    RESULTS = STUDIES / f"results_ablation_{name}"
     PLAN = PLAN_BALANCED
     run_root = root / name
     run_root.mkdir(parents=True, exist_ok=True)
@@ -551,6 +554,24 @@ def plot_curves(hists: dict[str, list[dict]], path: Path) -> None:
     plt.close(fig)
 
 
+def _default_paths(args: argparse.Namespace) -> None:
+    """The report's and the curves' files where the command line gives none: the paper
+    recipe's Table 3 at the top of ``benchmarks/``, another recipe's under ``studies/``."""
+    if args.command not in ("report", "curves"):
+        return
+    here = Path(__file__).resolve().parent
+    paper = args.recipe == "paper"
+    top = here if paper else STUDIES
+    args.results = args.results or str(RESULTS)
+    args.figure = args.figure or str(
+        top / "figures" / ("ablation_curves.png" if paper else f"ablation_{args.recipe}.png"))
+    if args.out is None and args.command == "curves":
+        args.out = str(Path(args.results) / "curves.md")
+    elif args.out is None:
+        args.out = str(top / ("results_ablation.md" if paper
+                              else f"results_ablation_{args.recipe}.md"))
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -580,27 +601,20 @@ def main(argv: list[str] | None = None) -> int:
                    help="also score a shipped checkpoint (StrLPose.PRETRAINED name, default "
                         "'geometric') as a reference row, once (reference/<NAME>.json)")
     r = sub.add_parser("report", help="write the results table and the curves plot")
-    here = Path(__file__).resolve().parent
-    r.add_argument("--results", default=str(RESULTS), help="the scored runs")
-    r.add_argument("--out", default=str(here / "results_ablation.md"))
-    r.add_argument("--figure", default=str(here / "figures" / "ablation_curves.png"))
+    r.add_argument("--results", default=None, help="the scored runs (default: RESULTS)")
+    r.add_argument("--out", default=None,
+                   help="default: results_ablation.md (another recipe: studies/"
+                        "results_ablation_<recipe>.md)")
+    r.add_argument("--figure", default=None,
+                   help="default: figures/ablation_curves.png (another recipe: studies/"
+                        "figures/ablation_<recipe>.png)")
     c = sub.add_parser("curves", help="validation curves of the runs so far (table + plot)")
-    c.add_argument("--out", default=str(here / "results_ablation_curves.md"))
-    c.add_argument("--figure", default=str(here / "figures" / "ablation_curves.png"))
-    c.add_argument("--results", default=str(RESULTS), help="the committed histories")
+    c.add_argument("--out", default=None, help="default: curves.md in RESULTS")
+    c.add_argument("--figure", default=None, help="default: the report's")
+    c.add_argument("--results", default=None, help="the committed histories (default: RESULTS)")
     args = ap.parse_args(argv)
     args.root = str(use_recipe(args.recipe, Path(args.root)))
-    if args.recipe != "paper":
-        for key in ("results",):
-            if getattr(args, key, None) == str(here / "results_ablation"):
-                setattr(args, key, str(RESULTS))
-        for key, name in (("out", "results_ablation_{}.md"), ("figure", "ablation_{}.png")):
-            value = getattr(args, key, None)
-            if value is not None and Path(value).name in ("results_ablation.md",
-                                                         "results_ablation_curves.md",
-                                                         "ablation_curves.png"):
-                stem = "curves_" if "curves" in Path(value).name and key == "out" else ""
-                setattr(args, key, str(Path(value).parent / name.format(stem + args.recipe)))
+    _default_paths(args)
     return {"train": cmd_train, "cache": cmd_cache, "status": cmd_status, "eval": cmd_eval,
             "report": cmd_report, "curves": cmd_curves}[args.command](args)
 

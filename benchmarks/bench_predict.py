@@ -238,7 +238,7 @@ def main() -> None:
              "pair in this run. Targets (issue 'The learned path at CPU speed'): the network "
              "path (front end with lines, graph, forward, PoseLib, fused) <= 1.0x, the default "
              "predict <= 0.8x. The figures before that issue's work: "
-             "`benchmarks/results_predict_before.md`. Run it on a quiet machine.", ""]
+             "`benchmarks/studies/results_predict_before.md`. Run it on a quiet machine.", ""]
     t0 = time.perf_counter()
     model = StrLPose.from_pretrained()
     load_ms = 1e3 * (time.perf_counter() - t0)

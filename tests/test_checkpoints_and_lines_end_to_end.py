@@ -237,21 +237,3 @@ def test_mistyped_set_key_names_the_closest(capsys):
         TrainConfig(model_overrides={"hiden": 3}).model_config()
     with pytest.raises(ValueError, match=r"\(got zzz\)$"):
         TrainConfig(model_overrides={"zzz": 3}).model_config()
-
-
-def test_the_calibration_fit_reads_raw_covariances(pair):
-    """Found while fixing the above: `bench_pose.py --calibrate` fits on the checkpoint with
-    its calibration removed; with the shipped fallback, PoseLib's covariance would have been
-    scaled during the fit, and the stored scale ~1 (sigma 4-5x too small)."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    import bench_pose
-
-    model = StrLPose.from_pretrained()
-    md = bench_pose.uncalibrated(model.metadata)
-    assert md["calibration"] == {} and "recommended_order" not in md
-    model.metadata = md
-    rec = PoseEstimator(model, methods="poselib").estimate(_pm(pair)).pose
-    assert rec.status == "ok" and "calibration_scale" not in rec.info

@@ -1,12 +1,14 @@
-"""The documentation runs as written: README.md, docs/*.md and benchmarks/README.md.
+"""The documentation runs as written: README.md, docs/*.md, benchmarks/README.md and
+benchmarks/studies/README.md.
 
 - Every fenced ``python`` block marked ``<!-- test: run -->`` on the line before it runs as a
   script, in a fresh folder (so a missing ``if __name__ == "__main__":`` guard fails).
 - Every other ``python`` block compiles, and the names it imports from ``strl_pyg`` exist.
 - Every ``strl-pose ...``, ``python examples/*.py ...`` and ``python benchmarks/*.py ...``
-  command (fenced shell blocks and inline code) names an existing subcommand or script and
-  uses only ``--flags`` that its parser knows: ``strl_pyg.cli.commands.build_parser()`` (and
-  ``strl_pyg.evaluation.run.build_parser()`` for ``evaluate``), or the script's ``--help``.
+  (or ``benchmarks/studies/*.py``) command (fenced shell blocks and inline code) names an
+  existing subcommand or script and uses only ``--flags`` that its parser knows:
+  ``strl_pyg.cli.commands.build_parser()`` (and ``strl_pyg.evaluation.run.build_parser()`` for
+  ``evaluate``), or the script's ``--help``.
 - Every relative link points at an existing file, and its ``#anchor`` at a heading there.
 - Every dotted ``strl_pyg.x.y`` name and every ``strl_pyg/``, ``examples/``, ``benchmarks/``,
   ``tests/`` or ``docs/`` path in inline code exists.
@@ -30,6 +32,7 @@ import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 DOC_FILES = sorted([REPO_ROOT / "README.md", REPO_ROOT / "benchmarks" / "README.md",
+                    REPO_ROOT / "benchmarks" / "studies" / "README.md",
                     *(REPO_ROOT / "docs").glob("*.md")])
 RUN_MARKER = "<!-- test: run -->"
 SHELL_LANGS = {"bash", "sh", "shell", "console", ""}
@@ -41,7 +44,9 @@ _FENCE = re.compile(r"^(\s*)(```|~~~)\s*([\w+-]*)")
 _INLINE = re.compile(r"`([^`\n]+)`")
 _LINK = re.compile(r"(?<!!)\[[^\]\n]*\]\(([^)\s]+)\)|!\[[^\]\n]*\]\(([^)\s]+)\)")
 _FLAG = re.compile(r"(?<![\w-])--[A-Za-z][\w-]*")
-_SCRIPT = re.compile(r"(?:^|/)((?:examples|benchmarks)/[\w.-]+\.py)$")
+_SCRIPT = re.compile(r"(?:^|/)((?:examples|benchmarks|benchmarks/studies)/[\w.-]+\.py)$")
+#: The folders whose pages may name their own scripts bare (``x.py``).
+SCRIPT_FOLDERS = ("examples", "benchmarks", "benchmarks/studies")
 _DOTTED = re.compile(r"\bstrl_pyg(?:\.[A-Za-z_]\w*)+")
 _PATH = re.compile(r"^(?:strl_pyg|examples|benchmarks|tests|docs)/[\w./-]*[\w-]$")
 
@@ -144,14 +149,14 @@ class Command:
 
 
 def _script(tok: str, page_dir: Path | None) -> str | None:
-    """``examples/x.py`` / ``benchmarks/x.py`` named by ``tok``; on a page inside one of those
-    folders a bare ``x.py`` is that folder's."""
+    """``examples/x.py`` / ``benchmarks/x.py`` / ``benchmarks/studies/x.py`` named by ``tok``;
+    on a page inside one of those folders a bare ``x.py`` is that folder's."""
     m = _SCRIPT.search(tok)
     if m:
         return m.group(1)
-    if page_dir is not None and page_dir.name in ("examples", "benchmarks") \
-            and re.fullmatch(r"[\w-]+\.py", tok):
-        return f"{page_dir.name}/{tok}"
+    folder = _rel(page_dir) if page_dir is not None else None
+    if folder in SCRIPT_FOLDERS and re.fullmatch(r"[\w-]+\.py", tok):
+        return f"{folder}/{tok}"
     return None
 
 
@@ -382,10 +387,11 @@ def test_every_relative_link_points_at_an_existing_file_and_heading():
 
 
 def test_every_link_of_the_benchmark_reports_resolves():
-    """The result pages, also those a script writes with hand notes embedded (a link of
-    results_pose_recipe/notes.md is read from benchmarks/, where the report stands: one
-    pointed one folder too high)."""
-    pages = sorted((REPO_ROOT / "benchmarks").glob("*.md"))
+    """The result pages of benchmarks/ and benchmarks/studies/, also those a script writes
+    with hand notes embedded (a link of studies/results_pose_recipe/notes.md is read from
+    studies/, where the report stands: one pointed one folder too high)."""
+    bench = REPO_ROOT / "benchmarks"
+    pages = sorted([*bench.glob("*.md"), *(bench / "studies").glob("*.md")])
     assert len(pages) >= 20
     bad = [e for p in pages if p not in DOC_FILES for e in link_errors(parse_markdown(p))]
     assert not bad, "\n".join(bad)

@@ -398,29 +398,6 @@ def test_the_default_recipe_is_the_studys_and_the_papers_is_one_dict_away():
         TrainConfig(steps=10, warmup_steps=-1)
 
 
-def test_table3_and_the_study_pin_their_reference_recipe():
-    """The package's defaults changed in 0.4; Table 3 (benchmarks/ablation.py) and the recipe
-    study keep the settings their committed runs trained with."""
-    import argparse
-    import sys
-
-    sys.path.insert(0, str(REPO / "benchmarks"))
-    import ablation
-    import study_pose_recipe as study
-
-    from strl_pyg.training.config import add_train_arguments
-    from strl_pyg.training.loop import config_from_args
-
-    ap = add_train_arguments(argparse.ArgumentParser())
-    for args in (ablation.TRAIN_ARGS, study.COMMON + study.VARIANTS["both"]):
-        cfg = config_from_args(ap.parse_args(args), ap)
-        assert (cfg.lr, cfg.lr_schedule, cfg.warmup_steps, cfg.beta) == (3e-4, "constant", 0, 0.5)
-    winner_args = study.COMMON + study.VARIANTS["both-cos1e-3-b0.25"]
-    winner = config_from_args(ap.parse_args(winner_args), ap)
-    assert (winner.lr, winner.lr_schedule, winner.warmup_steps, winner.beta) == (
-        1e-3, "cosine", 100, 0.25)
-
-
 def test_a_cosine_run_logs_its_rates_and_resumes_on_the_same_schedule(tmp_path, monkeypatch):
     import os
     import signal
