@@ -40,6 +40,17 @@ The plan (:data:`PLAN`): all nine rows with seed 0, then seeds 1 and 2 of ``base
 run resumed to more steps equals a longer run), width 64, 3 layers, 4 heads (the shipped
 size), validation on 100 held-out pairs every 250 steps.
 
+**Table 3 on real photographs** (``--recipe real``, :data:`PLAN_REAL`, :data:`REAL_ARGS`):
+baseline, LP and full with 3 seeds each, trained on the real_scenes training scenes (the
+fixed split) mixed 1:1 with generated pairs, the balanced loss and flow inputs at this
+protocol's constant 3e-4, :data:`REAL_STEPS` steps of batch 16, and scored on the 4 validation
+scenes and the KITTI 06, DeMoN and dino slices (``bench_real_scenes.pair_sets``); results in
+``results_ablation/real_photographs/``. The posed matches are cached once in
+``<root>/cache`` (point it at an existing match cache with a symlink)::
+
+    nice -n 10 python benchmarks/ablation.py --recipe real train --eval
+    python benchmarks/ablation.py --recipe real report
+
 Cost, measured on the 2-core development machine with other work on the second core: the
 cache ~20 min once; per 1000 steps baseline 4 min, L / LP 11 min, V 13 min, full ~25 min
 (quiet: about 1 s per step for the full row). The first five rows' validation curves at 1000
@@ -99,23 +110,53 @@ STUDIES = Path(__file__).resolve().parent / "studies"
 #: and is scored into ``studies/results_ablation_balanced/``. Everything else is the same
 #: protocol.
 RECIPES = {"paper": ["--loss", "paper", "--set", "inputs=paper"],
-           "balanced": ["--loss", "balanced", "--set", "inputs=flow"]}
+           "balanced": ["--loss", "balanced", "--set", "inputs=flow"],
+           "real": []}  # its own flags: REAL_ARGS
 #: The balanced recipe's plan: 3 seeds of baseline, LP, V and full, and L (seed 0 of every
 #: row first).
 PLAN_BALANCED = ([(r, 0) for r in ("baseline", "LP", "V", "full", "L")]
                  + [(r, s) for s in (1, 2) for r in MULTI_SEED_ROWS])
 
 
+#: Table 3 on real photographs (recipe ``real``): baseline, LP and full, 3 seeds each, on the
+#: real_scenes training scenes mixed 1:1 with generated pairs (the package's posed-photograph
+#: training, ``--dataset posed``), scored on the 4 validation scenes and the KITTI 06, DeMoN and
+#: dino slices (``bench_real_scenes.pair_sets``). Seed 0 of the three rows first.
+PLAN_REAL = [(r, s) for s in (0, 1, 2) for r in ("baseline", "LP", "full")]
+#: The real recipe's budget: steps of batch 16 per run (about 70 minutes of one CPU core).
+REAL_STEPS = 1200
+#: The real_scenes folder (``$STRL_REAL_SCENES``, default ``../shared/data/real_scenes``).
+REAL_SCENES = os.environ.get("STRL_REAL_SCENES", str(
+    Path(__file__).resolve().parents[2] / "shared" / "data" / "real_scenes"))
+REAL_ARGS = [
+    "--dataset", "posed", "--data-root", REAL_SCENES, "--synthetic-share", "0.5",
+    "--synthetic-pairs", "800", "--val-gap", "2", "--val-stride", "4",
+    "--steps", str(REAL_STEPS), "--val-every", "200", "--batch-size", "16", "--lr", "3e-4",
+    "--lr-schedule", "constant", "--warmup-steps", "0", "--beta", "0.5",
+    "--set", "hidden=64", "--set", "layers=3", "--set", "heads=4",
+    "--loss", "balanced", "--set", "inputs=flow",
+    "--checkpoint-minutes", "5", "--no-progress", "--no-tensorboard",
+]
+#: The evaluation sets of a recipe: ``cache folder -> {name: [(pair id, matches, T_0to1)]}``.
+EVAL_SETS = None
+
+
 def use_recipe(name: str, root: Path) -> Path:
     """Points the module at recipe ``name``: its training flags, plan, results folder; returns
-    its run root (``<root>/runs`` for the paper's, ``<root>/balanced`` for the other, so both
+    its run root (``<root>/runs`` for the paper's, ``<root>/<recipe>`` for the others, so all
     share the caches)."""
-    global RESULTS, PLAN
+    global RESULTS, PLAN, STEPS, EVAL_SETS
     TRAIN_ARGS[:] = [a for a in _BASE_ARGS] + RECIPES[name]
     if name == "paper":
         return root
     RESULTS = STUDIES / f"results_ablation_{name}"
     PLAN = PLAN_BALANCED
+    if name == "real":
+        import bench_real_scenes as brs
+
+        TRAIN_ARGS[:] = list(REAL_ARGS)
+        RESULTS = Path(__file__).resolve().parent / "results_ablation" / "real_photographs"
+        PLAN, STEPS, EVAL_SETS = PLAN_REAL, REAL_STEPS, brs.pair_sets
     run_root = root / name
     run_root.mkdir(parents=True, exist_ok=True)
     for shared in ("cache", "eval_cache"):
@@ -220,7 +261,10 @@ class _Scorer:
         import ablation_eval as ae
 
         if self._sets is None:
-            self._sets = ae.all_sets(self.root / "eval_cache", quick=self.quick)
+            if EVAL_SETS is not None:
+                self._sets = EVAL_SETS(self.root / "eval_cache")
+            else:
+                self._sets = ae.all_sets(self.root / "eval_cache", quick=self.quick)
             ids = {k: [pid for pid, _, _ in v] for k, v in self._sets.items()}
             ae.check_or_save_sets(self.out / "sets.json", ids)
             if not (self.out / "poselib.json").exists():
@@ -268,7 +312,7 @@ def cmd_cache(args: argparse.Namespace) -> int:
     if not args.eval_only:
         from strl_pyg.training.config import add_train_arguments
         from strl_pyg.training.data import build_datasets
-        from strl_pyg.training.loop import config_from_args
+        from strl_pyg.training.commandline import config_from_args
 
         ap = add_train_arguments(argparse.ArgumentParser())
         targs = ap.parse_args([*TRAIN_ARGS, "--cache-dir", str(Path(args.root) / "cache"),
@@ -350,7 +394,8 @@ def cmd_status(args: argparse.Namespace) -> int:
     return 0
 
 
-def _finished_runs(root: Path, min_steps: int = STEPS) -> list[tuple[str, int, Path]]:
+def _finished_runs(root: Path, min_steps: int | None = None) -> list[tuple[str, int, Path]]:
+    min_steps = STEPS if min_steps is None else min_steps
     return [(r, s, root / "runs" / run_name(r, s)) for r, s in PLAN
             if run_step(root / "runs" / run_name(r, s)) >= min_steps]
 
@@ -560,6 +605,12 @@ def _default_paths(args: argparse.Namespace) -> None:
     if args.command not in ("report", "curves"):
         return
     here = Path(__file__).resolve().parent
+    if args.recipe == "real":  # Table 3's topic: under results_ablation/
+        args.results = args.results or str(RESULTS)
+        args.figure = args.figure or str(RESULTS / "curves.png")
+        args.out = args.out or str(RESULTS / ("curves.md" if args.command == "curves"
+                                              else "report.md"))
+        return
     paper = args.recipe == "paper"
     top = here if paper else STUDIES
     args.results = args.results or str(RESULTS)
@@ -577,8 +628,9 @@ def main(argv: list[str] | None = None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--root", default=ROOT_DEFAULT, help="cache and run folders")
     ap.add_argument("--recipe", choices=tuple(RECIPES), default="paper",
-                    help="training recipe (RECIPES): 'paper' (the first Table 3) or "
-                         "'balanced' (its own plan and results folder)")
+                    help="training recipe (RECIPES): 'paper' (the first Table 3), "
+                         "'balanced' (its own plan and results folder) or 'real' (Table 3 on "
+                         "real photographs: PLAN_REAL, REAL_ARGS)")
     sub = ap.add_subparsers(dest="command", required=True)
     t = sub.add_parser("train", help="train (or resume) every run of the plan")
     t.add_argument("--only", nargs="*", choices=ROWS, help="only these rows")
@@ -594,8 +646,8 @@ def main(argv: list[str] | None = None) -> int:
     e = sub.add_parser("eval", help="score the finished runs and PoseLib on every set")
     e.add_argument("--threads", type=int, default=1, help="torch threads")
     e.add_argument("--quick", action="store_true", help="4 pairs per set (a smoke run)")
-    e.add_argument("--min-steps", type=int, default=STEPS,
-                   help="score runs that reached this step (default: the plan's)")
+    e.add_argument("--min-steps", type=int, default=None,
+                   help="score runs that reached this step (default: the recipe's STEPS)")
     e.add_argument("--reference", nargs="?", const="geometric", default=None,
                    metavar="NAME",
                    help="also score a shipped checkpoint (StrLPose.PRETRAINED name, default "

@@ -22,7 +22,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from strl_pyg.frontend import FrontendConfig, epipolar_residuals, match_images
+from strl_pyg.frontend import FrontendConfig, match_images
+from strl_pyg.geometry import epipolar_residuals
 from strl_pyg.synthetic import SceneConfig, evaluate_matches, generate_pair
 
 STAGES = ("points_detect", "points_match", "geometry", "lines_detect", "lines_match", "total")

@@ -152,7 +152,7 @@ def kitti_pairs(gap: int, cache: Path, config=None):
     seq = root / "sequences" / "06"
     if not seq.is_dir():
         return []
-    from strl_pyg.cli.commands import read_intrinsics
+    from strl_pyg.cli.readers import read_intrinsics
 
     K = read_intrinsics(str(seq / "calib.txt"))
     poses = np.loadtxt(root / "poses" / "06.txt").reshape(-1, 3, 4)
@@ -625,7 +625,7 @@ def main(argv=None) -> int:
     mean_T = None
     if args.train_checkpoint:
         from strl_pyg.geometry import Pose
-        from strl_pyg.training.loop import load_checkpoint, mean_pose
+        from strl_pyg.training import load_checkpoint, mean_pose
 
         st = load_checkpoint(args.train_checkpoint)
         q, t = mean_pose(st["trivial_T"], model.config.translation)

@@ -61,7 +61,7 @@ def _images():
     out = []
     seq = DATA / "kitti_odometry" / "sequences" / "06"
     if seq.is_dir():
-        from strl_pyg.cli.commands import read_intrinsics
+        from strl_pyg.cli.readers import read_intrinsics
 
         K = read_intrinsics(str(seq / "calib.txt"))
         for p in sorted((seq / "image_0").glob("*.png"))[::5]:

@@ -9,12 +9,12 @@ Examples:
     # visual branch; otherwise the classical methods run alone, with a note
     python examples/pose_from_matches.py --npz a_b_matches.npz --K calib.txt --size 370 1226
 
-The match file may be any layout `strl_pyg.data.load_external_matches` reads: strl-pyg's own
+The match file may be any layout `strl_pyg.data.external.load_external_matches` reads: strl-pyg's own
 (`strl-pose match`, PairMatches.save), `mkpts0/mkpts1[/mlines0/mlines1]`, SuperGlue
 (`keypoints0/1`, `matches`, `match_confidence`), a LightGlue dict saved with
 `np.savez(path, keypoints0=..., keypoints1=..., matches=..., scores=..., image_size0=...)`,
 GlueStick or kornia arrays. In Python, LightGlue's three dicts go through
-`strl_pyg.data.from_lightglue(feats0, feats1, matches01)`.
+`strl_pyg.data.external.from_lightglue(feats0, feats1, matches01)`.
 
 What each input is for:
   * image sizes (H, W): every layout needs them; they come from the file (strl, matched,
@@ -40,7 +40,7 @@ import numpy as np
 
 
 def _parser() -> argparse.ArgumentParser:
-    from strl_pyg.cli.guard import OneLineArgumentParser
+    from strl_pyg.utils import OneLineArgumentParser
     from strl_pyg.training.checkpoints import default_checkpoint
 
     # a bad command line or file is one `error: ...` line (exit 2), as in `strl-pose`
@@ -61,7 +61,7 @@ def _parser() -> argparse.ArgumentParser:
 def _read_file_matches(args, ap):
     """The matches of ``--npz`` with the sizes, images and K of the flags."""
     from strl_pyg.cli.readers import read_image_file, read_intrinsics
-    from strl_pyg.data import load_external_matches
+    from strl_pyg.data.external import load_external_matches
 
     if (args.image0 is None) != (args.image1 is None):
         ap.error("Expected both --image0 and --image1 (got only "
@@ -99,7 +99,7 @@ def _run(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
 
     from strl_pyg import StrLPose
     from strl_pyg.estimation.classical import BASELINE_METHODS, estimate_relative_pose
-    from strl_pyg.inference.estimator import forward_pose, prepare_graph
+    from strl_pyg.inference import forward_pose, prepare_graph
 
     if args.npz:
         matches, T_gt = _read_file_matches(args, ap), None

@@ -19,7 +19,7 @@ from torch import nn
 from torch_geometric.data import Batch, Data
 from torch_geometric.nn import global_mean_pool
 
-from strl_pyg.data.build import complete_edge_index
+from strl_pyg.data import complete_edge_index
 from strl_pyg.nn import AttentionConv
 
 

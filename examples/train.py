@@ -28,13 +28,14 @@ import argparse
 import sys
 
 from strl_pyg.cli.commands import check_train_files
-from strl_pyg.cli.guard import OneLineArgumentParser, run_guarded
+from strl_pyg.cli.guard import run_guarded
+from strl_pyg.utils import OneLineArgumentParser
 from strl_pyg.training.config import add_train_arguments
 
 
 def _run(args: argparse.Namespace, ap: argparse.ArgumentParser, argv: list[str]) -> int:
     check_train_files(args)  # before torch is imported
-    from strl_pyg.training.loop import run_from_args
+    from strl_pyg.training import run_from_args
 
     return run_from_args(args, ap, argv)  # argv: what --resume takes from the run
 

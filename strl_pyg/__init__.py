@@ -16,29 +16,23 @@ from strl_pyg.utils.lazy import lazy_exports
 
 __version__ = "0.4.0.dev0"
 
-__all__ = [
-    "PairMatches",
-    "build_pair_graph",
-    "Pose",
-    "StrLPose",
-    "StrLPoseConfig",
-    "PoseOutput",
-    "ABLATIONS",
-    "__version__",
-]
-
-__getattr__, __dir__ = lazy_exports(__name__, {
+_EXPORTS = {
     "PairMatches": "strl_pyg.data.matches",
     "build_pair_graph": "strl_pyg.data.build",
-    "Pose": "strl_pyg.geometry",
-    "StrLPose": "strl_pyg.model",
-    "StrLPoseConfig": "strl_pyg.model",
-    "PoseOutput": "strl_pyg.model",
-    "ABLATIONS": "strl_pyg.model",
-}, globals())
+    "Pose": "strl_pyg.geometry.pose",
+    "StrLPose": "strl_pyg.model.strl_pose",
+    "StrLPoseConfig": "strl_pyg.model.config",
+    "PoseOutput": "strl_pyg.model.config",
+    "ABLATIONS": "strl_pyg.model.config",
+}
+
+__all__ = [*_EXPORTS, "__version__"]
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 
 if TYPE_CHECKING:  # for type checkers and IDEs; never executed
     from strl_pyg.data.build import build_pair_graph
     from strl_pyg.data.matches import PairMatches
     from strl_pyg.geometry import Pose
-    from strl_pyg.model.strl_pose import ABLATIONS, PoseOutput, StrLPose, StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose
+    from strl_pyg.model import ABLATIONS, PoseOutput, StrLPoseConfig

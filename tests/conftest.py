@@ -55,3 +55,12 @@ def method_registry():
     yield registry
     registry.METHODS.clear()
     registry.METHODS.update(saved)
+
+
+@pytest.fixture(scope="module")
+def held_out_pair():
+    """The generated pair of seed 2_000_017 (held out from training; ``pair`` in
+    tests/inference/test_inference.py), for the other modules' tests that run on it."""
+    from strl_pyg.synthetic import generate_pair
+
+    return generate_pair(2_000_017)

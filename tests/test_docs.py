@@ -37,8 +37,7 @@ DOC_FILES = sorted([REPO_ROOT / "README.md", REPO_ROOT / "benchmarks" / "README.
 RUN_MARKER = "<!-- test: run -->"
 SHELL_LANGS = {"bash", "sh", "shell", "console", ""}
 #: Deprecated names that a page may mention on purpose (to say that they are deprecated).
-DEPRECATED_MENTIONS = {"docs/architecture.md": {"strl_pyg.fusion", "strl_pyg.synthetic.metrics",
-                                                "strl_pyg.pose_methods", "strl_pyg.baselines"}}
+DEPRECATED_MENTIONS: dict[str, set[str]] = {}
 
 _FENCE = re.compile(r"^(\s*)(```|~~~)\s*([\w+-]*)")
 _INLINE = re.compile(r"`([^`\n]+)`")

@@ -31,7 +31,8 @@ def test_reuse_layers_dense_equals_explicit(capsys):
 
 
 def test_pose_from_matches_on_a_saved_file(tmp_path, capsys):
-    from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose
+    from strl_pyg.model import StrLPoseConfig
     from strl_pyg.synthetic import SceneConfig, generate_pair
 
     ckpt = tmp_path / "tiny.pt"
@@ -50,7 +51,8 @@ def generated_pair_files(tmp_path_factory):
     import cv2
     import numpy as np
 
-    from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose
+    from strl_pyg.model import StrLPoseConfig
     from strl_pyg.synthetic import SceneConfig, generate_pair
 
     root = tmp_path_factory.mktemp("pair")
@@ -118,7 +120,7 @@ def test_pose_from_matches_lightglue_dict(generated_pair_files, capsys):
     out = capsys.readouterr().out
     assert "T_0to1 (Str-L Pose)" in out and "T_0to1 (OpenCV MAGSAC)" in out
     # the same dict in memory reads to the same matches (sizes from its (W, H) image_size)
-    from strl_pyg.data import load_external_matches
+    from strl_pyg.data.external import load_external_matches
 
     m = load_external_matches(f["lightglue"])
     assert m.image_size0 == (96, 128) and m.num_points == len(f["lightglue"]["scores"][0])

@@ -87,6 +87,18 @@ def folder(module: str) -> str:
     return parts[1]
 
 
+def _export_map(node: ast.AST) -> ast.Dict | None:
+    """The name -> module dict of a lazy face: ``_EXPORTS = {...}`` or the literal given to
+    ``lazy_exports(__name__, {...}, ...)``."""
+    if (isinstance(node, ast.Assign) and isinstance(node.value, ast.Dict)
+            and any(isinstance(t, ast.Name) and t.id == "_EXPORTS" for t in node.targets)):
+        return node.value
+    if (isinstance(node, ast.Call) and getattr(node.func, "id", None) == "lazy_exports"
+            and len(node.args) >= 2 and isinstance(node.args[1], ast.Dict)):
+        return node.args[1]
+    return None
+
+
 def _resolve(target: str, known: dict[str, Path]) -> str | None:
     while target and target not in known:
         target = target.rpartition(".")[0]
@@ -111,9 +123,9 @@ def edges_of(module: str, source: str, known: dict[str, Path]) -> list[Edge]:
             targets = [(a.name, None) for a in node.names]
         elif isinstance(node, ast.ImportFrom) and not node.level:
             targets = [(node.module or "", a.name) for a in node.names]
-        elif (isinstance(node, ast.Call) and getattr(node.func, "id", None) == "lazy_exports"
-              and len(node.args) >= 2 and isinstance(node.args[1], ast.Dict)):
-            for key, value in zip(node.args[1].keys, node.args[1].values, strict=True):
+        elif _export_map(node) is not None:
+            exports = _export_map(node)
+            for key, value in zip(exports.keys, exports.values, strict=True):
                 if isinstance(value, ast.Constant) and isinstance(key, ast.Constant):
                     target = value.value or f"{module}.{key.value}"
                     dst = _resolve(target, known)
@@ -304,8 +316,9 @@ def test_planted_upward_and_sideways_imports_are_caught(tmp_path):
         "viz/plots.py": "from strl_pyg.geometry.pose import Pose\n",  # down: fine
         "inference/est.py": "",
         "utils/__init__.py": "from strl_pyg.utils.lazy import lazy_exports\n"
-                             "__getattr__, __dir__ = lazy_exports(__name__, "
-                             "{'Pose': 'strl_pyg.geometry.pose'}, globals())\n",  # lazy up
+                             "_EXPORTS = {'Pose': 'strl_pyg.geometry.pose'}\n"
+                             "__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, "
+                             "globals())\n",  # lazy up
         "utils/lazy.py": "",
     })
     bad = floor_violations(edges)

@@ -22,19 +22,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/studies/
 from strl_bench_common import banner  # noqa: E402
 
 from strl_pyg.estimation.classical import estimate_relative_pose  # noqa: E402
-from strl_pyg.estimation.pose_fusion import (  # noqa: E402
-    classical_covariance,
-    fuse_poses,
-    pose_to_tangent,
-    tangent_basis,
-)
-from strl_pyg.evaluation.run import (  # noqa: E402
-    EvalReport,
-    PairResult,
-    pair_result,
-    predict_pose,
-    synthetic_eval_pairs,
-)
+from strl_pyg.estimation.pose_fusion import classical_covariance, fuse_poses, pose_to_tangent
+from strl_pyg.geometry import tangent_basis
+from strl_pyg.evaluation.run import predict_pose
+from strl_pyg.evaluation import EvalReport, PairResult, pair_result, synthetic_eval_pairs
 from strl_pyg.geometry import Pose  # noqa: E402
 from strl_pyg.model.strl_pose import StrLPose  # noqa: E402
 

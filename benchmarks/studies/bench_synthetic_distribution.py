@@ -24,7 +24,8 @@ import cv2
 import numpy as np
 
 from strl_pyg.datasets import SyntheticPairs
-from strl_pyg.frontend import epipolar_residuals, match_images
+from strl_pyg.frontend import match_images
+from strl_pyg.geometry import epipolar_residuals
 from strl_pyg.synthetic import SCENE_KINDS, generate_pair, scene_distribution
 from strl_pyg.synthetic.distributions import DEFAULT_SIZES
 

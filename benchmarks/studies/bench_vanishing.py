@@ -81,8 +81,8 @@ def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:
 
     from strl_pyg.estimation.classical import estimate_relative_pose
     from strl_pyg.inference import PoseEstimator
-    from strl_pyg.inference.estimator import METHODS as REGISTRY
-    from strl_pyg.inference.estimator import POINT_POOR_MAX_POINTS
+    from strl_pyg.inference import METHODS as REGISTRY
+    from strl_pyg.inference import POINT_POOR_MAX_POINTS
 
     lines_only = ("vp", "vp_checked")
     without = tuple(m for m in REGISTRY if m not in lines_only and REGISTRY[m].available())
@@ -170,9 +170,9 @@ def line_statistics(pairs) -> str:
         if m is None or not m.num_lines or m.num_points < VP_MIN_POINTS:
             continue
         K0 = np.asarray(m.K0, float)
-        ends, mids, _ = L._segments(np.asarray(m.lines0, float), K0)
+        ends, mids, _ = L.segment_geometry(np.asarray(m.lines0, float), K0)
         for d0, _, mk in vanishing_directions(m):
-            noise.append(np.median(L._vp_residual_px(d0[None], K0, ends[mk], mids[mk])[0]))
+            noise.append(np.median(L.vp_residual_px(d0[None], K0, ends[mk], mids[mk])[0]))
             count.append(int(mk.sum()))
     return (f"Line statistics of the split ({len(noise)} vanishing directions): median line "
             f"noise {np.median(noise):.3f} px (LINE_NOISE_REF_PX {L.LINE_NOISE_REF_PX}), median "
@@ -189,6 +189,7 @@ def fit(cache: Path, n: int) -> tuple[float, int, str]:
 
     from strl_pyg.estimation import line_refine as L
     from strl_pyg.inference import PoseEstimator
+    from strl_pyg.inference import line_methods as LM
     from strl_pyg.inference import methods as M
     from strl_pyg.inference.support import check_support
 
@@ -203,21 +204,21 @@ def fit(cache: Path, n: int) -> tuple[float, int, str]:
     L.VP_LINE_SIGMA_PX = sigma  # read by the method vp at every call
     est = PoseEstimator(methods=("poselib", "vp"))
     base = [(m, T, est.estimate(m).methods) for _, m, T in tqdm(pairs, desc="calibration")]
-    saved = (M.VP_CHECK_ANGLE_DEG, M.VP_CHECK_SUPPORT_SLACK)
+    saved = (LM.VanishingPointChecked.angle_deg, LM.VanishingPointChecked.support_slack)
     grid = {}
     try:
         for ang in FIT_ANGLES:
             for slack in FIT_SLACKS:
-                M.VP_CHECK_ANGLE_DEG, M.VP_CHECK_SUPPORT_SLACK = ang, slack
+                checker = LM.VanishingPointChecked()  # this grid point's thresholds
+                checker.angle_deg, checker.support_slack = ang, slack
                 worst = []
                 for m, T, known in base:
-                    rec = check_support(M._vp_checked(m, M.MethodContext(results=dict(known))),
-                                        m)
+                    rec = check_support(checker(m, M.MethodContext(results=dict(known))), m)
                     worst.append(max(bp.errors(rec.T_0to1, T)) if rec.status == "ok"
                                  else 180.0)
                 grid[ang, slack] = _auc(np.array(worst))
     finally:
-        M.VP_CHECK_ANGLE_DEG, M.VP_CHECK_SUPPORT_SLACK = saved
+        LM.VanishingPointChecked.angle_deg, LM.VanishingPointChecked.support_slack = saved
     poselib = _auc(np.array([max(bp.errors(k["poselib"].T_0to1, T))
                              if k["poselib"].status == "ok" else 180.0 for _, T, k in base]))
     best = max(grid, key=lambda g: (round(grid[g], 6), g[0], -g[1]))
@@ -264,8 +265,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from strl_pyg.estimation import line_refine as L
     from strl_pyg.frontend import FrontendConfig
-    from strl_pyg.inference import methods as M
-    from strl_pyg.inference.estimator import POINT_POOR_MAX_POINTS
+    from strl_pyg.inference import line_methods as LM
+    from strl_pyg.inference import POINT_POOR_MAX_POINTS
     from strl_pyg.metrics.stats import median_ratio_interval
     from strl_pyg.model.strl_pose import StrLPose
 
@@ -294,11 +295,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.fit:
         ang, slack, fit_text = fit(cache, args.fit)
         print(fit_text)
-        if (ang, slack) != (M.VP_CHECK_ANGLE_DEG, M.VP_CHECK_SUPPORT_SLACK):
+        if (ang, slack) != (LM.VanishingPointChecked.angle_deg, LM.VanishingPointChecked.support_slack):
             print(f"note: the fit ({ang}, {slack}) differs from the package's "
-                  f"({M.VP_CHECK_ANGLE_DEG}, {M.VP_CHECK_SUPPORT_SLACK}); the evaluation uses "
+                  f"({LM.VanishingPointChecked.angle_deg}, {LM.VanishingPointChecked.support_slack}); the evaluation uses "
                   "the fit: set the fitted constants in the package")
-        M.VP_CHECK_ANGLE_DEG, M.VP_CHECK_SUPPORT_SLACK = ang, slack
+        LM.VanishingPointChecked.angle_deg, LM.VanishingPointChecked.support_slack = ang, slack
     few = FrontendConfig(max_keypoints=ae.FEW_KEYPOINTS)
     load = {"point_poor": lambda: ae.point_poor_pairs(cache, args.point_poor),
             "kitti06_kp40": lambda: bp.kitti_pairs(1, cache, config=few),
@@ -323,7 +324,7 @@ def main(argv: list[str] | None = None) -> int:
              "pose) = 180 deg, [95 % bootstrap interval]; median max-error (deg) over the "
              "pairs with a pose, and how many of the pairs have one. Constants: "
              f"VP_LINE_SIGMA_PX {L.VP_LINE_SIGMA_PX}, VP_CHECK_ANGLE_DEG "
-             f"{M.VP_CHECK_ANGLE_DEG}, VP_CHECK_SUPPORT_SLACK {M.VP_CHECK_SUPPORT_SLACK}.", "",
+             f"{LM.VanishingPointChecked.angle_deg}, VP_CHECK_SUPPORT_SLACK {LM.VanishingPointChecked.support_slack}.", "",
              "| set | pairs | " + " | ".join(METHODS) + " | "
              + " | ".join(f"{k} - PoseLib (AUC)" for k in RECOMMENDED) + " |",
              "|---|---" + "|---" * (len(METHODS) + len(RECOMMENDED)) + "|"]

@@ -27,9 +27,10 @@ import torch
 def replay(path: str) -> dict:
     from strl_pyg.data import keys
     from strl_pyg.training import loop
+    from strl_pyg.training.skipped import load_skipped_step
 
-    step, cfg, model, batch = loop.load_skipped_step(path)
-    loss_fn, geo_fn = loop._losses(cfg, model.config)
+    step, cfg, model, batch = load_skipped_step(path)
+    loss_fn, geo_fn = loop.losses_for(cfg, model.config)
     model.train()
     report: dict = {"step": step, "anomaly": None}
     T = batch[keys.T_0TO1]

@@ -214,8 +214,9 @@ def gradient_shares(run: Path, batches: int = 8) -> dict[str, float]:
     from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.training.checkpoints import load_checkpoint
     from strl_pyg.training.config import TrainConfig
-    from strl_pyg.training.data import _Resampled, build_datasets
-    from strl_pyg.training.loop import _collater, _losses
+    from strl_pyg.training.data import ResampledPairs, build_datasets
+    from strl_pyg.training.data import collater
+    from strl_pyg.training.loop import losses_for
 
     state = load_checkpoint(run / "last.pt")
     cfg = TrainConfig.from_dict(state["train_config"])
@@ -223,10 +224,10 @@ def gradient_shares(run: Path, batches: int = 8) -> dict[str, float]:
     model.load_state_dict(state["model"])
     model.train()
     train, _ = build_datasets(cfg)
-    loss_fn = _losses(cfg, model.config)[0]  # the run's own loss: its form, beta, weights
+    loss_fn = losses_for(cfg, model.config)[0]  # the run's own loss: its form, beta, weights
     shared = [p for n, p in model.named_parameters() if not n.startswith("pose_head.")]
-    collate = _collater(model.config)
-    data = _Resampled(train, cfg.num_points, cfg.num_lines, 12345, cfg.swap_prob)
+    collate = collater(model.config)
+    data = ResampledPairs(train, cfg.num_points, cfg.num_lines, 12345, cfg.swap_prob)
     rot, trans = [], []
     for b in range(batches):
         gen = torch.Generator().manual_seed(b)
@@ -596,7 +597,7 @@ def validation_pairs(run: Path) -> list[tuple[str, object, object]]:
 
     from strl_pyg.training.config import TrainConfig
     from strl_pyg.training.data import build_datasets
-    from strl_pyg.training.loop import load_checkpoint
+    from strl_pyg.training import load_checkpoint
 
     cfg = TrainConfig.from_dict(load_checkpoint(run / "last.pt")["train_config"])
     if cfg.matches != "frontend":

@@ -146,7 +146,7 @@ def test_table3_and_the_study_pin_their_reference_recipe():
     import study_pose_recipe as study
 
     from strl_pyg.training.config import add_train_arguments
-    from strl_pyg.training.loop import config_from_args
+    from strl_pyg.training.commandline import config_from_args
 
     ablation = _ablation_module()
     ap = add_train_arguments(argparse.ArgumentParser())
@@ -182,3 +182,32 @@ def test_the_default_files_are_table_3s_at_the_top_and_another_recipes_under_stu
                                figure="f")
     ab._default_paths(given)
     assert (given.results, given.out, given.figure) == ("r", "o", "f")
+
+
+def test_table3_on_real_photographs_trains_posed_pairs_with_its_own_plan(tmp_path):
+    """Recipe ``real``: baseline, LP and full x 3 seeds on the real_scenes training scenes mixed
+    1:1 with generated pairs, at its own step budget, scored on the real sets, its results
+    under results_ablation/ (Table 3's topic, not a new top-level file)."""
+    from strl_pyg.training.commandline import config_from_args
+    from strl_pyg.training.config import add_train_arguments
+
+    ab = _ablation_module()
+    root = ab.use_recipe("real", tmp_path)
+    assert root == tmp_path / "real" and (root / "cache").is_symlink()
+    assert sorted(ab.PLAN) == sorted((r, s) for r in ("baseline", "LP", "full") for s in range(3))
+    assert ab.PLAN[:3] == [("baseline", 0), ("LP", 0), ("full", 0)]
+    assert ab.STEPS == ab.REAL_STEPS and ab.RESULTS == BENCH / "results_ablation" / "real_photographs"
+    ap = add_train_arguments(argparse.ArgumentParser())
+    cfg = config_from_args(ap.parse_args([*ab.TRAIN_ARGS, "--model", "LP"]), ap)
+    assert (cfg.dataset, cfg.synthetic_share, cfg.steps, cfg.loss) == (
+        "posed", 0.5, ab.REAL_STEPS, "balanced")
+    assert cfg.model_config().use_lines and cfg.train_scenes is None  # the fixed split
+    cmd = ab.train_command(root, "full", 1)
+    assert cmd[cmd.index("--model") + 1] == "full" and cmd[cmd.index("--seed") + 1] == "1"
+    args = argparse.Namespace(command="report", recipe="real", results=None, out=None,
+                              figure=None)
+    ab._default_paths(args)
+    assert args.out == str(ab.RESULTS / "report.md") and args.results == str(ab.RESULTS)
+    import bench_real_scenes
+
+    assert ab.EVAL_SETS is bench_real_scenes.pair_sets

@@ -89,8 +89,7 @@ def test_a_corrupt_entry_is_made_again(tmp_path):
 
 
 def test_the_calibration_fit_reads_raw_covariances():
-    """Found while fixing an own checkpoint's calibration (tests/
-    test_checkpoints_and_lines_end_to_end.py): `bench_pose.py --calibrate` fits on the
+    """`bench_pose.py --calibrate` fits on the
     checkpoint with its calibration removed; with the shipped fallback, PoseLib's covariance
     would have been scaled during the fit, and the stored scale ~1 (sigma 4-5x too small)."""
     pair = generate_pair(2_000_017)

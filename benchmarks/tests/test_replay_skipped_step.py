@@ -29,7 +29,7 @@ def _nan_gradients_on(monkeypatch, calls: set):
     ``calls``-th calls (1-based; -1: every call): sqrt(0 * x) has 0 * inf as its derivative."""
     from strl_pyg.training import loop
 
-    real = loop._losses
+    real = loop.losses_for
     count = [0]
 
     def losses(cfg, model_cfg):
@@ -44,7 +44,7 @@ def _nan_gradients_on(monkeypatch, calls: set):
 
         return planted, geo
 
-    monkeypatch.setattr(loop, "_losses", losses)
+    monkeypatch.setattr(loop, "losses_for", losses)
 
 
 def test_the_replay_names_the_operation_whose_backward_gave_nan(tmp_path, monkeypatch):

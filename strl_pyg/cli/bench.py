@@ -7,7 +7,7 @@ import os
 import time
 
 from strl_pyg.cli.readers import DEMO_SEED, load_model
-from strl_pyg.cli.readers import UsageError
+from strl_pyg.utils import UsageError
 
 __all__ = ["cmd_bench"]
 

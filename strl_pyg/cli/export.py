@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from strl_pyg.cli.readers import load_model
-from strl_pyg.cli.readers import UsageError
+from strl_pyg.utils import UsageError
 
 __all__ = ["cmd_export"]
 

@@ -8,9 +8,9 @@ import os
 import sys
 import warnings
 
-from strl_pyg.utils.commandline import OneLineArgumentParser, UsageError
+from strl_pyg.utils.commandline import UsageError
 
-__all__ = ["run_guarded", "OneLineArgumentParser"]
+__all__ = ["run_guarded"]
 
 
 def _report(err: BaseException) -> int:

@@ -16,9 +16,9 @@ import numpy as np
 
 from strl_pyg.utils.commandline import UsageError
 
-__all__ = ["UsageError", "MAX_SIDE", "read_image_file", "read_intrinsics",
-           "downscale_for_matching", "PairInputs", "read_pair", "non_negative_int",
-           "bootstrap_count", "DEMO_SEED", "load_model"]
+__all__ = ["MAX_SIDE", "read_image_file", "read_intrinsics", "downscale_for_matching",
+           "PairInputs", "read_pair", "non_negative_int", "bootstrap_count", "DEMO_SEED",
+           "load_model", "check_input_file", "intrinsics_from_args"]
 
 #: Default longest image side for matching (``--max-side``); larger images are downscaled.
 #: A 6000x4000 pair at full resolution took 5.6 GB and 48 s in `strl-pose match`; 0.5 GB and
@@ -106,7 +106,7 @@ def read_intrinsics(text_or_path: str) -> np.ndarray:
                       if ln.strip() and not ln.startswith("#")), [])
         if len(first) >= 5 and first[0].isdigit() and first[1].replace("_", "").isalpha():
             K = _colmap_K(text, f"'{path}'")
-            from strl_pyg.data.matches import check_K
+            from strl_pyg.data.checks import check_K
 
             try:
                 return check_K(K, "K")
@@ -141,7 +141,7 @@ def read_intrinsics(text_or_path: str) -> np.ndarray:
     if not all(np.isfinite(values)):
         raise UsageError(f"Expected finite numbers for intrinsics in {source} (got {values})")
     K = _K_from_numbers(values, source)
-    from strl_pyg.data.matches import check_K
+    from strl_pyg.data.checks import check_K
 
     try:
         return check_K(K, "K")
@@ -149,7 +149,7 @@ def read_intrinsics(text_or_path: str) -> np.ndarray:
         raise UsageError(str(err)) from err
 
 
-def _intrinsics(args) -> tuple[np.ndarray | None, np.ndarray | None]:
+def intrinsics_from_args(args) -> tuple[np.ndarray | None, np.ndarray | None]:
     K0 = read_intrinsics(args.K0) if args.K0 else None
     K1 = read_intrinsics(args.K1) if args.K1 else K0
     if args.K:
@@ -221,7 +221,7 @@ class PairInputs(tuple):
             info=info)
 
 
-def _check_input_file(path: str | os.PathLike, what: str) -> None:
+def check_input_file(path: str | os.PathLike, what: str) -> None:
     path = Path(path)
     if path.is_dir():
         raise UsageError(f"Expected a {what} at '{path}' (got a folder)")
@@ -232,7 +232,7 @@ def _check_input_file(path: str | os.PathLike, what: str) -> None:
 def read_pair(args) -> PairInputs:
     """Reads the pair's images and intrinsics and downscales them to ``--max-side``."""
     img0, img1 = read_image_file(args.image0), read_image_file(args.image1)
-    K0, K1 = _intrinsics(args)
+    K0, K1 = intrinsics_from_args(args)
     max_side = getattr(args, "max_side", MAX_SIDE)
     small0, sK0, s0 = downscale_for_matching(img0, K0, max_side)
     small1, sK1, s1 = downscale_for_matching(img1, K1, max_side)

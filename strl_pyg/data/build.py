@@ -25,35 +25,12 @@ from torch_geometric.data import HeteroData
 
 from strl_pyg.data import keys as keys_
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.data.pair_graph import (
-    ImplicitEdgesError,
-    PairGraph,
-    complete_edge_index,
-    drop_legacy_cross_edges,
-    edge_index_dict,
-    has_implicit_complete_edges,
-    implicit_edge_types,
-    materialize_complete_edges,
-)
+from strl_pyg.data.pair_graph import PairGraph, drop_legacy_cross_edges, materialize_complete_edges
 from strl_pyg.geometry import check_rotation, normalize_points
 from strl_pyg.utils.io import atomic_open
 
-__all__ = [
-    "build_pair_graph",
-    "normalize_coords",
-    "sample_patches",
-    "image_to_tensor",
-    "PairGraph",
-    "ImplicitEdgesError",
-    "complete_edge_index",
-    "edge_index_dict",
-    "materialize_complete_edges",
-    "has_implicit_complete_edges",
-    "implicit_edge_types",
-    "line_edge_index",
-    "save_graph",
-    "load_graph",
-]
+__all__ = ["build_pair_graph", "normalize_coords", "sample_patches", "image_to_tensor",
+           "line_edge_index", "save_graph", "load_graph"]
 
 COMPLETE_EDGE_MODES = ("implicit", "explicit")
 NORMALIZATIONS = ("auto", "intrinsics", "image_size")

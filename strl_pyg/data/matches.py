@@ -14,14 +14,21 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from strl_pyg.utils.images import check_image
-from strl_pyg.utils.io import atomic_open
+from strl_pyg.data.checks import (
+    MIN_LINE_LENGTH,
+    as_array,
+    atomic_save_npz,
+    check_finite,
+    check_in_image,
+    check_K,
+    check_optional_image,
+    check_size,
+    load_npz,
+)
 
 __all__ = [
     "PairMatches",
     "MatchFileKeyError",
-    "OUT_OF_IMAGE_TOLERANCE",
-    "MIN_LINE_LENGTH",
     "LINE_ENDPOINTS",
     "ENDPOINTS_CORRESPONDING",
     "ENDPOINTS_AS_DETECTED",
@@ -43,14 +50,7 @@ LINE_ENDPOINTS = "line_endpoints"
 ENDPOINTS_CORRESPONDING = "corresponding"
 ENDPOINTS_AS_DETECTED = "as detected"
 
-#: A coordinate may lie this many pixels outside ``[0, W - 1] x [0, H - 1]`` (detectors and
-#: projections of generated scenes place points on the border, sub-pixel refinement nudges
-#: them past it); anything further is treated as a bug in the caller's match list.
-OUT_OF_IMAGE_TOLERANCE = 4.0
 
-#: Line segments shorter than this (pixels, in either image) have no direction and are
-#: rejected.
-MIN_LINE_LENGTH = 1e-3
 
 _NPZ_ARRAYS = (
     "points0",
@@ -66,84 +66,6 @@ _NPZ_ARRAYS = (
     "image0",
     "image1",
 )
-
-
-def _as_array(value: Any, name: str, dtype=np.float64) -> np.ndarray:
-    if hasattr(value, "detach"):  # torch tensor
-        value = value.detach().cpu().numpy()
-    try:
-        arr = np.asarray(value)
-    except Exception as err:  # pragma: no cover - numpy accepts nearly everything
-        raise TypeError(f"Expected an array for '{name}' (got {type(value).__name__})") from err
-    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == np.bool_):
-        raise TypeError(f"Expected a numeric array for '{name}' (got dtype {arr.dtype})")
-    return arr.astype(dtype, copy=False) if dtype is not None else arr
-
-
-def _check_finite(arr: np.ndarray, name: str) -> None:
-    if not np.isfinite(arr).all():
-        bad = int((~np.isfinite(arr)).reshape(len(arr), -1).any(1).sum()) if arr.ndim else 1
-        raise ValueError(f"Expected finite values in '{name}' (got NaN or inf in {bad} rows)")
-
-
-def _check_size(value: Any, name: str) -> tuple[int, int]:
-    arr = _as_array(value, name, dtype=None).reshape(-1)
-    if (
-        arr.shape != (2,)
-        or not np.all(np.isfinite(arr))
-        or np.any(arr <= 0)
-        or np.any(arr != np.round(arr))
-    ):
-        raise ValueError(f"Expected '{name}' as two positive integers (H, W) (got {value!r})")
-    return int(arr[0]), int(arr[1])
-
-
-def check_K(value: Any, name: str) -> np.ndarray | None:
-    if value is None:
-        return None
-    K = _as_array(value, name)
-    if K.shape != (3, 3):
-        raise ValueError(f"Expected '{name}' of shape (3, 3) (got {tuple(K.shape)})")
-    _check_finite(K, name)
-    if not np.allclose(K[2], [0.0, 0.0, 1.0], atol=1e-6):
-        raise ValueError(f"Expected the last row of '{name}' to be [0, 0, 1] (got {K[2].tolist()})")
-    if K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise ValueError(
-            f"Expected positive focal lengths in '{name}' (got fx={K[0, 0]}, fy={K[1, 1]})"
-        )
-    if abs(np.linalg.det(K)) < 1e-12 or np.linalg.cond(K) > 1e12:
-        raise ValueError(f"Expected an invertible '{name}' (got det={np.linalg.det(K):.3g})")
-    return K
-
-
-def _check_image(value: Any, name: str) -> np.ndarray | None:
-    """``None``, or the image checked by the package's one image check
-    (:func:`strl_pyg.utils.images.check_image`, kept as given)."""
-    return None if value is None else check_image(value, name)
-
-
-def _outside(xy: np.ndarray, h: int, w: int, tol: float) -> np.ndarray:
-    """Per ``(x, y)`` row, whether it lies outside an ``h x w`` image (+- ``tol`` px)."""
-    return ((xy[:, 0] < -tol) | (xy[:, 0] > w - 1 + tol)
-            | (xy[:, 1] < -tol) | (xy[:, 1] > h - 1 + tol))
-
-
-def _check_in_image(coords: np.ndarray, size: tuple[int, int], name: str) -> None:
-    if coords.size == 0:
-        return
-    h, w = size
-    xy = coords.reshape(-1, 2)
-    tol = OUT_OF_IMAGE_TOLERANCE
-    out = _outside(xy, h, w, tol)
-    if out.any():
-        i = int(np.flatnonzero(out)[0])
-        hint = (f"; they fit a {w}x{h} image: was image_size{name[-1]} given as (W, H)? "
-                "Sizes are (H, W)" if not _outside(xy, w, h, tol).any() else "")
-        raise ValueError(
-            f"Expected '{name}' inside the {h}x{w} px image (H x W, +-{tol} px) "
-            f"(got {int(out.sum())} coordinates outside, first {xy[i].tolist()}){hint}"
-        )
-
 
 
 class MatchFileKeyError(ValueError, KeyError):
@@ -195,8 +117,8 @@ class PairMatches:
     info: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        self.image0 = _check_image(self.image0, "image0")
-        self.image1 = _check_image(self.image1, "image1")
+        self.image0 = check_optional_image(self.image0, "image0")
+        self.image1 = check_optional_image(self.image1, "image1")
         for i in (0, 1):
             size_name, img = f"image_size{i}", getattr(self, f"image{i}")
             size = getattr(self, size_name)
@@ -206,7 +128,7 @@ class PairMatches:
                         f"Expected '{size_name}' (H, W) or 'image{i}' to be given (got neither)"
                     )
                 size = img.shape[:2]
-            size = _check_size(size, size_name)
+            size = check_size(size, size_name)
             if img is not None and tuple(img.shape[:2]) != size:
                 raise ValueError(
                     f"Expected 'image{i}' of size {size} (H, W) (got {tuple(img.shape[:2])})"
@@ -239,10 +161,10 @@ class PairMatches:
                     f"(got {int(short.sum())} zero-length lines, first index "
                     f"{int(np.flatnonzero(short)[0])})"
                 )
-        _check_in_image(self.points0, self.image_size0, "points0")
-        _check_in_image(self.points1, self.image_size1, "points1")
-        _check_in_image(self.lines0, self.image_size0, "lines0")
-        _check_in_image(self.lines1, self.image_size1, "lines1")
+        check_in_image(self.points0, self.image_size0, "points0")
+        check_in_image(self.points1, self.image_size1, "points1")
+        check_in_image(self.lines0, self.image_size0, "lines0")
+        check_in_image(self.lines1, self.image_size1, "lines1")
         self.point_scores = self._scores(self.point_scores, "point_scores", len(self.points0))
         self.line_scores = self._scores(self.line_scores, "line_scores", len(self.lines0))
         self.K0 = check_K(self.K0, "K0")
@@ -256,7 +178,7 @@ class PairMatches:
     def _coords(value: Any, name: str, tail: tuple[int, ...]) -> np.ndarray:
         if value is None:
             return np.zeros((0, *tail), dtype=np.float64)
-        arr = _as_array(value, name)
+        arr = as_array(value, name)
         if arr.size == 0:
             return np.zeros((0, *tail), dtype=np.float64)
         if tail == (2, 2) and arr.shape[1:] in ((4,), (1, 4)):
@@ -264,17 +186,17 @@ class PairMatches:
         if arr.ndim != 1 + len(tail) or arr.shape[1:] != tail:
             want = "[N, " + ", ".join(map(str, tail)) + "]"
             raise ValueError(f"Expected '{name}' of shape {want} (got {tuple(arr.shape)})")
-        _check_finite(arr, name)
+        check_finite(arr, name)
         return np.ascontiguousarray(arr)
 
     @staticmethod
     def _scores(value: Any, name: str, n: int) -> np.ndarray | None:
         if value is None:
             return None
-        arr = _as_array(value, name).reshape(-1)
+        arr = as_array(value, name).reshape(-1)
         if len(arr) != n:
             raise ValueError(f"Expected '{name}' of length {n} (got {len(arr)})")
-        _check_finite(arr, name)
+        check_finite(arr, name)
         return arr
 
     @property
@@ -417,7 +339,7 @@ class PairMatches:
     @classmethod
     def load(cls, path: str | os.PathLike) -> PairMatches:
         """Loads a file written by :meth:`save`; missing or corrupt files raise clearly."""
-        data = _load_npz(path)
+        data = load_npz(path)
         missing = [k for k in ("points0", "points1", "image_size0", "image_size1") if k not in data]
         if missing:
             raise MatchFileKeyError(
@@ -485,32 +407,4 @@ def _distinct(points: np.ndarray, tol_px: float = DUPLICATE_TOLERANCE_PX) -> int
         return 0
     return len(np.unique(np.round(points / tol_px).astype(np.int64), axis=0))
 
-
-def atomic_save_npz(path: str | os.PathLike, arrays: dict[str, np.ndarray]) -> None:
-    """Writes ``arrays`` to ``path`` via a temporary file in the same folder and a rename, so
-    readers never see a half-written file."""
-    with atomic_open(path) as f:
-        np.savez(f, **arrays)
-
-
-def _load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"Expected a match file at '{path}' (got no such file)")
-    with open(path, "rb") as f:
-        head = f.read(6)
-    if not head.startswith(b"PK"):  # an .npz is a zip archive; numpy reads anything else
-        # as a pickle and would say so
-        what = "an empty file" if not head else (
-            "a single .npy array" if head.startswith(b"\x93NUMPY") else
-            f"a file that is not an .npz archive: it starts with {head!r}")
-        raise ValueError(f"Expected a readable .npz match file at '{path}' (got {what})")
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            return {k: npz[k] for k in npz.files}
-    except Exception as err:
-        why = str(err).splitlines()[0] if str(err) else type(err).__name__
-        if "allow_pickle" in why:  # numpy's wording would suggest unsafe loading
-            why = "an object array; pickled data is never read"
-        raise ValueError(f"Expected a readable .npz match file at '{path}' (got {why})") from err
 

@@ -202,7 +202,7 @@ def drop_legacy_cross_edges(data: HeteroData) -> HeteroData:
 
 
 def edge_index_dict(data: HeteroData) -> dict[tuple[str, str, str], Tensor | CompleteEdges]:
-    """``data.edge_index_dict`` with a :class:`~strl_pyg.nn.CompleteEdges` marker (carrying
+    """``data.edge_index_dict`` with a :class:`~strl_pyg.data.CompleteEdges` marker (carrying
     the graph ids of its source and target nodes) for every implicit complete edge type: the
     edge input of a :func:`torch_geometric.nn.to_hetero` model built from
     :class:`~strl_pyg.nn.AttentionConv` layers.

@@ -11,11 +11,8 @@ from torch_geometric.data import Batch, HeteroData
 from torch_geometric.transforms import BaseTransform
 
 from strl_pyg.data import keys as keys_
-from strl_pyg.data.build import (
-    has_implicit_complete_edges,
-    line_edge_index,
-    materialize_complete_edges,
-)
+from strl_pyg.data.build import line_edge_index
+from strl_pyg.data import has_implicit_complete_edges, materialize_complete_edges
 from strl_pyg.geometry.manifold import so3_exp
 
 __all__ = [

@@ -31,18 +31,8 @@ from strl_pyg.datasets.cache import (
 )
 from strl_pyg.utils.images import decode_image
 
-__all__ = [
-    "PAIR_ID",
-    "SUBSET",
-    "ImageSource",
-    "PairRecord",
-    "CachedPairDataset",
-    "PairDataset",
-    "read_image",
-    "resize_image",
-    "scale_intrinsics",
-    "load_pair_images",
-]
+__all__ = ["ImageSource", "PairRecord", "CachedPairDataset", "PairDataset", "read_image",
+           "resize_image", "scale_intrinsics", "load_pair_images"]
 
 # Graph-level string attributes (collate to lists in a batch), for per-subset evaluation.
 
@@ -201,8 +191,9 @@ class CachedPairDataset(Dataset):
     :class:`MatchCache`.
 
     Subclasses give the pair keys, a picklable match function with its payloads, and how to
-    turn cached matches into a graph. Pairs recorded as failed (no matches) are left out of
-    the index, with a warning giving their count.
+    turn cached matches into a graph. Pairs recorded as failed (no matches), and those with
+    fewer than ``min_points`` / ``min_lines`` matches, are left out of the index, with a
+    warning giving their count.
     """
 
     def __init__(
@@ -212,7 +203,13 @@ class CachedPairDataset(Dataset):
         fingerprint: Callable[[], dict[str, Any]],
         transform: Callable | None = None,
         root: str | os.PathLike | None = None,
+        min_points: int = 0,
+        min_lines: int = 0,
     ) -> None:
+        for name, value in (("min_points", min_points), ("min_lines", min_lines)):
+            if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+                raise ValueError(f"Expected {name} as an integer >= 0 (got {value!r})")
+        self.min_points, self.min_lines = min_points, min_lines
         self._keys = list(keys)
         if len(set(self._keys)) != len(self._keys):
             raise ValueError("Expected unique pair ids (got duplicates)")
@@ -265,6 +262,20 @@ class CachedPairDataset(Dataset):
                 f"(markers in '{self.cache.dir}')",
                 stacklevel=3,
             )
+        if self.min_points or self.min_lines:
+            counts = self.cache.counts([self._keys[i] for i in self._index])
+            few = [i for i in self._index if self._keys[i] in counts
+                   and (counts[self._keys[i]][0] < self.min_points
+                        or counts[self._keys[i]][1] < self.min_lines)]
+            if few:
+                dropped = set(few)
+                self._index = [i for i in self._index if i not in dropped]
+                warnings.warn(
+                    f"{len(few)} of {len(self._keys)} pairs have fewer than "
+                    f"min_points={self.min_points} point or min_lines={self.min_lines} line "
+                    "matches and are skipped",
+                    stacklevel=3,
+                )
 
     def build_cache(
         self,
@@ -332,6 +343,9 @@ class PairDataset(CachedPairDataset):
         limit: Keep only the first ``limit`` pairs (smoke runs, tests).
         kind: Dataset kind, part of the cache fingerprint.
         root: The data folder (PyG's ``root``, stored as a string).
+        min_points, min_lines: Leave out the pairs with fewer cached point / line matches
+            (counted once per entry from its match arrays, :meth:`MatchCache.counts`; a
+            warning gives how many); not part of the cache key.
     """
 
     def __init__(
@@ -348,6 +362,8 @@ class PairDataset(CachedPairDataset):
         limit: int | None = None,
         kind: str = "pairs",
         root: str | os.PathLike | None = None,
+        min_points: int = 0,
+        min_lines: int = 0,
     ) -> None:
         if image_size is not None:
             if len(image_size) != 2 or any(int(s) != s or s <= 0 for s in image_size):
@@ -369,7 +385,7 @@ class PairDataset(CachedPairDataset):
         self.kind = kind
         super().__init__(
             [cache_key(r.pair_id) for r in self.records], cache_dir, self._make_fingerprint,
-            transform, root,
+            transform, root, min_points=min_points, min_lines=min_lines,
         )
 
     def _make_fingerprint(self) -> dict[str, Any]:

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.utils.io import atomic_open
 
@@ -205,6 +207,39 @@ class MatchCache:
                 "build the cache first (dataset.build_cache())"
             )
         return PairMatches.load(path)
+
+    def counts(self, keys: Sequence[str]) -> dict[str, tuple[int, int]]:
+        """``key -> (point matches, line matches)`` of the cached entries among ``keys``
+        (failed and missing ones are left out), read from the match arrays alone (not the
+        images an entry may keep) and remembered in ``counts.json`` in the cache folder, so a
+        filter by match count reads each entry once."""
+        index_path = self.dir / "counts.json"
+        known: dict[str, list[int]] = {}
+        if index_path.is_file():
+            try:
+                known = json.loads(index_path.read_text())
+            except (OSError, ValueError):
+                known = {}  # a damaged index is rebuilt from the entries
+        out, added = {}, False
+        for key in keys:
+            path = self.path(key)
+            if not path.is_file():
+                continue
+            stamp = path.stat().st_mtime_ns
+            row = known.get(key)
+            if not (isinstance(row, list) and len(row) == 3 and row[2] == stamp):
+                try:
+                    with np.load(path, allow_pickle=False) as npz:
+                        row = [len(npz["points0"]), len(npz["lines0"]) if "lines0" in npz.files
+                               else 0, stamp]
+                except Exception as err:
+                    raise ValueError(f"Expected a readable match file at '{path}' (got "
+                                     f"{type(err).__name__}: {err})") from err
+                known[key], added = row, True
+            out[key] = (int(row[0]), int(row[1]))
+        if added:
+            _atomic_write_text(index_path, json.dumps(known))
+        return out
 
     def _prepare_dir(self) -> None:
         self.dir.mkdir(parents=True, exist_ok=True)

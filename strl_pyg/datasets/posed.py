@@ -135,7 +135,7 @@ class PosedImagePairs(PairDataset):
         image_size: ``(H, W)`` to resize to before matching (``None``: keep the files' size,
             as stored in ``real_scenes``).
         **kwargs: ``frontend_config``, ``patch_size``, ``keep_images``, ``grayscale``,
-            ``limit``, ``transform`` of :class:`PairDataset`.
+            ``limit``, ``transform``, ``min_points``, ``min_lines`` of :class:`PairDataset`.
 
     Items carry ``subset`` = the scene's name, ``pair_id`` = ``"scene/i-j"``.
     """

@@ -27,9 +27,8 @@ from torch_geometric.data import HeteroData
 
 from strl_pyg.data.build import build_pair_graph
 from strl_pyg.data.matches import PairMatches
+from strl_pyg.data.keys import PAIR_ID, SUBSET
 from strl_pyg.datasets.base import (
-    PAIR_ID,
-    SUBSET,
     CachedPairDataset,
     _check_training_frontend,
     _config_dict,

@@ -8,45 +8,7 @@ from __future__ import annotations
 
 from strl_pyg.utils.lazy import lazy_exports
 
-__all__ = [
-    "tangent_basis",
-    "so3_exp",
-    "so3_log",
-    "sphere_exp",
-    "sphere_log",
-    "BaselineResult",
-    "BASELINE_METHODS",
-    "MIN_POINTS",
-    "estimate_relative_pose",
-    "mean_focal",
-    "normalised_matches",
-    "have_poselib",
-    "msac_cost",
-    "guided_estimate",
-    "REFINE_WEIGHTINGS",
-    "bootstrap_covariance",
-    "MIN_BOOTSTRAP",
-    "FusedPose",
-    "FUSION_MODES",
-    "MIN_INLIERS",
-    "GATE_CHI2",
-    "PARAMETER_NAMES",
-    "pose_to_tangent",
-    "tangent_to_pose",
-    "sampson_residuals",
-    "sampson_jacobian",
-    "truncated_sigma",
-    "classical_covariance",
-    "network_covariance",
-    "fuse_poses",
-]
-
-__getattr__, __dir__ = lazy_exports(__name__, {
-    "tangent_basis": "strl_pyg.estimation.pose_fusion",
-    "so3_exp": "strl_pyg.estimation.pose_fusion",
-    "so3_log": "strl_pyg.estimation.pose_fusion",
-    "sphere_exp": "strl_pyg.estimation.pose_fusion",
-    "sphere_log": "strl_pyg.estimation.pose_fusion",
+_EXPORTS = {
     "BaselineResult": "strl_pyg.estimation.classical",
     "BASELINE_METHODS": "strl_pyg.estimation.classical",
     "MIN_POINTS": "strl_pyg.estimation.classical",
@@ -72,4 +34,8 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "classical_covariance": "strl_pyg.estimation.pose_fusion",
     "network_covariance": "strl_pyg.estimation.pose_fusion",
     "fuse_poses": "strl_pyg.estimation.pose_fusion",
-}, globals())
+}
+
+__all__ = list(_EXPORTS)
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

@@ -14,13 +14,13 @@ from strl_pyg.geometry import check_rotation, pose_sampson
 from strl_pyg.geometry.manifold import so3_exp, sphere_exp, tangent_basis
 
 __all__ = ["refine_with_lines", "line_sigmas", "VP_LINE_SIGMA_PX", "LINE_NOISE_REF_PX",
-           "LINE_COUNT_REF"]
+           "LINE_COUNT_REF", "segment_geometry", "vp_residual_px"]
 
 #: The lines' weight in the joint refinement (:func:`refine_with_lines`): the pixel distance of
 #: a segment's endpoint to its vanishing line counts like a point's Sampson distance times
 #: ``1 / VP_LINE_SIGMA_PX``; read at every call by the method ``vp``
 #: (:class:`~strl_pyg.inference.PoseEstimator`). Fitted on the calibration split of
-#: ``benchmarks/bench_vanishing.py`` (point-poor pairs of other seeds than ``point_poor``).
+#: ``benchmarks/studies/bench_vanishing.py`` (point-poor pairs of other seeds than ``point_poor``).
 VP_LINE_SIGMA_PX = 0.03
 #: The line noise and the lines per direction of the calibration split (medians over its
 #: directions: the median endpoint distance of a direction's lines to its vanishing line, in
@@ -34,7 +34,7 @@ def _homogeneous(x: np.ndarray) -> np.ndarray:
     return np.concatenate([x, np.ones(x.shape[:-1] + (1,))], axis=-1)
 
 
-def _segments(lines: np.ndarray, K: np.ndarray):
+def segment_geometry(lines: np.ndarray, K: np.ndarray):
     """Pixel endpoints ``[M, 2, 3]``, midpoints ``[M, 3]`` and unit interpretation-plane
     normals (normalised camera coordinates) ``[M, 3]`` of ``[M, 2, 2]`` pixel segments."""
     ph = _homogeneous(lines)
@@ -56,7 +56,7 @@ def _vp_residuals(d: torch.Tensor, K: torch.Tensor, ends: torch.Tensor,
     return (l * ends[None, :, 0]).sum(-1) / l[..., :2].norm(dim=-1).clamp_min(1e-300)
 
 
-def _vp_residual_px(d: np.ndarray, K: np.ndarray, ends: np.ndarray, mids: np.ndarray):
+def vp_residual_px(d: np.ndarray, K: np.ndarray, ends: np.ndarray, mids: np.ndarray):
     """:func:`_vp_residuals`' distance ``[H, M]`` (unsigned) of numpy arrays, in closed form
     (the fast path of the vanishing-point consensus; :func:`_vp_residuals` is its reference).
 
@@ -86,16 +86,16 @@ def line_sigmas(matches: PairMatches, directions: list, line_sigma_px: float) ->
     share its errors (edges not quite parallel, lens residuals), so they are not independent
     evidence: with the sigma scaled so, a direction's lines weigh on the rotation like ten
     lines of the calibration split's precision, however many and however noisy
-    (``benchmarks/results_vanishing.md``).
+    (``benchmarks/studies/results_vanishing.md``).
     """
     if not 0 < line_sigma_px < np.inf:  # NaN too; inf would silently drop the lines
         raise ValueError(f"Expected a finite line_sigma_px > 0 (got {line_sigma_px})")
     K0 = np.asarray(matches.K0, float)
-    ends, mids, _ = _segments(np.asarray(matches.lines0, float), K0)
+    ends, mids, _ = segment_geometry(np.asarray(matches.lines0, float), K0)
     out = []
     for d0, _, mk in directions:
         mk = np.asarray(mk, bool)
-        s = float(np.median(_vp_residual_px(np.asarray(d0, float)[None], K0, ends[mk],
+        s = float(np.median(vp_residual_px(np.asarray(d0, float)[None], K0, ends[mk],
                                             mids[mk])[0])) if mk.any() else 0.0
         out.append(line_sigma_px * max(1.0, s / LINE_NOISE_REF_PX)
                    * max(1.0, mk.sum() / LINE_COUNT_REF) ** 0.5)
@@ -159,7 +159,7 @@ def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, direct
     x0, x1 = x0[keep], x1[keep]
     segs = []
     for lines, K in ((matches.lines0, K0), (matches.lines1, K1)):
-        e, m, _ = _segments(np.asarray(lines, float), K.numpy())
+        e, m, _ = segment_geometry(np.asarray(lines, float), K.numpy())
         segs.append((torch.from_numpy(e), torch.from_numpy(m)))
     R0 = torch.as_tensor(R, dtype=dt)
     t0 = torch.as_tensor(t, dtype=dt)

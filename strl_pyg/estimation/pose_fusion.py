@@ -73,26 +73,9 @@ from strl_pyg.geometry import (
     tangent_basis,
 )
 
-__all__ = [
-    "FusedPose",
-    "FUSION_MODES",
-    "MIN_INLIERS",
-    "GATE_CHI2",
-    "PARAMETER_NAMES",
-    "tangent_basis",
-    "so3_exp",
-    "so3_log",
-    "sphere_exp",
-    "sphere_log",
-    "pose_to_tangent",
-    "tangent_to_pose",
-    "sampson_residuals",
-    "sampson_jacobian",
-    "truncated_sigma",
-    "classical_covariance",
-    "network_covariance",
-    "fuse_poses",
-]
+__all__ = ["FusedPose", "FUSION_MODES", "MIN_INLIERS", "GATE_CHI2", "PARAMETER_NAMES",
+           "pose_to_tangent", "tangent_to_pose", "sampson_residuals", "sampson_jacobian",
+           "truncated_sigma", "classical_covariance", "network_covariance", "fuse_poses"]
 
 #: Tangent parameters, in order.
 PARAMETER_NAMES = ("w_x", "w_y", "w_z", "d_1", "d_2")
@@ -209,7 +192,7 @@ def classical_covariance(
             :func:`truncated_sigma` undoes that. ``None``: no correction.
         inflation: multiplies the covariance (divides the information); ``1`` is the
             first-order (Cramer-Rao-like) value, which is optimistic for RANSAC estimates
-            (see ``benchmarks/results_fusion.md``).
+            (see ``benchmarks/studies/results_fusion.md``).
 
     Returns:
         ``(information [5, 5], covariance [5, 5], sigma_px)`` in float64; the covariance is a
@@ -377,7 +360,7 @@ def fuse_poses(
             e.g. the fitted scale a checkpoint stores; default 1).
         network_extra: ``[5, 5]`` covariance added to the network's own before the scale,
             isotropic in each block (so the same in any tangent basis): the swap check's
-            disagreement term (:func:`strl_pyg.inference.methods.swap_covariance`).
+            disagreement term (:func:`strl_pyg.estimation.uncertainty.swap_covariance`).
 
     Returns:
         :class:`FusedPose`.

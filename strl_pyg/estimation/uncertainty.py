@@ -28,7 +28,7 @@ from strl_pyg.utils.threads import available_cores, shared_pool
 
 __all__ = ["bootstrap_covariance", "bootstrap_resamples", "Bootstrap", "cap_covariance",
            "MIN_BOOTSTRAP", "FAR_ROTATION_DEG", "FAR_TRANSLATION_DEG",
-           "MAX_SIGMA_DEG"]
+           "MAX_SIGMA_DEG", "data_covariance", "swap_covariance"]
 
 # Which methods' records carry first-order + bootstrap covariances is their registry entry's
 # (MethodSpec.bootstrapped; strl_pyg.inference.BOOTSTRAPPED lists them): ``guided`` carries
@@ -160,7 +160,8 @@ def bootstrap_resamples(matches: PairMatches, pose: Pose, method: str = "poselib
     ``n``; PoseLib and OpenCV release the GIL): every resample's draw and solver seed are fixed
     before any is solved, so the covariance is the same for any ``workers`` (tested).
     """
-    from strl_pyg.estimation.pose_fusion import pose_to_tangent, tangent_basis
+    from strl_pyg.estimation.pose_fusion import pose_to_tangent
+    from strl_pyg.geometry import tangent_basis
 
     if not isinstance(matches, PairMatches):
         raise TypeError(f"Expected a PairMatches (got {type(matches).__name__})")
@@ -197,3 +198,25 @@ def bootstrap_resamples(matches: PairMatches, pose: Pose, method: str = "poselib
     trans = np.degrees(np.linalg.norm(X[:, 3:], axis=1))
     far = int(((rot > FAR_ROTATION_DEG) | (trans > FAR_TRANSLATION_DEG)).sum())
     return Bootstrap(X.T @ X / len(X), len(X), far)
+
+
+def data_covariance(rotation_rad: float, translation_rad: float) -> np.ndarray:
+    """The ``[5, 5]`` tangent covariance that the regression's data check adds
+    (:attr:`strl_pyg.inference.methods.MethodContext.data_check`), before its calibration scale as the swap check's term:
+    the classical pose is far more precise than the network's where it is right, so the
+    distance to it stands for the network's own error, its square spread over the 3 rotation
+    and the 2 direction axes (``d_R^2 / 3``, ``d_t^2 / 2``). Where the classical pose is wrong
+    the term is wide whatever the network's error (conservative). The regression's record
+    carries it; the fusion does not (its consistency gate compares the network with the same
+    classical pose: the term would let every network pose pass it)."""
+    return np.diag([rotation_rad ** 2 / 3] * 3 + [translation_rad ** 2 / 2] * 2)
+
+
+def swap_covariance(rotation_rad: float, translation_rad: float) -> np.ndarray:
+    """The ``[5, 5]`` tangent covariance that a disagreement between the network's pose and
+    the inverse of its pose of the swapped pair adds (:attr:`strl_pyg.inference.methods.MethodContext.swap_check`): were
+    the two errors independent and alike, their difference would hold twice the variance of
+    each, spread over the 3 rotation and the 2 direction axes, so ``d_R^2 / 6`` and
+    ``d_t^2 / 4`` per axis. The network's own log-variances are fitted on the training
+    distribution and stay small away from it; the two passes disagree there."""
+    return np.diag([rotation_rad ** 2 / 6] * 3 + [translation_rad ** 2 / 4] * 2)

@@ -40,14 +40,14 @@ from strl_pyg.estimation import line_refine
 from strl_pyg.estimation.classical import BaselineResult, _failed, normalised_matches
 from strl_pyg.estimation.line_refine import (
     _homogeneous,
-    _segments,
-    _vp_residual_px,
+    segment_geometry,
+    vp_residual_px,
     refine_with_lines,
 )
 from strl_pyg.geometry import Pose, check_rotation, pose_sampson
 
-__all__ = ["vanishing_directions", "vanishing_point_pose", "refine_with_lines", "VP_MIN_LINES",
-           "VP_MIN_POINTS", "VP_MIN_SEPARATION_DEG"]
+__all__ = ["vanishing_directions", "vanishing_point_pose", "VP_MIN_LINES", "VP_MIN_POINTS",
+           "VP_MIN_SEPARATION_DEG"]
 
 #: Line matches a vanishing direction needs (in both images) to be used.
 VP_MIN_LINES = 4
@@ -57,7 +57,7 @@ VP_MIN_POINTS = 5
 #: this far apart (deg): the rotation of two nearly parallel directions is ill-conditioned about
 #: the axis between them, and one direction leaves a rotation free. A conditioning bound, not a
 #: fit: on the calibration split 30, 45 and 60 deg score alike; on the dino's curved outlines the
-#: directions found lay 10-13 deg apart (``benchmarks/results_vanishing.md``).
+#: directions found lay 10-13 deg apart (``benchmarks/studies/results_vanishing.md``).
 VP_MIN_SEPARATION_DEG = 30.0
 
 
@@ -86,8 +86,8 @@ def vanishing_directions(matches: PairMatches, line_threshold_px: float = 2.0,
     if matches.num_lines < 2 or not matches.has_intrinsics:
         return []
     K0, K1 = np.asarray(matches.K0, float), np.asarray(matches.K1, float)
-    e0, m0, n0 = _segments(np.asarray(matches.lines0, float), K0)
-    e1, m1, n1 = _segments(np.asarray(matches.lines1, float), K1)
+    e0, m0, n0 = segment_geometry(np.asarray(matches.lines0, float), K0)
+    e1, m1, n1 = segment_geometry(np.asarray(matches.lines1, float), K1)
     M = len(n0)
     rng = np.random.default_rng(seed)
     pairs = np.array(np.triu_indices(M, 1)).T
@@ -115,8 +115,8 @@ def vanishing_directions(matches: PairMatches, line_threshold_px: float = 2.0,
             d0, d1 = d0[keep], d1[keep]
             if len(d0) == 0:
                 break
-        inl = ((_vp_residual_px(d0, K0, e0, m0) < line_threshold_px)
-               & (_vp_residual_px(d1, K1, e1, m1) < line_threshold_px) & free[None])
+        inl = ((vp_residual_px(d0, K0, e0, m0) < line_threshold_px)
+               & (vp_residual_px(d1, K1, e1, m1) < line_threshold_px) & free[None])
         best = int(inl.sum(axis=1).argmax())
         mask = inl[best]
         if mask.sum() < min_lines:
@@ -128,8 +128,8 @@ def vanishing_directions(matches: PairMatches, line_threshold_px: float = 2.0,
             d1b = np.linalg.svd(n1[mask], full_matrices=False)[2][-1]
             if i == 2:
                 break
-            new = ((_vp_residual_px(d0b[None], K0, e0, m0)[0] < line_threshold_px)
-                   & (_vp_residual_px(d1b[None], K1, e1, m1)[0] < line_threshold_px) & free)
+            new = ((vp_residual_px(d0b[None], K0, e0, m0)[0] < line_threshold_px)
+                   & (vp_residual_px(d1b[None], K1, e1, m1)[0] < line_threshold_px) & free)
             if new.sum() < min_lines:
                 break
             mask = new

@@ -28,15 +28,11 @@ import numpy as np
 
 from strl_pyg.geometry import Pose
 from strl_pyg.metrics.stats import AUC_THRESHOLDS, pose_error_stats
-from strl_pyg.metrics.two_view import (
-    integrate_relative_poses,
-    kitti_odometry_errors,
-    kitti_odometry_summary,
-    relative_pose_error,
-)
+from strl_pyg.metrics.two_view import relative_pose_error
+from strl_pyg.metrics import integrate_relative_poses, kitti_odometry_errors, kitti_odometry_summary
 from strl_pyg.utils.io import atomic_open
 
-__all__ = ["AUC_THRESHOLDS", "SHORT_SEGMENT_LENGTHS", "PairResult", "pair_result", "EvalReport"]
+__all__ = ["SHORT_SEGMENT_LENGTHS", "PairResult", "pair_result", "EvalReport"]
 
 #: Non-standard short segments (metres) for slices too short for KITTI's 100-800 m.
 SHORT_SEGMENT_LENGTHS = (10.0, 20.0, 30.0, 40.0, 50.0)

@@ -3,7 +3,7 @@ on the same matches, with the paper's tables; also the ``strl-pose evaluate`` co
 
 Per pair (:class:`~strl_pyg.evaluation.pairs.EvalPair`: matches, ground-truth ``T_0to1``,
 subset, id) the methods of :class:`~strl_pyg.inference.PoseEstimator`, by the registry's names
-(:data:`METHODS`, the registry: ``regression``, ``opencv``, ``poselib``, ``fused``,
+(:data:`~strl_pyg.inference.METHODS`, the registry: ``regression``, ``opencv``, ``poselib``, ``fused``,
 ``geometric``, ``guided``, ``vp``, ``vp_checked``), estimate ``T_0to1`` (``X1 = R X0 + t``)
 with the estimator's support checks and statuses: a method's pose counts only with status
 ``"ok"``. The 0.2 names (``strl``, ``fused_opencv``, ``fused_poselib``) are refused with their
@@ -41,69 +41,28 @@ from strl_pyg.evaluation.pairs import (
     kitti_eval_pairs,
     synthetic_eval_pairs,
 )
-from strl_pyg.evaluation.report import (
-    AUC_THRESHOLDS,
-    SHORT_SEGMENT_LENGTHS,
-    EvalReport,
-    PairResult,
-    pair_result,
-)
+from strl_pyg.evaluation.report import EvalReport, PairResult, pair_result
 from strl_pyg.geometry import Pose
-from strl_pyg.inference.network import network_pose, prepare_matches
-from strl_pyg.metrics.two_view import (  # noqa: F401  (names this module had before the 0.2 split)
-    integrate_relative_poses,
-    kitti_odometry_errors,
-    kitti_odometry_summary,
-    pose_auc,
-    relative_pose_error,
-)
+from strl_pyg.inference.network import network_pose
 from strl_pyg.synthetic.config import LINE_SCENE_KINDS, SCENE_KINDS
 from strl_pyg.utils.commandline import OneLineArgumentParser, UsageError
 from strl_pyg.utils.io import one_line
 
-__all__ = [
-    "METHODS",  # noqa: F822  (module __getattr__: the registry's current names)
-    "AUC_THRESHOLDS",
-    "SHORT_SEGMENT_LENGTHS",
-    "EvalPair",
-    "PairResult",
-    "pair_result",
-    "EvalReport",
-    "LEGACY_METHOD_NAMES",
-    "NETWORK_METHODS",  # noqa: F822  (module __getattr__: the registry's)
-    "available_methods",
-    "resolve_methods",
-    "prepare_matches",
-    "predict_pose",
-    "evaluate_pairs",
-    "synthetic_eval_pairs",
-    "demon_eval_pairs",
-    "kitti_eval_pairs",
-    "build_parser",
-    "main",
-]
+__all__ = ["LEGACY_METHOD_NAMES", "available_methods", "resolve_methods", "predict_pose",
+           "evaluate_pairs", "build_parser", "main"]
 
 def registered_methods() -> tuple[str, ...]:
     """The methods ``evaluate`` scores: the registry of
-    :class:`~strl_pyg.inference.PoseEstimator` (``METHODS`` of this module), by the same
-    names, a method registered later included."""
-    from strl_pyg.inference.estimator import METHODS as REGISTRY
+    :class:`~strl_pyg.inference.PoseEstimator` by the same names, a method registered later included."""
+    from strl_pyg.inference import METHODS as REGISTRY
 
     return tuple(REGISTRY)
 
 
 def _network_methods() -> tuple[str, ...]:
-    from strl_pyg.inference.estimator import methods_where
+    from strl_pyg.inference import methods_where
 
     return methods_where(uses_network=True)
-
-
-def __getattr__(name: str) -> Any:
-    if name == "METHODS":
-        return registered_methods()
-    if name == "NETWORK_METHODS":
-        return _network_methods()
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 #: Names of the 0.2 runner -> registry names, named in the error that refuses them (0.4
@@ -111,12 +70,11 @@ def __getattr__(name: str) -> Any:
 #: ``fused``, which fuses with the first ``"ok"`` classical pose (PoseLib when installed).
 LEGACY_METHOD_NAMES = {"strl": "regression", "fused_poselib": "fused", "fused_opencv": "fused"}
 
-# NETWORK_METHODS (the methods that need a network): the registry's, through __getattr__
 
 
 def available_methods() -> tuple[str, ...]:
-    """:data:`METHODS` whose dependencies are installed (PoseLib's only when importable)."""
-    from strl_pyg.inference.estimator import METHODS as REGISTRY
+    """:data:`~strl_pyg.inference.METHODS` whose dependencies are installed (PoseLib's only when importable)."""
+    from strl_pyg.inference import METHODS as REGISTRY
 
     return tuple(m for m in REGISTRY if REGISTRY[m].available())
 
@@ -126,7 +84,7 @@ def resolve_methods(methods: Iterable[str] | None, model: Any) -> tuple[str, ...
     with its registry name); ``None``: :func:`available_methods`, without the network
     methods when ``model`` is ``None`` and without those that need the geometric head when
     ``model`` has none (asked for by name, they run and say why they fail)."""
-    from strl_pyg.inference.estimator import METHODS as REGISTRY
+    from strl_pyg.inference import METHODS as REGISTRY
 
     head = bool(getattr(getattr(model, "config", None), "geometric", False))
     if methods is None:
@@ -181,7 +139,7 @@ def evaluate_pairs(
     Args:
         model: a :class:`~strl_pyg.model.StrLPose` (``None``: classical methods only).
         pairs: :class:`EvalPair` s.
-        methods: names from :data:`METHODS` (old names of :data:`LEGACY_METHOD_NAMES` are
+        methods: names from :data:`~strl_pyg.inference.METHODS` (old names of :data:`LEGACY_METHOD_NAMES` are
             accepted with a warning; default: :func:`available_methods`, without the network
             methods when ``model`` is ``None``).
         resample: the regression's input graph (``"model"``: the checkpoint's counts,
@@ -322,7 +280,7 @@ def _checked(args: argparse.Namespace) -> Path:
     except RuntimeError:
         raise UsageError(f"Expected a torch device such as 'cpu' or 'cuda' for --device "
                          f"(got {args.device!r})") from None
-    from strl_pyg.training.loop import check_device
+    from strl_pyg.training.commandline import check_device
 
     try:  # before the checkpoint is mapped onto it (an absent device blamed the checkpoint)
         check_device(args.device)

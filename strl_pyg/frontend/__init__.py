@@ -18,7 +18,7 @@ When neither a point nor a line match is found (all-black, featureless or unrela
 :class:`NoMatchesError` is raised, because an empty :class:`PairMatches` is invalid.
 
 :func:`fundamental_from_pose` and :func:`epipolar_residuals` live in
-:mod:`strl_pyg.geometry.epipolar` and are re-exported here.
+:mod:`strl_pyg.geometry.epipolar`.
 """
 
 from __future__ import annotations
@@ -34,7 +34,6 @@ from strl_pyg.frontend.lines import (
 )
 from strl_pyg.frontend.pipeline import check_frontend_image, match_images
 from strl_pyg.frontend.points import fit_fundamental, match_points
-from strl_pyg.geometry.epipolar import epipolar_residuals, fundamental_from_pose
 
 __all__ = [
     "FrontendConfig",
@@ -50,7 +49,5 @@ __all__ = [
     "candidate_pairs",
     "line_descriptor_scores",
     "check_frontend_image",
-    "epipolar_residuals",
-    "fundamental_from_pose",
 ]
 

@@ -63,7 +63,7 @@ class FrontendConfig:
             matches, segments as detected: their endpoints do *not*
             correspond (``info["line_endpoints"]``), so only the line solvers (``vp``,
             ``vp_checked``) may read them; the network methods refuse them. Measured in
-            ``benchmarks/results_line_matchers.md``: better on real street pairs with very few
+            ``benchmarks/studies/results_line_matchers.md``: better on real street pairs with very few
             points, worse where an F from 8-30 points exists. (default: ``"epipolar"``)
         line_descriptor_ratio: Lowe's ratio test of the descriptor matcher (nearest / second
             nearest descriptor distance). (default: 0.85)

@@ -8,59 +8,8 @@ from __future__ import annotations
 
 from strl_pyg.utils.lazy import lazy_exports
 
-__all__ = [
-    "STATUSES",
-    "MIN_POINTS",
-    "ZERO_PARALLAX_PX",
-    "ZERO_PARALLAX_FRACTION",
-    "FOCAL_RANGE",
-    "MethodResult",
-    "MethodContext",
-    "PoseEstimate",
-    "prepare_matches",
-    "prepare_graph",
-    "forward_pose",
-    "input_warnings",
-    "zero_parallax",
-    "flipped_lines",
-    "RECOMMENDED_ORDER",
-    "RECOMMENDED",
-    "POINT_POOR_ORDER",
-    "POINT_POOR_MAX_POINTS",
-    "recommended_order",
-    "METHODS",
-    "MethodSpec",
-    "PoseEstimator",
-    "register_method",
-    "MethodFn",
-    "MIN_INLIER_RATIO",
-    "MIN_SUPPORT_INLIERS",
-    "SUPPORT_BAND",
-    "SUPPORT_CHECKED",
-    "CHEIRALITY_MIN",
-    "check_support",
-    "NORMALISED_K_MAX",
-    "intrinsics_problems",
-    "network_pose",
-    "estimate_recommended",
-    "estimate_methods",
-    "methods_needed",
-    "NETWORK_METHODS",
-    "DEPENDENCIES",
-    "BOOTSTRAPPED",
-    "methods_where",
-    "POSELIB_MISSING",
-    "BAD_INTRINSICS",
-    "NO_INTRINSICS",
-    "EstimatorConfig",
-    "CheckpointSettings",
-    "check_device",
-]
-
-# 0.2 code read other names of the module this folder was: they resolve too
-_lazy_getattr, __dir__ = lazy_exports(__name__, {
+_EXPORTS = {
     "STATUSES": "strl_pyg.inference.record",
-    "MIN_POINTS": "strl_pyg.inference.estimator",
     "ZERO_PARALLAX_PX": "strl_pyg.inference.checks",
     "ZERO_PARALLAX_FRACTION": "strl_pyg.inference.checks",
     "FOCAL_RANGE": "strl_pyg.inference.checks",
@@ -74,14 +23,14 @@ _lazy_getattr, __dir__ = lazy_exports(__name__, {
     "zero_parallax": "strl_pyg.inference.checks",
     "flipped_lines": "strl_pyg.inference.checks",
     "RECOMMENDED_ORDER": "strl_pyg.inference.policy",
-    "RECOMMENDED": "strl_pyg.inference.estimator",
+    "RECOMMENDED": "strl_pyg.inference.registry",
     "POINT_POOR_ORDER": "strl_pyg.inference.policy",
-    "POINT_POOR_MAX_POINTS": "strl_pyg.inference.estimator",
+    "POINT_POOR_MAX_POINTS": "strl_pyg.inference.methods",
     "recommended_order": "strl_pyg.inference.policy",
-    "METHODS": "strl_pyg.inference.estimator",
-    "MethodSpec": "strl_pyg.inference.estimator",
+    "METHODS": "strl_pyg.inference.registry",
+    "MethodSpec": "strl_pyg.inference.registry",
     "PoseEstimator": "strl_pyg.inference.estimator",
-    "register_method": "strl_pyg.inference.estimator",
+    "register_method": "strl_pyg.inference.registry",
     "MethodFn": "strl_pyg.inference.methods",
     "MIN_INLIER_RATIO": "strl_pyg.inference.support",
     "MIN_SUPPORT_INLIERS": "strl_pyg.inference.support",
@@ -93,15 +42,19 @@ _lazy_getattr, __dir__ = lazy_exports(__name__, {
     "network_pose": "strl_pyg.inference.network",
     "estimate_recommended": "strl_pyg.inference.recommended",
     "estimate_methods": "strl_pyg.inference.recommended",
-    "methods_needed": "strl_pyg.inference.estimator",
-    "methods_where": "strl_pyg.inference.estimator",
+    "methods_needed": "strl_pyg.inference.registry",
+    "methods_where": "strl_pyg.inference.registry",
     "POSELIB_MISSING": "strl_pyg.inference.policy",
-    "BAD_INTRINSICS": "strl_pyg.inference.estimator",
-    "NO_INTRINSICS": "strl_pyg.inference.estimator",
+    "BAD_INTRINSICS": "strl_pyg.inference.checks",
+    "NO_INTRINSICS": "strl_pyg.inference.pair",
     "EstimatorConfig": "strl_pyg.inference.config",
     "CheckpointSettings": "strl_pyg.inference.config",
     "check_device": "strl_pyg.inference.checks",
-}, globals())
+}
+
+__all__ = [*_EXPORTS, "SUPPORT_CHECKED", "NETWORK_METHODS", "DEPENDENCIES", "BOOTSTRAPPED"]
+
+_lazy_getattr, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 
 #: Tables derived from the method registry on every access (never cached on the face): a
 #: method registered later is in them.
@@ -110,7 +63,7 @@ _DERIVED = ("SUPPORT_CHECKED", "BOOTSTRAPPED", "NETWORK_METHODS", "DEPENDENCIES"
 
 def __getattr__(name: str):
     if name in _DERIVED:
-        from strl_pyg.inference import estimator
+        from strl_pyg.inference import registry
 
-        return getattr(estimator, name)
+        return registry.DERIVED[name]()
     return _lazy_getattr(name)

@@ -20,56 +20,31 @@ images): no pose is given), ``"failed"`` (the method found no pose, e.g. RANSAC 
 model, or the matches do not support it; never replaced by an identity pose). A pose exists
 only with ``"ok"``.
 
-The work is split by concern, and every name below is importable from here:
-
-* :mod:`strl_pyg.inference.record`: the records (:class:`MethodResult`, :class:`PoseEstimate`,
-  ``to_dict``) and the covariance / ``sigma`` convention.
-* :mod:`strl_pyg.inference.network`: the network's input graph and forward
-  (:func:`prepare_graph`, :func:`forward_pose`).
-* :mod:`strl_pyg.inference.checks`: the input checks (:func:`input_warnings`,
-  :func:`zero_parallax`, :func:`intrinsics_problems`, :func:`check_device`).
-* :mod:`strl_pyg.inference.methods`: the methods themselves (regression, classical, fused,
-  geometric, guided) and the :class:`MethodContext` they see.
-* this module: the registry (:data:`METHODS`, :func:`register_method`), the recommended
-  order and :class:`PoseEstimator`.
-
-Adding a method is one call: ``register_method("name", fn)`` with
-``fn(matches, context) -> MethodResult``; ``context.results`` holds the methods run before it.
+The folder's modules: the records (:mod:`~strl_pyg.inference.record`), the input checks
+(:mod:`~strl_pyg.inference.checks`), the network's graph and forward
+(:mod:`~strl_pyg.inference.network`), the method classes (:mod:`~strl_pyg.inference.methods`,
+:mod:`~strl_pyg.inference.line_methods`) and their registry (:mod:`~strl_pyg.inference.registry`:
+``register_method(MyMethod())``, a :class:`~strl_pyg.inference.registry.PoseMethod`), one
+pair's run (:mod:`~strl_pyg.inference.pair`), the calibration
+(:mod:`~strl_pyg.inference.calibration`), the recommended order
+(:mod:`~strl_pyg.inference.policy`), the evidence for a pose (:mod:`~strl_pyg.inference.evidence`)
+and this module, :class:`PoseEstimator`.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 import torch
 
-from strl_pyg.data.matches import (
-    DUPLICATE_TOLERANCE_PX,
-    POINT_ROW_KEYS,
-    PairMatches,
-    first_unique_rows,
-)
-from strl_pyg.estimation.classical import (
-    MIN_POINTS,
-    estimate_relative_pose,  # noqa: F401  (0.1.x name here)
-    normalisation_scope,
-)
-from strl_pyg.estimation.uncertainty import MAX_SIGMA_DEG, cap_covariance
-from strl_pyg.inference.checks import (
-    BAD_INTRINSICS,
-    FOCAL_RANGE,
-    NORMALISED_K_MAX,  # noqa: F401  (importable from here like the module's other names)
-    ZERO_PARALLAX_FRACTION,
-    ZERO_PARALLAX_PX,
-    flipped_lines,
-    input_warnings,
-    intrinsics_problems,
-    zero_parallax,
-)
+from strl_pyg.data.matches import PairMatches
+from strl_pyg.estimation.classical import normalisation_scope
+from strl_pyg.inference.calibration import calibrate, shipped_header
+from strl_pyg.inference.checks import BAD_INTRINSICS, input_warnings
 from strl_pyg.inference.config import CheckpointSettings, EstimatorConfig
 from strl_pyg.inference.evidence import (
     apply_configuration,
@@ -77,42 +52,35 @@ from strl_pyg.inference.evidence import (
     learned_pose_evidence,
     pair_geometry,
 )
-from strl_pyg.inference.methods import (  # noqa: I001
-    POINT_POOR_MAX_POINTS,  # one regime, defined where vp_checked reads it (re-exported)
+from strl_pyg.inference.methods import (
+    Classical,
+    Fused,
+    Geometric,
+    Guided,
     MethodContext,
-    MethodFn,
-    _classical,
-    _fused,
-    _geometric,
-    _guided,
-    _regression,
-    _vp,
-    _vp_checked,
-    have_poselib,
+    Regression,
 )
-from strl_pyg.inference.network import (
-    forward_pose,
-    network_pose,  # noqa: F401  (importable from here like the module's other names)
-    prepare_graph,
-    prepare_matches,
+from strl_pyg.inference.line_methods import VanishingPoint, VanishingPointChecked
+from strl_pyg.inference.pair import (
+    PairRun,
+    attach_fundamental,
+    checked_pair,
+    pair_rules,
+    unique_in_order,
 )
-from strl_pyg.inference.policy import (  # noqa: F401  (the policy's names, importable here)
-    POINT_POOR_ORDER,
+from strl_pyg.inference.policy import (
     POSELIB_MISSING,
-    RECOMMENDED_ORDER,
     measured_with_missing_poselib,
     recommended_order,
 )
-from strl_pyg.inference.record import STATUSES, MethodResult, PoseEstimate
-from strl_pyg.inference.registry import (  # noqa: F401  (the registry's names, importable here)
-    DERIVED,
+from strl_pyg.inference.record import MethodResult, PoseEstimate
+from strl_pyg.inference.registry import (
     METHODS,
     RECOMMENDED,
     MethodSpec,
     checked_method_names,
     classical_method,
     methods_needed,
-    methods_where,
     network_free_methods,
     register_method,
 )
@@ -120,187 +88,16 @@ from strl_pyg.inference.support import (
     check_support,
 )
 
-__all__ = [
-    "STATUSES", "RECOMMENDED_ORDER", "recommended_order", "MIN_POINTS", "ZERO_PARALLAX_PX",
-    "ZERO_PARALLAX_FRACTION",
-    "FOCAL_RANGE", "METHODS", "MethodSpec", "MethodResult", "MethodContext", "PoseEstimate",
-    "PoseEstimator", "register_method", "prepare_matches", "prepare_graph", "forward_pose",
-    "input_warnings", "zero_parallax", "RECOMMENDED", "methods_needed",
-]
+__all__ = ["PoseEstimator"]
 
 
-def __getattr__(name: str) -> Any:
-    if name in DERIVED:  # the registry's derived tables (always its current state)
-        return DERIVED[name]()
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-register_method("regression", _regression, needs_intrinsics=False, uses_network=True,
-                reads_lines=True, support_checked=False, label="the network's pose head")
-register_method("opencv", _classical("opencv"), bootstrapped=True, label="OpenCV MAGSAC")
-register_method("poselib", _classical("poselib"), available=have_poselib, bootstrapped=True,
-                label="PoseLib")
-register_method("fused", _fused, uses_network=True, reads_lines=True, bootstrapped=True,
-                classical_base=True, depends_on=("regression", "classical"),
-                label="network + classical, information form")
-register_method("geometric", _geometric, uses_network=True, reads_lines=True,
-                needs_geometric_head=True, label="the network's weighted eight-point")
-register_method("guided", _guided, uses_network=True, reads_lines=True, bootstrapped=True,
-                classical_base=True, depends_on=("classical",), needs_geometric_head=True,
-                label="network-guided classical solve")
-register_method("vp", _vp, reads_lines=True, depends_on=("classical",),
-                label="vanishing-point rotation + 2-point translation")
-register_method("vp_checked", _vp_checked, reads_lines=True, depends_on=("classical", "vp"),
-                label="PoseLib checked by the lines' vanishing direction")
+# the built-in methods, in the order they run
+for _method in (Regression(), Classical("opencv"), Classical("poselib"), Fused(), Geometric(),
+                Guided(), VanishingPoint(), VanishingPointChecked()):
+    register_method(_method)
 
 
 # ----------------------------------------------------------------------------- estimator
-#: Why every pose of a pair without intrinsics is ``"unreliable"``.
-NO_INTRINSICS = ("no metric pose without intrinsics K0, K1 (the network's pose from "
-                 "coordinates normalised by the image size is not one): the pair's epipolar "
-                 "geometry is its fundamental matrix, info['fundamental_matrix']")
-
-
-def _attach_fundamental(estimate: PoseEstimate, matches: PairMatches, threshold_px: float,
-                        seed: int, rows: np.ndarray) -> None:
-    """The route without intrinsics: the fundamental matrix of the (checked) point matches
-    (OpenCV MAGSAC, pixels) in the recommended record's ``info``, with the number of distinct
-    inliers and the inlier mask over the input's rows (``rows``: the checked row of each)."""
-    from strl_pyg.estimation.classical import fundamental_matrix
-
-    found = fundamental_matrix(matches, threshold_px, seed)
-    info = dict(estimate.pose.info)  # the record may share its dict with a method's
-    info["fundamental_matrix"] = None if found is None else found[0]
-    if found is not None:
-        info["fundamental_inliers"] = int(found[1].sum())
-        info["fundamental_inlier_mask"] = np.asarray(found[1], dtype=bool)[rows]
-    estimate.pose.info = info
-
-
-def _checked_pair(matches: PairMatches) -> tuple[PairMatches, list[str], np.ndarray,
-                                                  str | None, list[str]]:
-    """The pair's one input check: the matches with each correspondence once (every decision,
-    minimum counts, support, bootstrap sigma, counts correspondences, not rows), the input
-    warnings, the row of every input point in them, why the pair is degenerate (or ``None``)
-    and what is wrong with its intrinsics (:func:`intrinsics_problems`)."""
-    problems = intrinsics_problems(matches.image_size0, matches.image_size1, matches.K0,
-                                   matches.K1)
-    warnings = list(problems) if matches.has_intrinsics else input_warnings(
-        matches.image_size0, matches.image_size1, None, None)
-    matches, repeats, rows = matches.deduplicated()
-    warnings += repeats
-    warnings += flipped_lines(matches)
-    n, degenerate = matches.num_distinct_points, None
-    spread = _spread_px(matches)
-    if n and spread < 4.0 and min(*matches.image_size0, *matches.image_size1) >= 64:
-        degenerate = (f"Expected pixel coordinates (got all {matches.num_points} point "
-                      f"matches within {spread:.2g} px of each other in images of "
-                      f"{matches.image_size0[0]}x{matches.image_size0[1]} px: normalised "
-                      "coordinates? build the matches with PairMatches.from_normalized)")
-    elif zero_parallax(matches):
-        degenerate = (f"zero parallax: most of the {n} point matches moved less than "
-                      f"{ZERO_PARALLAX_PX} px (identical or near-identical images): the "
-                      "translation is undefined")
-    if degenerate is not None:
-        warnings.append(degenerate)
-    return matches, warnings, rows, degenerate, problems
-
-
-def _pair_rules(results: dict[str, MethodResult], matches: PairMatches,
-                rows: np.ndarray, problems: list[str]) -> None:
-    """What holds for every method of a pair, applied in place: intrinsics that fail the
-    checks (``problems``: :func:`intrinsics_problems`) or none at all make every pose
-    ``"unreliable"``; inlier masks go to the input's rows."""
-    reasons = [f"{BAD_INTRINSICS}: " + "; ".join(problems)] if problems else []
-    if not matches.has_intrinsics:
-        # the network then reads coordinates normalised by the image size, not by K: its
-        # rotation and its calibrated sigma are not those of a calibrated pair
-        reasons.append(NO_INTRINSICS)
-    for name, res in results.items():
-        new = [why for why in reasons if why not in res.warnings]  # a known result may
-        results[name] = res = res.unreliable(new)  # carry them already
-        if res.info.get("inlier_mask") is not None and res.inliers is None:
-            res.inliers = np.asarray(res.info.pop("inlier_mask"), dtype=bool)[rows]
-
-
-_SHIPPED_METADATA: list = []
-
-
-def shipped_header() -> Any:
-    """The default shipped checkpoint's metadata and config, as an object with ``metadata``
-    (what the calibration and order helpers read) and ``config``, read once per process
-    without building the model."""
-    if not _SHIPPED_METADATA:
-        from types import SimpleNamespace
-
-        from strl_pyg.model.strl_pose import StrLPose
-
-        config, metadata = StrLPose.pretrained_header()
-        _SHIPPED_METADATA.append(SimpleNamespace(metadata=metadata, config=config))
-    return _SHIPPED_METADATA[0]
-
-
-def _spread_px(matches: PairMatches) -> float:
-    """The larger extent (pixels) of the point matches in either image; ``inf`` without
-    point matches."""
-    if matches.num_points == 0:
-        return float("inf")
-    return float(max(np.ptp(matches.points0, axis=0).max(), np.ptp(matches.points1, axis=0).max()))
-
-
-def _unique(items: list[str]) -> list[str]:
-    return list(dict.fromkeys(items))
-
-
-@dataclass
-class _Pair:
-    """One pair's run, the estimator's one context per pair: the matches checked once
-    (:func:`_checked_pair`), their normalisation (the memo of
-    :func:`~strl_pyg.estimation.classical.normalisation_scope`), the results of the methods run
-    so far and what they share (:class:`MethodContext`)."""
-
-    matches: PairMatches  # checked: each correspondence once
-    warnings: list[str]
-    rows: np.ndarray  # the checked row of every input point row
-    degenerate: str | None
-    problems: list[str]  # intrinsics_problems, found once
-    ctx: MethodContext
-    memo: dict = field(default_factory=dict)
-    geometry: Any = None  # the two-view configuration (strl_pyg.inference.evidence), once
-
-    def add_lines(self, lined: PairMatches) -> None:
-        """Joins the line matches of ``lined`` (these point matches with lines added, e.g. by
-        :func:`~strl_pyg.frontend.pipeline.add_lines`): the points, their check and
-        normalisation and the results of the methods that read no lines stay."""
-        first = self._first_rows()
-        if not (lined.num_points == len(self.rows)
-                and np.array_equal(lined.points0[first], self.matches.points0)
-                and np.array_equal(lined.points1[first], self.matches.points1)):
-            raise ValueError(f"Expected the pair's {len(self.rows)} point matches with lines "
-                             f"added (got {lined.num_points} other point matches)")
-        li = first_unique_rows(np.concatenate([lined.lines0, lined.lines1], axis=1),
-                               DUPLICATE_TOLERANCE_PX)
-        if len(li) < lined.num_lines:
-            self.warnings.append(f"{lined.num_lines - len(li)} repeated line matches removed "
-                                 "(a repeated match is one correspondence): "
-                                 f"{len(li)} line matches remain")
-        info = dict(lined.info)  # the point rows the check re-indexed stay re-indexed
-        for key in POINT_ROW_KEYS:
-            info.pop(key, None)
-            if key in self.matches.info:
-                info[key] = self.matches.info[key]
-        # the same point arrays: their normalisation is found again in the memo
-        self.matches = replace(self.matches, lines0=lined.lines0[li], lines1=lined.lines1[li],
-                               line_scores=None if lined.line_scores is None
-                               else lined.line_scores[li], info=info)
-        self.ctx.results = {m: r for m, r in self.ctx.results.items()
-                            if m in METHODS and not METHODS[m].reads_lines}
-        for key in ("vanishing_directions", "full_forward"):  # read the lines
-            self.ctx.cache.pop(key, None)
-
-    def _first_rows(self) -> np.ndarray:
-        """The input row kept for every checked row (the first of its repeats)."""
-        return np.unique(self.rows, return_index=True)[1]
 
 
 class PoseEstimator:
@@ -347,12 +144,12 @@ class PoseEstimator:
             ``None`` (every match).
         swap_check: the regression also runs on the swapped pair (image 1 first) and its
             covariance grows by the disagreement of the two passes
-            (:func:`~strl_pyg.inference.methods.swap_covariance`; default ``True``): the
+            (:func:`~strl_pyg.estimation.uncertainty.swap_covariance`; default ``True``): the
             network's own variances are fitted on its training distribution and stay small
             away from it.
         data_check: the regression's covariance also grows by its distance to the classical
             pose of the same matches (PoseLib's, else OpenCV's; one solve per pair, shared
-            with that method) (:func:`~strl_pyg.inference.methods.data_covariance`; default
+            with that method) (:func:`~strl_pyg.estimation.uncertainty.data_covariance`; default
             ``True``; needs intrinsics and 8 distinct point matches).
     """
 
@@ -452,7 +249,7 @@ class PoseEstimator:
         pair = self._pair(matches)
         if names == RECOMMENDED:
             return self._recommended(pair, known=known)
-        self._run_methods(pair, names, known)
+        self._run_methods(pair, methods_needed(names), known)  # with what they read
         return self._finish(pair, names)
 
     def _names(self, methods: Any) -> tuple[str, ...] | str:
@@ -462,12 +259,12 @@ class PoseEstimator:
             return checked_method_names(methods)
         return RECOMMENDED if self.recommended_only else self.method_names
 
-    def _pair(self, matches: PairMatches) -> _Pair:
+    def _pair(self, matches: PairMatches) -> PairRun:
         """The pair's one context: its input check, and the context its methods share. The
         model's metadata (the shipped one's when None was given) calibrates the classical
         methods too, also when no network method runs; the network itself is built only
         when a method needs it."""
-        checked, warnings, rows, degenerate, problems = _checked_pair(matches)
+        checked, warnings, rows, degenerate, problems = checked_pair(matches)
         geometry, memo = None, {}
         if degenerate is None and not problems and checked.has_intrinsics:
             # the configuration and the focal check, from the same checked matches
@@ -483,9 +280,9 @@ class PoseEstimator:
                             data_check=self.config.data_check,
                             support=(self.min_inlier_ratio, self.min_inliers,
                                      self.min_in_front))
-        return _Pair(checked, warnings, rows, degenerate, problems, ctx, memo, geometry)
+        return PairRun(checked, warnings, rows, degenerate, problems, ctx, memo, geometry)
 
-    def _run_methods(self, pair: _Pair, names: Any,
+    def _run_methods(self, pair: PairRun, names: Any,
                      known: dict[str, MethodResult] | None = None) -> None:
         """Runs the methods of ``names`` the pair has no result of yet, in the registry's
         order (a method that reads another's result runs after it, whatever order the caller
@@ -501,21 +298,21 @@ class PoseEstimator:
                     continue
                 res = self._support(self._run(name, pair.matches, pair.ctx, pair.degenerate),
                                     pair.matches)
-                results[name] = self._calibrated(name, res, pair.ctx.settings)
+                results[name] = calibrate(name, res, pair.ctx.settings, self.bootstrap)
 
-    def _finish(self, pair: _Pair, names: Any, fundamental: bool = True) -> PoseEstimate:
+    def _finish(self, pair: PairRun, names: Any, fundamental: bool = True) -> PoseEstimate:
         """The estimate of the methods ``names`` of the pair (in that order): the rules that
         hold for every method of a pair, then the recommended pose; without intrinsics, the
         pair's fundamental matrix (``fundamental``)."""
         results = {name: pair.ctx.results[name] for name in names}  # the caller's order
-        _pair_rules(results, pair.matches, pair.rows, pair.problems)
+        pair_rules(results, pair.matches, pair.rows, pair.problems)
         estimate = self._recommend(results, list(pair.warnings), pair.matches, pair.geometry)
         with normalisation_scope(pair.memo):
             estimate = apply_configuration(estimate, pair.geometry, pair.matches)
         estimate.point_rows = pair.rows
         if fundamental and not pair.matches.has_intrinsics:
             with normalisation_scope(pair.memo):
-                _attach_fundamental(estimate, pair.matches, self.threshold_px, self.seed,
+                attach_fundamental(estimate, pair.matches, self.threshold_px, self.seed,
                                     pair.rows)
         return estimate
 
@@ -523,7 +320,7 @@ class PoseEstimator:
         return [m for m in recommended_order(self.settings, num_points)
                 if m in METHODS and METHODS[m].available()]
 
-    def _recommended(self, pair: _Pair, more_lines: Callable[[], PairMatches] | None = None,
+    def _recommended(self, pair: PairRun, more_lines: Callable[[], PairMatches] | None = None,
                      known: dict[str, MethodResult] | None = None) -> PoseEstimate:
         """The recommended order walked one method at a time (with the methods it reads),
         stopping once the recommended pose is ``"ok"``, or at the first ``"unreliable"`` one
@@ -560,7 +357,7 @@ class PoseEstimator:
         # fundamental matrix (fitted once, at the end)
         return est if pair.matches.has_intrinsics else self._finish(pair, run)
 
-    def _run_all(self, pair: _Pair, more_lines: Callable[[], PairMatches] | None,
+    def _run_all(self, pair: PairRun, more_lines: Callable[[], PairMatches] | None,
                  known: dict[str, MethodResult] | None) -> PoseEstimate:
         """Every method of the estimator on the pair (the results it has are kept)."""
         if more_lines is not None and any(METHODS[m].reads_lines for m in self.method_names):
@@ -607,44 +404,6 @@ class PoseEstimator:
             if dep in ctx.results and ctx.results[dep].status == "skipped":
                 return f"it reads {dep}, which was skipped"
         return None
-
-    def _calibrated(self, name: str, res: MethodResult,
-                    settings: CheckpointSettings) -> MethodResult:
-        """``res`` with its covariance scaled by the checkpoint's calibration where it applies
-        (or a warning why not), then capped at :data:`MAX_SIGMA_DEG` per block."""
-        scale, fitted_boot, shipped = settings.scale_of(name)
-        spec = METHODS[name]
-        which = "the shipped weights' scale" if shipped else "the checkpoint's scale"
-        if (scale is not None and spec.bootstrapped and res.covariance is not None
-                and fitted_boot != self.bootstrap):
-            res.warnings.append(
-                f"{name}: covariance not calibrated ({which} was fitted with "
-                f"bootstrap={fitted_boot}, this estimate used bootstrap={self.bootstrap})")
-            scale = None
-        if (scale is not None and spec.classical_base and res.covariance is not None
-                and measured_with_missing_poselib(settings)):
-            res.warnings.append(
-                f"{name}: covariance not calibrated ({which} was fitted with "
-                "PoseLib as its classical base, which is not installed here)")
-            scale = None
-        if scale is not None and res.covariance is not None:
-            res.covariance = res.covariance * scale
-            res.info["calibration_scale"] = scale
-            if shipped:
-                res.info["calibration_from"] = "shipped"
-        elif (res.covariance is not None and res.info.get("calibration_scale") is None
-              and not any("not calibrated" in w for w in res.warnings)):
-            # (a record that carries another method's calibrated covariance, vp_checked's
-            # copy of the classical one, has its scale already)
-            res.warnings.append(f"{name}: covariance not calibrated (no scale of it in the "
-                                "checkpoint's metadata): its sigma is not a measured one")
-        if res.covariance is not None:
-            res.covariance, capped = cap_covariance(res.covariance)
-            if capped:
-                res.info["sigma_capped"] = True
-                res.warnings.append(f"{name}: sigma capped at {MAX_SIGMA_DEG:g} deg (its "
-                                    "covariance stated more: the pose is ambiguous)")
-        return res
 
     def estimate_images(self, image0: np.ndarray, image1: np.ndarray, K0: Any = None,
                         K1: Any = None, frontend_config: Any = None,
@@ -718,7 +477,7 @@ class PoseEstimator:
                 r = learned_pose_evidence(r, matches, self.threshold_px, (
                     self.min_inlier_ratio, self.min_inliers, self.min_in_front), geometry)
             if r.status == "ok":
-                pose = replace(r, warnings=_unique(warnings + notes + r.warnings))
+                pose = replace(r, warnings=unique_in_order(warnings + notes + r.warnings))
                 return PoseEstimate(pose, results, matches.num_points, matches.num_lines,
                                     matches)
             if r.status == "unreliable" and fallback is None:
@@ -730,11 +489,11 @@ class PoseEstimator:
             r, before = fallback
             own = [f"{BAD_INTRINSICS} (the warnings on K above)"
                    if w.startswith(f"{BAD_INTRINSICS}: ") else w for w in r.warnings]
-            pose = replace(r, warnings=_unique(warnings + before + own))
+            pose = replace(r, warnings=unique_in_order(warnings + before + own))
             return PoseEstimate(pose, results, matches.num_points, matches.num_lines, matches)
         if not order:
             notes.append(f"none of the recommended methods {chosen} was run")
         status = "degenerate" if any(results[m].status == "degenerate" for m in order) \
             else "failed"
-        pose = MethodResult(None, status, warnings=_unique(warnings + notes))
+        pose = MethodResult(None, status, warnings=unique_in_order(warnings + notes))
         return PoseEstimate(pose, results, matches.num_points, matches.num_lines, matches)

@@ -31,7 +31,6 @@ import numpy as np
 
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.estimation.classical import fundamental_matrix, normalised_matches
-from strl_pyg.inference.checks import BAD_INTRINSICS
 from strl_pyg.estimation.two_view import TwoViewGeometry, classify_two_view, planar_candidates
 from strl_pyg.inference.record import MethodResult, PoseEstimate
 from strl_pyg.inference.support import check_support
@@ -134,7 +133,7 @@ def apply_configuration(estimate: PoseEstimate, geo: TwoViewGeometry | None,
     pose = estimate.pose
     info = {**pose.info, "configuration": geo.configuration}
     if geo.configuration == "rotation" and pose.status in ("ok", "failed", "unreliable") \
-            and geo.rotation is not None and not _bad_intrinsics(pose):
+            and geo.rotation is not None and not pose.bad_intrinsics:
         sigma = geo.rotation_sigma_deg if geo.rotation_sigma_deg is not None else float("nan")
         s = math.radians(max(sigma, 1e-3)) if math.isfinite(sigma) else None
         cov = None if s is None else np.eye(3) * s * s / 3.0
@@ -182,8 +181,4 @@ def apply_configuration(estimate: PoseEstimate, geo: TwoViewGeometry | None,
 def _rot_deg(A: np.ndarray, B: np.ndarray) -> float:
     c = (np.trace(A @ B.T) - 1.0) / 2.0
     return math.degrees(math.acos(max(-1.0, min(1.0, float(c)))))
-
-
-def _bad_intrinsics(pose: MethodResult) -> bool:
-    return any(w.startswith(BAD_INTRINSICS) for w in pose.warnings)
 

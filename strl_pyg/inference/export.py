@@ -53,7 +53,7 @@ class DensePoseModule(nn.Module):
 
     def forward(self, coords: Tensor, line_feat: Tensor, endpoint_idx: Tensor,
                 line_edges: Tensor, visual: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        from strl_pyg.nn.attention import CompleteEdges
+        from strl_pyg.data import CompleteEdges
         from strl_pyg.nn.layout import DenseLayout
 
         m = self.model

@@ -10,12 +10,8 @@ the context they share; :mod:`strl_pyg.inference.estimator` registers them in :d
 * ``geometric``: the weighted eight-point solve of the geometric head, refined.
 * ``guided``: the classical solver guided by the geometric head's inlier weights
   (:func:`~strl_pyg.estimation.guided.guided_estimate`).
-* ``vp``: the vanishing-point rotation of the matched lines and a 2-point translation
-  (:func:`~strl_pyg.estimation.vanishing.vanishing_point_pose`); first in the recommended order
-  where a pair has at most 30 point matches
-  (:data:`~strl_pyg.inference.policy.POINT_POOR_ORDER`, ``benchmarks/results_vanishing.md``).
-* ``vp_checked`` (:func:`_vp_checked`): the classical pose, replaced by ``vp``'s where the
-  points are few and the lines' strongest vanishing direction contradicts its rotation; opt-in.
+* ``vp``, ``vp_checked``: the methods of the lines' vanishing directions
+  (:mod:`strl_pyg.inference.line_methods`).
 
 A method is ``fn(matches, context) -> MethodResult``; ``context.results`` holds the methods
 run before it. Covariances (:mod:`strl_pyg.inference.record`): the network's from its predicted
@@ -41,12 +37,16 @@ from strl_pyg.estimation.uncertainty import (
     FAR_TRANSLATION_DEG,
     MIN_BOOTSTRAP,
     bootstrap_resamples,
+    data_covariance,
+    swap_covariance,
 )
 from strl_pyg.inference.config import CheckpointSettings
 from strl_pyg.inference.network import network_pose
 from strl_pyg.inference.record import MethodResult
+from strl_pyg.inference.registry import PoseMethod
 
-__all__ = ["MethodContext", "MethodFn"]
+__all__ = ["MethodContext", "MethodFn", "POINT_POOR_MAX_POINTS", "Regression", "Classical",
+           "Geometric", "Guided", "Fused", "with_covariance"]
 
 
 # ----------------------------------------------------------------------------- context
@@ -89,63 +89,75 @@ MethodFn = Callable[[PairMatches, MethodContext], MethodResult]
 
 
 # ----------------------------------------------------------------------------- methods
-def _regression(matches: PairMatches, ctx: MethodContext) -> MethodResult:
-    from strl_pyg.estimation.pose_fusion import network_covariance, tangent_basis
-    from strl_pyg.geometry import Pose
+class Regression(PoseMethod):
+    """The network's pose head on the pair's resampled graph (as in training), with its covariance
+    from the predicted log-variances, the swap check and the data check."""
 
-    model = ctx.model
-    start = time.perf_counter()
-    # the swap check runs its own forward pass: one batch of both pairs measured 2x slower on
-    # a CPU (330 ms against 81 + 80 ms on KITTI: the batched graph loses the one-pair path)
-    out = network_pose(model, matches, ctx.seed, ctx.resample, ctx.device)
-    ms = (time.perf_counter() - start) * 1e3
-    q, t, lv = (x[0].detach().cpu().double() for x in (out.quaternion, out.translation,
-                                                       out.log_var))
-    if not all(bool(torch.isfinite(x).all()) for x in (q, t, lv)) or float(t.norm()) < 1e-12:
-        return MethodResult("regression", "failed", time_ms=ms, raw=out,
-                            warnings=["the network returned a non-finite or zero pose"])
-    cov = network_covariance(q, t, lv, tangent_basis(t)).numpy()
-    info = {"quaternion": q, "translation": t, "log_var": lv,
-            "sigma_components": torch.exp(0.5 * lv),
-            "translation_kind": model.config.translation}
-    pose = Pose.from_quaternion(q, t)
-    warnings = []
-    if ctx.swap_check:
+    name = "regression"
+    label = "the network's pose head"
+    needs_intrinsics = False
+    uses_network = True
+    reads_lines = True
+    support_checked = False
+
+    def __call__(self, matches: PairMatches, ctx: MethodContext) -> MethodResult:
+        from strl_pyg.estimation.pose_fusion import network_covariance
+        from strl_pyg.geometry import tangent_basis
+        from strl_pyg.geometry import Pose
+
+        model = ctx.model
         start = time.perf_counter()
-        try:
-            found = _swap_disagreement(model, matches, ctx, pose)
-        except Exception as err:  # the forward pose stands; only its check is missing
-            found = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
-        # its own time: time_ms stays the forward pass's, comparable with runs without it
-        info["swap_check_ms"] = (time.perf_counter() - start) * 1e3
-        if found is None or isinstance(found, str):
-            why = ("the swapped pair's forward pass gave a non-finite or zero pose"
-                   if found is None else f"the swapped pair's forward pass raised {found}")
-            warnings.append(f"regression: no swap check ({why}); its covariance is the "
-                            "network's own")
-        else:
-            rot, trans = found
-            cov = cov + swap_covariance(rot, trans)
-            info["swap_disagreement_deg"] = {"rotation": math.degrees(rot),
-                                             "translation": math.degrees(trans)}
-    if ctx.data_check:
-        start = time.perf_counter()
-        try:
-            found = _data_disagreement(matches, pose, ctx)
-        except Exception as err:  # the forward pose stands; only its check is missing
-            found = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
-        info["data_check_ms"] = (time.perf_counter() - start) * 1e3
-        if isinstance(found, str):
-            info["data_check"] = f"not run: {found}"
-            if matches.has_intrinsics:  # without K the pose is "unreliable" anyway
-                warnings.append(f"regression: no data check ({found}); its covariance does "
-                                "not hold the distance to the classical pose")
-        else:
-            cov = cov + data_covariance(*found)
-            info["data_disagreement_deg"] = {"rotation": math.degrees(found[0]),
-                                             "translation": math.degrees(found[1])}
-    return MethodResult("regression", "ok", pose, cov, warnings, time_ms=ms,
-                        info=info, raw=out)
+        # the swap check runs its own forward pass: one batch of both pairs measured 2x slower on
+        # a CPU (330 ms against 81 + 80 ms on KITTI: the batched graph loses the one-pair path)
+        out = network_pose(model, matches, ctx.seed, ctx.resample, ctx.device)
+        ms = (time.perf_counter() - start) * 1e3
+        q, t, lv = (x[0].detach().cpu().double() for x in (out.quaternion, out.translation,
+                                                           out.log_var))
+        if not all(bool(torch.isfinite(x).all()) for x in (q, t, lv)) or float(t.norm()) < 1e-12:
+            return MethodResult("regression", "failed", time_ms=ms, raw=out,
+                                warnings=["the network returned a non-finite or zero pose"])
+        cov = network_covariance(q, t, lv, tangent_basis(t)).numpy()
+        info = {"quaternion": q, "translation": t, "log_var": lv,
+                "sigma_components": torch.exp(0.5 * lv),
+                "translation_kind": model.config.translation}
+        pose = Pose.from_quaternion(q, t)
+        warnings = []
+        if ctx.swap_check:
+            start = time.perf_counter()
+            try:
+                found = _swap_disagreement(model, matches, ctx, pose)
+            except Exception as err:  # the forward pose stands; only its check is missing
+                found = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
+            # its own time: time_ms stays the forward pass's, comparable with runs without it
+            info["swap_check_ms"] = (time.perf_counter() - start) * 1e3
+            if found is None or isinstance(found, str):
+                why = ("the swapped pair's forward pass gave a non-finite or zero pose"
+                       if found is None else f"the swapped pair's forward pass raised {found}")
+                warnings.append(f"regression: no swap check ({why}); its covariance is the "
+                                "network's own")
+            else:
+                rot, trans = found
+                cov = cov + swap_covariance(rot, trans)
+                info["swap_disagreement_deg"] = {"rotation": math.degrees(rot),
+                                                 "translation": math.degrees(trans)}
+        if ctx.data_check:
+            start = time.perf_counter()
+            try:
+                found = _data_disagreement(matches, pose, ctx)
+            except Exception as err:  # the forward pose stands; only its check is missing
+                found = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
+            info["data_check_ms"] = (time.perf_counter() - start) * 1e3
+            if isinstance(found, str):
+                info["data_check"] = f"not run: {found}"
+                if matches.has_intrinsics:  # without K the pose is "unreliable" anyway
+                    warnings.append(f"regression: no data check ({found}); its covariance does "
+                                    "not hold the distance to the classical pose")
+            else:
+                cov = cov + data_covariance(*found)
+                info["data_disagreement_deg"] = {"rotation": math.degrees(found[0]),
+                                                 "translation": math.degrees(found[1])}
+        return MethodResult("regression", "ok", pose, cov, warnings, time_ms=ms,
+                            info=info, raw=out)
 
 
 #: Fewest distinct point matches for the regression's data check (a 5-dof pose needs 5; the
@@ -185,28 +197,6 @@ def _data_disagreement(matches: PairMatches, pose: Any,
     return float(torch.arccos(cos_r)), float(torch.arccos(cos_t))
 
 
-def data_covariance(rotation_rad: float, translation_rad: float) -> np.ndarray:
-    """The ``[5, 5]`` tangent covariance that the regression's data check adds
-    (:data:`MethodContext.data_check`), before its calibration scale as the swap check's term:
-    the classical pose is far more precise than the network's where it is right, so the
-    distance to it stands for the network's own error, its square spread over the 3 rotation
-    and the 2 direction axes (``d_R^2 / 3``, ``d_t^2 / 2``). Where the classical pose is wrong
-    the term is wide whatever the network's error (conservative). The regression's record
-    carries it; the fusion does not (its consistency gate compares the network with the same
-    classical pose: the term would let every network pose pass it)."""
-    return np.diag([rotation_rad ** 2 / 3] * 3 + [translation_rad ** 2 / 2] * 2)
-
-
-def swap_covariance(rotation_rad: float, translation_rad: float) -> np.ndarray:
-    """The ``[5, 5]`` tangent covariance that a disagreement between the network's pose and
-    the inverse of its pose of the swapped pair adds (:data:`MethodContext.swap_check`): were
-    the two errors independent and alike, their difference would hold twice the variance of
-    each, spread over the 3 rotation and the 2 direction axes, so ``d_R^2 / 6`` and
-    ``d_t^2 / 4`` per axis. The network's own log-variances are fitted on the training
-    distribution and stay small away from it; the two passes disagree there."""
-    return np.diag([rotation_rad ** 2 / 6] * 3 + [translation_rad ** 2 / 4] * 2)
-
-
 def swap_term(regression: MethodResult) -> np.ndarray | None:
     """The swap check's :func:`swap_covariance` of a regression record (``None`` when it ran
     without one): what the fusion adds to the network's variance, as the record did."""
@@ -235,8 +225,25 @@ def _swap_disagreement(model: torch.nn.Module, matches: PairMatches, ctx: Method
     return float(torch.arccos(cos_r)), float(torch.arccos(cos_t))
 
 
-def _classical(name: str) -> MethodFn:
-    def fn(matches: PairMatches, ctx: MethodContext) -> MethodResult:
+class Classical(PoseMethod):
+    """A classical essential-matrix solver (:mod:`strl_pyg.estimation.classical`):
+    ``Classical("opencv")`` (OpenCV MAGSAC) or ``Classical("poselib")`` (PoseLib LO-RANSAC,
+    where installed), with the first-order covariance of its inliers and the bootstrap."""
+
+    bootstrapped = True
+    LABELS = {"opencv": "OpenCV MAGSAC", "poselib": "PoseLib"}
+
+    def __init__(self, solver: str) -> None:
+        if solver not in self.LABELS:
+            raise ValueError(f"Expected a classical solver in {sorted(self.LABELS)} "
+                             f"(got {solver!r})")
+        self.name, self.label = solver, self.LABELS[solver]
+
+    def available(self) -> bool:
+        return self.name != "poselib" or have_poselib()
+
+    def __call__(self, matches: PairMatches, ctx: MethodContext) -> MethodResult:
+        name = self.name
         from strl_pyg.estimation.pose_fusion import classical_covariance
 
         thr = ctx.threshold_px
@@ -265,147 +272,12 @@ def _classical(name: str) -> MethodFn:
             boot = None
         return _add_bootstrap(rec, boot, ctx.bootstrap, "first-order")
 
-    return fn
-
-
-def _vp(matches: PairMatches, ctx: MethodContext) -> MethodResult:
-    """The vanishing-point rotation and 2-point translation
-    (:func:`~strl_pyg.estimation.vanishing.vanishing_point_pose`), with the classical pose
-    (PoseLib's, else OpenCV's) as a second start of its joint refinement on the points and
-    the lines (``info["start"]``: ``"vp"`` or ``0``, the classical pose): needs line matches,
-    and answers where the points are too few for the 5-point solvers; its covariance is the
-    first-order one of its inlier points (no bootstrap, not calibrated)."""
-    from strl_pyg.estimation import line_refine
-    from strl_pyg.estimation.vanishing import vanishing_point_pose
-
-    if matches.num_lines == 0:
-        # the input lacks what vp reads: "skipped", as for a model without its pixels
-        return MethodResult("vp", "skipped", warnings=[
-            "vp needs line matches (got none: FrontendConfig(lines=True), or lines0/lines1)"])
-    # the 5-point solver's supported pose is a second start of the joint refinement with the
-    # lines: its record of this run when it ran before, else solved and support-checked here
-    # (once per pair), so that vp's answer does not depend on the order of the methods
-    sigma = line_refine.VP_LINE_SIGMA_PX
-    starts = None
-    if sigma is not None:
-        from strl_pyg.inference.support import check_support
-
-        base = "poselib" if have_poselib() else "opencv"
-        cls = ctx.results.get(base) or ctx.cache.get("vp_start")
-        if cls is None:
-            cls = ctx.cache["vp_start"] = check_support(
-                _classical(base)(matches, ctx), matches, ctx.threshold_px, *ctx.support)
-        starts = [cls.T_0to1] if cls.status == "ok" else []
-    res = vanishing_point_pose(matches, ctx.threshold_px, seed=ctx.seed,
-                               directions=_vanishing_directions(matches, ctx), starts=starts,
-                               line_sigma_px=sigma)
-    if not res.success:
-        return MethodResult("vp", "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
-                            info=dict(res.info), warnings=[f"vp: {res.info['reason']}"])
-    rec = _with_covariance("vp", res.pose, matches, ctx.threshold_px,
-                           time_ms=res.time_ms, info=dict(res.info), raw=res)
-    if rec.covariance is not None:  # the documented key (the CLI prints it)
-        rec.info["covariance"] = "first-order"
-    return rec
-
-
-def _vanishing_directions(matches: PairMatches, ctx: MethodContext) -> list:
-    """The matched lines' vanishing directions (default thresholds, ``ctx.seed``), found once
-    per pair and shared by ``vp`` and ``vp_checked``."""
-    from strl_pyg.estimation.vanishing import vanishing_directions
-
-    if "vanishing_directions" not in ctx.cache:
-        ctx.cache["vanishing_directions"] = vanishing_directions(matches, seed=ctx.seed)
-    return ctx.cache["vanishing_directions"]
-
 
 #: The point-poor regime, one bound for everything that depends on it: at or below this many
 #: point matches the recommended order puts the line solver first (``POINT_POOR_ORDER``) and
 #: ``vp_checked`` consults the lines (above it, it is the classical pose). It is the definition
 #: of the evaluation set ``point_poor`` and its calibration split, not a fit.
 POINT_POOR_MAX_POINTS = 30
-#: How far (deg) the classical rotation may carry the strongest vanishing direction shared by
-#: both images' lines (``d1 = +-R d0``) from where the second image sees it before
-#: ``vp_checked`` turns to ``vp``'s pose; fitted with :data:`VP_CHECK_SUPPORT_SLACK` on a
-#: calibration split (``benchmarks/bench_vanishing.py --fit``).
-VP_CHECK_ANGLE_DEG = 2.0
-#: ``vp``'s pose replaces the classical one only while it is supported by at least this many
-#: fewer point matches than the classical pose (fitted with :data:`VP_CHECK_ANGLE_DEG`).
-VP_CHECK_SUPPORT_SLACK = 3
-
-
-def _result_of(name: str, matches: PairMatches, ctx: MethodContext) -> MethodResult:
-    """The record of ``name`` (``"poselib"``, ``"opencv"`` or ``"vp"``) from the methods run
-    before, else run here; ``info["support_inliers"]`` counted as the support check counts."""
-    from strl_pyg.inference.support import check_support
-
-    res = ctx.results.get(name)
-    if res is None:
-        res = (_vp if name == "vp" else _classical(name))(matches, ctx)
-    if res.status == "ok" and "support_inliers" not in res.info:
-        res = check_support(res, matches, ctx.threshold_px, min_inlier_ratio=0.0,
-                            min_inliers=0, min_in_front=0.0)
-    return res
-
-
-def _vp_checked(matches: PairMatches, ctx: MethodContext) -> MethodResult:
-    """The classical pose, checked against the lines where the points are few: with at most
-    :data:`POINT_POOR_MAX_POINTS` point matches, when the classical rotation contradicts the
-    strongest vanishing direction of the matched lines by more than :data:`VP_CHECK_ANGLE_DEG`
-    and ``vp``'s pose (whose rotation comes from those directions) is supported by about as
-    many point matches (:data:`VP_CHECK_SUPPORT_SLACK`), ``vp``'s pose; ``vp``'s also where the
-    classical solver gives none. ``info["source"]`` names the pose taken, ``info["reason"]``
-    why; the covariance is that pose's own record's (calibrated when that record was:
-    ``info["calibration_scale"]``)."""
-    start = time.perf_counter()
-    base = "poselib" if have_poselib() else "opencv"
-    cls = _result_of(base, matches, ctx)
-    info: dict[str, Any] = {"classical": base}
-
-    def take(rec: MethodResult, reason: str) -> MethodResult:
-        ms = (time.perf_counter() - start) * 1e3
-        if rec.status != "ok":
-            return MethodResult("vp_checked", rec.status, time_ms=ms, info={**info,
-                                "reason": reason}, warnings=[f"vp_checked: {reason}"]
-                                + [w for w in rec.warnings if w not in reason])
-        return MethodResult("vp_checked", "ok", rec.as_pose(), rec.covariance,
-                            list(rec.warnings), ms, rec.num_inliers,
-                            info={**info, "source": rec.method, "reason": reason,
-                                  "covariance": rec.info.get("covariance"),
-                                  "calibration_scale": rec.info.get("calibration_scale")},
-                            raw=rec.raw)
-
-    if matches.num_distinct_points > POINT_POOR_MAX_POINTS:
-        return take(cls, f"{matches.num_distinct_points} distinct point matches (> "
-                    f"{POINT_POOR_MAX_POINTS}): the {base} pose as it is")
-    if matches.num_lines == 0:
-        return take(cls, "no line matches to check the pose against")
-    vp = _result_of("vp", matches, ctx)
-    if cls.status != "ok":
-        return take(vp, f"{base} gave no supported pose" + (
-            "; vp's pose" if vp.status == "ok" else "; nor did vp"))
-    dirs = _vanishing_directions(matches, ctx)
-    if not dirs:
-        return take(cls, "no vanishing direction shared by both images' lines")
-    d0, d1, lines = dirs[0]
-    R = np.asarray(cls.T_0to1, dtype=np.float64)[:3, :3]
-    angle = float(np.degrees(np.arccos(np.clip(abs(float(d1 @ (R @ d0))), 0.0, 1.0))))
-    info.update(line_angle_deg=angle, direction_lines=int(lines.sum()))
-    if angle <= VP_CHECK_ANGLE_DEG:
-        return take(cls, f"the {base} rotation agrees with the lines' strongest vanishing "
-                         f"direction ({angle:.1f} deg)")
-    if vp.status != "ok":
-        return take(cls, f"the {base} rotation is {angle:.1f} deg off the lines' vanishing "
-                         f"direction, but vp has no supported pose")
-    s_cls, s_vp = cls.info["support_inliers"], vp.info["support_inliers"]
-    info.update(support_classical=s_cls, support_vp=s_vp)
-    if s_vp < s_cls - VP_CHECK_SUPPORT_SLACK:
-        return take(cls, f"the {base} rotation is {angle:.1f} deg off the lines' vanishing "
-                         f"direction, but vp's pose fits fewer point matches ({s_vp} against "
-                         f"{s_cls})")
-    return take(vp, f"the {base} rotation is {angle:.1f} deg off the lines' strongest "
-                    f"vanishing direction ({int(lines.sum())} lines); vp's pose fits {s_vp} "
-                    f"point matches against {s_cls}")
 
 
 def _full_forward(matches: PairMatches, ctx: MethodContext):
@@ -427,7 +299,7 @@ def _no_head(name: str, ctx: MethodContext) -> MethodResult | None:
     return None
 
 
-def _with_covariance(name: str, pose: Any, matches: PairMatches, thr: float,
+def with_covariance(name: str, pose: Any, matches: PairMatches, thr: float,
                      **kw: Any) -> MethodResult:
     """An ``"ok"`` record of ``pose`` (a float64 :class:`~strl_pyg.geometry.Pose`) with the
     first-order covariance of the point matches within ``thr`` px of it."""
@@ -446,70 +318,92 @@ def _with_covariance(name: str, pose: Any, matches: PairMatches, thr: float,
     return MethodResult(name, "ok", pose, cov, warnings, num_inliers=int(inl.sum()), **kw)
 
 
-def _geometric(matches: PairMatches, ctx: MethodContext) -> MethodResult:
-    from strl_pyg.estimation.classical import normalised_matches
-    from strl_pyg.geometry import Pose
-    from strl_pyg.geometry.essential import DEGENERATE, refine_pose
+class Geometric(PoseMethod):
+    """The geometric head's weighted eight-point solve, refined, with a first-order covariance."""
 
-    bad = _no_head("geometric", ctx)
-    if bad is not None:
-        return bad
-    out, ms = _full_forward(matches, ctx)
-    geo = out.geometric
-    status = int(geo.status[0])
-    if status != 0:
-        why = "degenerate weighted solve (too few effective matches or rank-deficient)" \
-            if status == DEGENERATE else "no intrinsics: the weighted solve needs K0, K1"
-        return MethodResult("geometric", "degenerate" if status == DEGENERATE else "failed",
-                            time_ms=ms, warnings=[f"geometric: {why}"], raw=out)
-    start = time.perf_counter()
-    w = torch.sigmoid(geo.point_logits.double().cpu())
-    x0, x1, focal = normalised_matches(matches)
-    R, t = refine_pose(geo.R[:1].cpu(), geo.t[:1].cpu(), x0[None], x1[None], w[None],
-                       iterations=10, tau=ctx.threshold_px / focal)
-    T = Pose(R[0], t[0])
-    ms += (time.perf_counter() - start) * 1e3
-    return _with_covariance("geometric", T, matches, ctx.threshold_px, time_ms=ms,
-                            info={"mean_weight": float(w.mean())}, raw=out)
+    name = "geometric"
+    label = "the network's weighted eight-point"
+    uses_network = True
+    reads_lines = True
+    needs_geometric_head = True
 
+    def __call__(self, matches: PairMatches, ctx: MethodContext) -> MethodResult:
+        from strl_pyg.estimation.classical import normalised_matches
+        from strl_pyg.geometry import Pose
+        from strl_pyg.geometry.essential import DEGENERATE, refine_pose
 
-def _guided(matches: PairMatches, ctx: MethodContext) -> MethodResult:
-    from strl_pyg.estimation.guided import guided_estimate
-
-    bad = _no_head("guided", ctx)
-    if bad is not None:
-        return bad
-    base = "poselib" if have_poselib() else "opencv"
-    out, ms = _full_forward(matches, ctx)
-    w = torch.sigmoid(out.geometric.point_logits.double().cpu()).numpy()
-    prior = ctx.results.get(base)
-    classical = prior.raw if prior is not None and prior.status == "ok" else None
-    res = guided_estimate(matches, w, base, ctx.threshold_px, seed=ctx.seed,
-                          classical=classical)
-    ms += res.time_ms
-    if not res.success:
-        return MethodResult("guided", "failed", time_ms=ms, raw=res,
-                            warnings=[f"guided {base}: no hypothesis found"])
-    info = {"base": base, "candidate": res.info["candidate"], "refined": res.info["refined"]}
-    rec = _with_covariance("guided", res.pose, matches,
-                           ctx.threshold_px, time_ms=ms, info=info, raw=res)
-    boot, n_boot, resampled = None, ctx.bootstrap, None
-    if rec.covariance is not None and n_boot:
-        # the same bootstrap as the classical records, of the solve guided kept: on all the
-        # matches (then it is the base method's own, computed once) or on the network's top
-        # matches; the refinement, when kept, is not re-run per resample
+        bad = _no_head("geometric", ctx)
+        if bad is not None:
+            return bad
+        out, ms = _full_forward(matches, ctx)
+        geo = out.geometric
+        status = int(geo.status[0])
+        if status != 0:
+            why = "degenerate weighted solve (too few effective matches or rank-deficient)" \
+                if status == DEGENERATE else "no intrinsics: the weighted solve needs K0, K1"
+            return MethodResult("geometric", "degenerate" if status == DEGENERATE else "failed",
+                                time_ms=ms, warnings=[f"geometric: {why}"], raw=out)
         start = time.perf_counter()
-        subset = res.info.get("point_index")
-        key = f"bootstrap_{base}"
-        if (subset is None and res.info["candidate"] == "all" and not res.info["refined"]
-                and key in ctx.cache):
-            boot, resampled = ctx.cache[key], base
-        else:
-            sub = matches if subset is None else matches.select(point_index=subset)
-            boot = bootstrap_resamples(sub, res.pose, base, n_boot,
-                                       ctx.threshold_px, ctx.seed)
-        rec.time_ms += (time.perf_counter() - start) * 1e3
-    return _add_bootstrap(rec, boot, n_boot, "first-order", resampled=resampled)
+        w = torch.sigmoid(geo.point_logits.double().cpu())
+        x0, x1, focal = normalised_matches(matches)
+        R, t = refine_pose(geo.R[:1].cpu(), geo.t[:1].cpu(), x0[None], x1[None], w[None],
+                           iterations=10, tau=ctx.threshold_px / focal)
+        T = Pose(R[0], t[0])
+        ms += (time.perf_counter() - start) * 1e3
+        return with_covariance("geometric", T, matches, ctx.threshold_px, time_ms=ms,
+                                info={"mean_weight": float(w.mean())}, raw=out)
+
+
+class Guided(PoseMethod):
+    """The classical solver guided by the geometric head's inlier weights
+    (:func:`~strl_pyg.estimation.guided.guided_estimate`)."""
+
+    name = "guided"
+    label = "network-guided classical solve"
+    uses_network = True
+    reads_lines = True
+    bootstrapped = True
+    classical_base = True
+    depends_on = ("classical",)
+    needs_geometric_head = True
+
+    def __call__(self, matches: PairMatches, ctx: MethodContext) -> MethodResult:
+        from strl_pyg.estimation.guided import guided_estimate
+
+        bad = _no_head("guided", ctx)
+        if bad is not None:
+            return bad
+        base = "poselib" if have_poselib() else "opencv"
+        out, ms = _full_forward(matches, ctx)
+        w = torch.sigmoid(out.geometric.point_logits.double().cpu()).numpy()
+        prior = ctx.results.get(base)
+        classical = prior.raw if prior is not None and prior.status == "ok" else None
+        res = guided_estimate(matches, w, base, ctx.threshold_px, seed=ctx.seed,
+                              classical=classical)
+        ms += res.time_ms
+        if not res.success:
+            return MethodResult("guided", "failed", time_ms=ms, raw=res,
+                                warnings=[f"guided {base}: no hypothesis found"])
+        info = {"base": base, "candidate": res.info["candidate"], "refined": res.info["refined"]}
+        rec = with_covariance("guided", res.pose, matches,
+                               ctx.threshold_px, time_ms=ms, info=info, raw=res)
+        boot, n_boot, resampled = None, ctx.bootstrap, None
+        if rec.covariance is not None and n_boot:
+            # the same bootstrap as the classical records, of the solve guided kept: on all the
+            # matches (then it is the base method's own, computed once) or on the network's top
+            # matches; the refinement, when kept, is not re-run per resample
+            start = time.perf_counter()
+            subset = res.info.get("point_index")
+            key = f"bootstrap_{base}"
+            if (subset is None and res.info["candidate"] == "all" and not res.info["refined"]
+                    and key in ctx.cache):
+                boot, resampled = ctx.cache[key], base
+            else:
+                sub = matches if subset is None else matches.select(point_index=subset)
+                boot = bootstrap_resamples(sub, res.pose, base, n_boot,
+                                           ctx.threshold_px, ctx.seed)
+            rec.time_ms += (time.perf_counter() - start) * 1e3
+        return _add_bootstrap(rec, boot, n_boot, "first-order", resampled=resampled)
 
 
 def _add_bootstrap(rec: MethodResult, boot: np.ndarray | None, n_boot: int, kind: str,
@@ -538,39 +432,51 @@ def _add_bootstrap(rec: MethodResult, boot: np.ndarray | None, n_boot: int, kind
     return rec
 
 
-def _fused(matches: PairMatches, ctx: MethodContext) -> MethodResult:
-    from strl_pyg.estimation.pose_fusion import fuse_poses
+class Fused(PoseMethod):
+    """The network's pose and the first ``"ok"`` classical pose combined in information form
+    (:func:`~strl_pyg.estimation.pose_fusion.fuse_poses`)."""
 
-    net = ctx.results.get("regression")
-    cls = next((ctx.results[c] for c in ("poselib", "opencv")
-                if c in ctx.results and ctx.results[c].status == "ok"), None)
-    if net is None or net.status != "ok" or cls is None:
-        return MethodResult("fused", "failed", warnings=[
-            "fused needs an 'ok' regression and an 'ok' classical estimate (poselib or opencv)"])
-    start = time.perf_counter()
-    # the regression's calibrated variance, times the fusion's own inflation (fitted on the
-    # held-out calibration pairs by benchmarks/bench_pose.py --calibrate: the smallest that
-    # keeps the 95 % upper bound of the median change against the classical pose <= +5 %)
-    settings = ctx.settings if ctx.settings is not None else CheckpointSettings.of(ctx.model)
-    scale = settings.calibration.get("regression", 1.0) * settings.fusion_inflation
-    f = fuse_poses(net.raw, None, cls.raw, matches, threshold_px=ctx.threshold_px,
-                   network_scale=scale, network_extra=swap_term(net))
-    ms = (time.perf_counter() - start) * 1e3 + net.time_ms + cls.time_ms
-    if f.source == "network":
-        return MethodResult("fused", "failed", time_ms=ms, raw=f, warnings=[
-            f"fused: too few {cls.method} inliers for a covariance ({f.info['num_inliers']})"])
-    gate = f.info.get("gate", {})
-    info = {"classical": cls.method, "network_weight": f.weights,
-            "sign_disagreement": f.info["sign_disagreement"], "used": f.source,
-            "gate_d2": gate.get("d2"), "network_variance_scale": scale}
-    warnings = [] if f.source == "fused" else [f"fused: {gate.get('reason')}"]
-    rec = MethodResult("fused", "ok", f.pose, f.covariance.numpy(),
-                       warnings, time_ms=ms, num_inliers=f.info["num_inliers"], info=info,
-                       raw=f)
-    # the fused pose stays near the classical one and moves with it when the matches change:
-    # the classical bootstrap term (instability of the solve, which the information form
-    # cannot see) is added, as for the classical record itself (its warning, if any, is there)
-    boot = ctx.cache.get(f"bootstrap_{cls.method}")
-    rec = _add_bootstrap(rec, boot, 0 if boot is None else ctx.bootstrap,
-                         "information form", f"{cls.method} ")
-    return rec
+    name = "fused"
+    label = "network + classical, information form"
+    uses_network = True
+    reads_lines = True
+    bootstrapped = True
+    classical_base = True
+    depends_on = ("regression", "classical")
+
+    def __call__(self, matches: PairMatches, ctx: MethodContext) -> MethodResult:
+        from strl_pyg.estimation.pose_fusion import fuse_poses
+
+        net = ctx.results.get("regression")
+        cls = next((ctx.results[c] for c in ("poselib", "opencv")
+                    if c in ctx.results and ctx.results[c].status == "ok"), None)
+        if net is None or net.status != "ok" or cls is None:
+            return MethodResult("fused", "failed", warnings=[
+                "fused needs an 'ok' regression and an 'ok' classical estimate (poselib or opencv)"])
+        start = time.perf_counter()
+        # the regression's calibrated variance, times the fusion's own inflation (fitted on the
+        # held-out calibration pairs by benchmarks/bench_pose.py --calibrate: the smallest that
+        # keeps the 95 % upper bound of the median change against the classical pose <= +5 %)
+        settings = ctx.settings if ctx.settings is not None else CheckpointSettings.of(ctx.model)
+        scale = settings.calibration.get("regression", 1.0) * settings.fusion_inflation
+        f = fuse_poses(net.raw, None, cls.raw, matches, threshold_px=ctx.threshold_px,
+                       network_scale=scale, network_extra=swap_term(net))
+        ms = (time.perf_counter() - start) * 1e3 + net.time_ms + cls.time_ms
+        if f.source == "network":
+            return MethodResult("fused", "failed", time_ms=ms, raw=f, warnings=[
+                f"fused: too few {cls.method} inliers for a covariance ({f.info['num_inliers']})"])
+        gate = f.info.get("gate", {})
+        info = {"classical": cls.method, "network_weight": f.weights,
+                "sign_disagreement": f.info["sign_disagreement"], "used": f.source,
+                "gate_d2": gate.get("d2"), "network_variance_scale": scale}
+        warnings = [] if f.source == "fused" else [f"fused: {gate.get('reason')}"]
+        rec = MethodResult("fused", "ok", f.pose, f.covariance.numpy(),
+                           warnings, time_ms=ms, num_inliers=f.info["num_inliers"], info=info,
+                           raw=f)
+        # the fused pose stays near the classical one and moves with it when the matches change:
+        # the classical bootstrap term (instability of the solve, which the information form
+        # cannot see) is added, as for the classical record itself (its warning, if any, is there)
+        boot = ctx.cache.get(f"bootstrap_{cls.method}")
+        rec = _add_bootstrap(rec, boot, 0 if boot is None else ctx.bootstrap,
+                             "information form", f"{cls.method} ")
+        return rec

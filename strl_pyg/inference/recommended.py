@@ -24,20 +24,7 @@ from typing import Any
 
 import numpy as np
 
-# methods_needed, NETWORK_METHODS, DEPENDENCIES: module __getattr__ (the registry's)
-__all__ = ["estimate_recommended", "estimate_methods", "methods_needed",  # noqa: F822
-           "NETWORK_METHODS", "DEPENDENCIES"]  # noqa: F822
-
-# NETWORK_METHODS, LINE_METHODS, DEPENDENCIES, methods_needed: the registry's, read through
-# the estimator module so a method registered later is in them too
-
-
-def __getattr__(name: str):
-    if name in ("NETWORK_METHODS", "LINE_METHODS", "DEPENDENCIES", "methods_needed"):
-        from strl_pyg.inference import estimator
-
-        return getattr(estimator, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__all__ = ["estimate_recommended", "estimate_methods"]
 
 
 def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0: Any = None,
@@ -58,7 +45,8 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
             (:class:`~strl_pyg.inference.config.EstimatorConfig` fields, or ``config=``); the
             methods run are the recommended ones.
     """
-    from strl_pyg.inference.estimator import RECOMMENDED, PoseEstimator
+    from strl_pyg.inference.estimator import PoseEstimator
+    from strl_pyg.inference import RECOMMENDED
 
     if "methods" in estimator_kw:
         raise ValueError("Expected no methods for estimate_recommended (got methods="
@@ -74,7 +62,8 @@ def estimate_methods(model: Any, image0: np.ndarray, image1: np.ndarray, K0: Any
     ``"all"`` (every installed method) or comma-separated names of
     :data:`~strl_pyg.inference.estimator.METHODS` (``ValueError`` for others); these override
     the methods of a ``config=``."""
-    from strl_pyg.inference.estimator import METHODS, PoseEstimator
+    from strl_pyg.inference.estimator import PoseEstimator
+    from strl_pyg.inference import METHODS
 
     if methods == "recommended":
         return estimate_recommended(model, image0, image1, K0, K1, frontend_config,

@@ -66,6 +66,11 @@ class MethodResult:
         inliers: bool ``[Np]`` per point match of the input (repeated rows share their
             correspondence's value): within the support band of the pose and in front of
             both cameras; ``None`` for methods the support check does not read.
+        rotation: the rotation ``[3, 3]`` of an ``"ok"`` or ``"rotation_only"`` record.
+        calibrated: whether :attr:`covariance` was scaled by a measured calibration
+            (``False``: a warning says why not; ``None``: not decided, or no covariance).
+        bad_intrinsics: the pose was computed with intrinsics that fail the input checks
+            (:func:`~strl_pyg.inference.checks.intrinsics_problems`).
     """
 
     method: str | None
@@ -79,6 +84,8 @@ class MethodResult:
     raw: Any = field(default=None, repr=False)
     inliers: np.ndarray | None = field(default=None, repr=False)
     rotation: np.ndarray | None = None
+    calibrated: bool | None = None
+    bad_intrinsics: bool = False
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -142,7 +149,8 @@ class MethodResult:
         if self.status == "rotation_only":
             info["unreliable_rotation"] = self.rotation
         return MethodResult(self.method, "unreliable", None, None, self.warnings + reasons,
-                            self.time_ms, self.num_inliers, info, self.raw, self.inliers)
+                            self.time_ms, self.num_inliers, info, self.raw, self.inliers,
+                            calibrated=self.calibrated, bad_intrinsics=self.bad_intrinsics)
 
     @property
     def sigma(self) -> dict[str, float] | None:

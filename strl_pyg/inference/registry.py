@@ -12,9 +12,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from strl_pyg.estimation.classical import MIN_POINTS
+from strl_pyg.estimation.classical import BASELINE_METHODS, MIN_POINTS
 
-__all__ = ["RECOMMENDED", "MethodSpec", "METHODS", "register_method", "methods_where",
+__all__ = ["RECOMMENDED", "PoseMethod", "MethodSpec", "METHODS", "register_method", "methods_where",
            "methods_needed", "network_free_methods", "classical_method",
            "checked_method_names"]
 
@@ -56,21 +56,72 @@ class MethodSpec:
     needs_geometric_head: bool = False
 
 
+class PoseMethod:
+    """A pose method, the way :class:`~strl_pyg.inference.PoseEstimator` runs it: called with
+    one pair's checked matches and the pair's :class:`~strl_pyg.inference.methods.MethodContext`,
+    it returns one :class:`~strl_pyg.inference.MethodResult`. What it needs and how its result
+    is treated are class attributes, the fields of :class:`MethodSpec` (``name``, ``label``,
+    ``min_points``, ``needs_intrinsics``, ``reads_lines``, ``uses_network``, ``depends_on``,
+    ``support_checked``, ``bootstrapped``, ``classical_base``, ``needs_geometric_head``), and
+    :meth:`available` says whether it is installed. Register one with
+    ``register_method(MyMethod())``; the built-in ones are in
+    :mod:`strl_pyg.inference.methods` and :mod:`strl_pyg.inference.line_methods`."""
+
+    name: str = ""
+    label: str = ""
+    min_points: int = MIN_POINTS
+    needs_intrinsics: bool = True
+    reads_lines: bool = False
+    uses_network: bool = False
+    depends_on: tuple[str, ...] = ()
+    support_checked: bool = True
+    bootstrapped: bool = False
+    classical_base: bool = False
+    needs_geometric_head: bool = False
+
+    def available(self) -> bool:
+        return True
+
+    def __call__(self, matches: Any, ctx: Any) -> Any:
+        raise NotImplementedError(f"{type(self).__name__} runs no pose method (define "
+                                  "__call__(matches, ctx) -> MethodResult)")
+
+    def spec(self) -> MethodSpec:
+        """This method's :class:`MethodSpec`."""
+        return MethodSpec(self, self.min_points, self.needs_intrinsics, self.available,
+                          self.label or self.name, self.reads_lines, self.uses_network,
+                          tuple(self.depends_on), self.support_checked, self.bootstrapped,
+                          self.classical_base, self.needs_geometric_head)
+
+
 #: ``name -> MethodSpec``, run in this order.
 METHODS: dict[str, MethodSpec] = {}
 
 
-def register_method(name: str, fn: MethodFn, *, min_points: int = MIN_POINTS,
-                    needs_intrinsics: bool = True, available: Callable[[], bool] | None = None,
+def register_method(name: str | PoseMethod, fn: MethodFn | None = None, *,
+                    min_points: int = MIN_POINTS, needs_intrinsics: bool = True,
+                    available: Callable[[], bool] | None = None,
                     replace_existing: bool = False, **spec: Any) -> None:
-    """Adds a method to :data:`METHODS` (run after the ones registered before it); ``spec``:
-    the other fields of :class:`MethodSpec` (``label``, ``reads_lines``, ...). The method is
-    then in ``strl-pose predict --methods``, ``evaluate``, the support check and the labels."""
-    if name in METHODS and not replace_existing:
-        raise ValueError(f"Expected a new method name (got {name!r}, already registered)")
-    if name == RECOMMENDED:
-        raise ValueError(f"Expected a method name other than {RECOMMENDED!r} (it selects the "
-                         "recommended methods)")
+    """Adds a method to :data:`METHODS` (run after the ones registered before it): a
+    :class:`PoseMethod` (``register_method(MyMethod())``, its attributes say what it needs), or
+    a name and a function ``fn(matches, context) -> MethodResult`` with ``spec``, the other
+    fields of :class:`MethodSpec` (``label``, ``reads_lines``, ...). The method is then in
+    ``strl-pose predict --methods``, ``evaluate``, the support check and the labels."""
+    if isinstance(name, PoseMethod):
+        if fn is not None or spec:
+            raise ValueError("Expected a PoseMethod alone (its attributes are its spec) (got "
+                             f"{'fn and ' if fn is not None else ''}{sorted(spec)} too)")
+        method, name = name, name.name
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"Expected a PoseMethod with a name (got {name!r} for "
+                             f"{type(method).__name__})")
+        _check_new(name, replace_existing)
+        METHODS[name] = method.spec()
+        return
+    if not callable(fn):
+        raise TypeError(f"Expected fn(matches, context) -> MethodResult for method {name!r} "
+                        f"(got {type(fn).__name__})")
+    _check_new(name, replace_existing)
     known = {f for f in MethodSpec.__dataclass_fields__} - {"fn", "min_points",
                                                              "needs_intrinsics", "available"}
     unknown = sorted(set(spec) - known)
@@ -78,6 +129,14 @@ def register_method(name: str, fn: MethodFn, *, min_points: int = MIN_POINTS,
         raise ValueError(f"Expected MethodSpec fields {sorted(known)} (got {unknown})")
     METHODS[name] = MethodSpec(fn, min_points, needs_intrinsics, available or (lambda: True),
                                **{"label": name, **spec})
+
+
+def _check_new(name: str, replace_existing: bool) -> None:
+    if name in METHODS and not replace_existing:
+        raise ValueError(f"Expected a new method name (got {name!r}, already registered)")
+    if name == RECOMMENDED:
+        raise ValueError(f"Expected a method name other than {RECOMMENDED!r} (it selects the "
+                         "recommended methods)")
 
 
 def methods_where(**flags: Any) -> tuple[str, ...]:
@@ -107,7 +166,9 @@ def __getattr__(name: str) -> Any:
 
 def methods_needed(names: Any) -> tuple[str, ...]:
     """``names`` with the methods they depend on, in registration order (the order
-    :class:`PoseEstimator` runs them)."""
+    :class:`PoseEstimator` runs them). A ``"classical"`` dependency is the classical solver
+    among ``names`` if there is one, else :func:`classical_method`."""
+    classical = next((n for n in names if n in BASELINE_METHODS), None) or classical_method()
     want, todo = set(), list(names)
     while todo:  # dependencies of dependencies too
         name = todo.pop()
@@ -115,7 +176,7 @@ def methods_needed(names: Any) -> tuple[str, ...]:
             continue
         want.add(name)
         deps = METHODS[name].depends_on if name in METHODS else ()
-        todo.extend(classical_method() if d == "classical" else d for d in deps)
+        todo.extend(classical if d == "classical" else d for d in deps)
     return tuple(m for m in METHODS if m in want)
 
 

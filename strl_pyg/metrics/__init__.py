@@ -7,32 +7,7 @@ from __future__ import annotations
 
 from strl_pyg.utils.lazy import lazy_exports
 
-__all__ = [
-    "KITTI_SEGMENT_LENGTHS",
-    "KittiSegmentErrors",
-    "kitti_odometry_errors",
-    "kitti_odometry_summary",
-    "umeyama_alignment",
-    "ATEResult",
-    "absolute_trajectory_error",
-    "relative_translation_norms",
-    "integrate_relative_poses",
-    "project_to_so3",
-    "write_kitti_trajectory",
-    "write_tum_trajectory",
-    "rotation_error_deg",
-    "translation_angle_error_deg",
-    "relative_pose_error",
-    "pose_auc",
-    "AUC_THRESHOLDS",
-    "pose_error_stats",
-    "coverage_interval",
-    "median_ratio_interval",
-    "auc_difference_interval",
-]
-
-# 0.2 code read other names of the module this folder was: they resolve too
-__getattr__, __dir__ = lazy_exports(__name__, {
+_EXPORTS = {
     "KITTI_SEGMENT_LENGTHS": "strl_pyg.metrics.odometry",
     "KittiSegmentErrors": "strl_pyg.metrics.odometry",
     "kitti_odometry_errors": "strl_pyg.metrics.odometry",
@@ -54,4 +29,8 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "coverage_interval": "strl_pyg.metrics.stats",
     "median_ratio_interval": "strl_pyg.metrics.stats",
     "auc_difference_interval": "strl_pyg.metrics.stats",
-}, globals())
+}
+
+__all__ = list(_EXPORTS)
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

@@ -26,37 +26,8 @@ import numpy as np
 import torch
 
 from strl_pyg.geometry import Pose, as_pose, as_tensor, check_tail, rotation_angle_deg
-from strl_pyg.metrics.odometry import (
-    KITTI_SEGMENT_LENGTHS,
-    ATEResult,
-    KittiSegmentErrors,
-    absolute_trajectory_error,
-    integrate_relative_poses,
-    kitti_odometry_errors,
-    kitti_odometry_summary,
-    relative_translation_norms,
-    umeyama_alignment,
-)
-from strl_pyg.metrics.trajectory import project_to_so3, write_kitti_trajectory, write_tum_trajectory
 
-__all__ = [
-    "rotation_error_deg",
-    "translation_angle_error_deg",
-    "relative_pose_error",
-    "pose_auc",
-    "KITTI_SEGMENT_LENGTHS",
-    "KittiSegmentErrors",
-    "kitti_odometry_errors",
-    "kitti_odometry_summary",
-    "umeyama_alignment",
-    "ATEResult",
-    "absolute_trajectory_error",
-    "relative_translation_norms",
-    "integrate_relative_poses",
-    "project_to_so3",
-    "write_kitti_trajectory",
-    "write_tum_trajectory",
-]
+__all__ = ["rotation_error_deg", "translation_angle_error_deg", "relative_pose_error", "pose_auc"]
 
 
 # ----------------------------------------------------------------------------- two-view errors

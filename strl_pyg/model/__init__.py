@@ -8,35 +8,21 @@ from __future__ import annotations
 
 from strl_pyg.utils.lazy import lazy_exports
 
-__all__ = [
-    "StrLPoseConfig",
-    "PoseOutput",
-    "GeometricOutput",
-    "ABLATIONS",
-    "NO_INTRINSICS",
-    "VISUAL_MODES",
-    "TRANSLATION_MODES",
-    "upgrade_key",
-    "StrLPose",
-    "ModelInputs",
-    "gather_inputs",
-    "upgrade_legacy_keys",
-    "what_checkpoint",
-]
-
-# 0.2 code read other names of the module this folder was: they resolve too
-__getattr__, __dir__ = lazy_exports(__name__, {
+_EXPORTS = {
     "StrLPoseConfig": "strl_pyg.model.config",
     "PoseOutput": "strl_pyg.model.config",
     "GeometricOutput": "strl_pyg.model.config",
     "ABLATIONS": "strl_pyg.model.config",
     "NO_INTRINSICS": "strl_pyg.model.config",
     "VISUAL_MODES": "strl_pyg.model.config",
-    "TRANSLATION_MODES": "strl_pyg.model.strl_pose",
     "upgrade_key": "strl_pyg.model.legacy",
     "StrLPose": "strl_pyg.model.strl_pose",
     "ModelInputs": "strl_pyg.model.gather",
     "gather_inputs": "strl_pyg.model.gather",
     "upgrade_legacy_keys": "strl_pyg.model.legacy",
     "what_checkpoint": "strl_pyg.model.legacy",
-}, globals())
+}
+
+__all__ = list(_EXPORTS)
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

@@ -14,7 +14,7 @@ from strl_pyg.nn.heads import TRANSLATION_MODES
 from strl_pyg.utils.dataclass import strict_from_dict
 
 __all__ = ["StrLPoseConfig", "PoseOutput", "GeometricOutput", "ABLATIONS", "NO_INTRINSICS",
-           "VISUAL_MODES", "TRANSLATION_MODES", "INPUT_MODES", "PAPER"]
+           "VISUAL_MODES", "PAPER"]
 
 ABLATIONS: dict[str, dict[str, Any]] = {
     "baseline": dict(use_lines=False, line_mp=False, visual=None, visual_graph=False,

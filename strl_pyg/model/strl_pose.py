@@ -15,19 +15,11 @@ from torch_geometric.data import HeteroData
 
 from strl_pyg.data import keys as K
 from strl_pyg.model.checkpoint import CheckpointIO
-from strl_pyg.model.config import (
-    ABLATIONS,
-    NO_INTRINSICS,
-    TRANSLATION_MODES,
-    VISUAL_MODES,
-    GeometricOutput,
-    PoseOutput,
-    StrLPoseConfig,
-)
+from strl_pyg.model.config import NO_INTRINSICS, GeometricOutput, PoseOutput, StrLPoseConfig
 from strl_pyg.model.gather import ModelInputs, gather_inputs
-from strl_pyg.model.legacy import upgrade_key, upgrade_legacy_keys
+from strl_pyg.model.legacy import upgrade_legacy_keys
+from strl_pyg.data import CompleteEdges
 from strl_pyg.nn import (
-    CompleteEdges,
     DenseLayout,
     DualGraphLayer,
     ImageEncoder,
@@ -39,8 +31,7 @@ from strl_pyg.nn import (
     WeightedFusion,
 )
 
-__all__ = ["StrLPoseConfig", "PoseOutput", "GeometricOutput", "StrLPose", "ABLATIONS",
-           "NO_INTRINSICS", "VISUAL_MODES", "TRANSLATION_MODES", "upgrade_key"]
+__all__ = ["StrLPose"]
 
 
 # ----------------------------------------------------------------------------- the model

@@ -2,7 +2,7 @@
 attention and line-endpoint layers and the dual-graph layer that combines them, the weighted
 fusion and the output heads."""
 
-from strl_pyg.nn.attention import AttentionConv, CompleteEdges
+from strl_pyg.nn.attention import AttentionConv
 from strl_pyg.nn.dual_graph import DualGraphLayer
 from strl_pyg.nn.encoders import (
     INPUT_MODES,
@@ -22,7 +22,6 @@ from strl_pyg.nn.mlp import mlp, reset_mlp
 
 __all__ = [
     "AttentionConv",
-    "CompleteEdges",
     "DenseLayout",
     "LineEndpointConv",
     "DualGraphLayer",

@@ -15,7 +15,7 @@ from strl_pyg.data.pair_graph import CompleteEdges  # the marker is data; re-exp
 from strl_pyg.nn.layout import DenseLayout
 from strl_pyg.nn.mlp import as_index, as_pair, mlp, reset_mlp
 
-__all__ = ["AttentionConv", "CompleteEdges"]
+__all__ = ["AttentionConv"]
 
 PairTensor = tuple[Tensor, Tensor]
 

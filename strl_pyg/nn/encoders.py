@@ -59,7 +59,7 @@ PARALLAX_NEIGHBOURS = 8
 #: Per-feature ``(mean, std)`` of the ``"flow"`` inputs before a training set's own statistics
 #: are fitted (:meth:`SpatialCoordinateEncoder.fit_standardisation`, which training does): the
 #: statistics fitted on the front-end matches of the ``lines_small`` training pairs with image
-#: swap (``benchmarks/study_pose_recipe.py``, run ``fe-both-s0``), rounded.
+#: swap (``benchmarks/studies/study_pose_recipe.py``, run ``fe-both-s0``), rounded.
 FLOW_DEFAULT_STATS = (
     (-0.013, -0.004, -0.013, -0.004, 0.0, 0.0, -0.012, 0.0),
     (0.307, 0.228, 0.307, 0.228, 0.143, 0.066, 0.059, 0.035),

@@ -21,28 +21,7 @@ _CONFIG = "strl_pyg.synthetic.config"
 _DIST = "strl_pyg.synthetic.distributions"
 _QUALITY = "strl_pyg.synthetic.match_quality"
 
-__all__ = [
-    "SCENE_KINDS",
-    "LINE_SCENE_KINDS",
-    "MOTIONS",
-    "DEFAULT_MOTION",
-    "SceneConfig",
-    "SceneDistribution",
-    "DISTRIBUTIONS",
-    "EVAL_DISTRIBUTIONS",
-    "EVAL_SEED",
-    "scene_distribution",
-    "eval_distribution",
-    "sample_scene_config",
-    "SyntheticPair",
-    "generate_pair",
-    "apply_photometric",
-    "evaluate_matches",
-    "line_transfer_error",
-    "point_transfer_error",
-]
-
-__getattr__, __dir__ = lazy_exports(__name__, {
+_EXPORTS = {
     "SCENE_KINDS": _CONFIG,
     "LINE_SCENE_KINDS": _CONFIG,
     "MOTIONS": _CONFIG,
@@ -61,7 +40,11 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "evaluate_matches": _QUALITY,
     "line_transfer_error": _QUALITY,
     "point_transfer_error": _QUALITY,
-}, globals())
+}
+
+__all__ = list(_EXPORTS)
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 
 if TYPE_CHECKING:  # for type checkers and IDEs; never executed
     from strl_pyg.synthetic.config import (

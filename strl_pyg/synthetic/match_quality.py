@@ -5,8 +5,7 @@ Every surface is a plane ``n . X0 = d`` (camera-0 frame), so a pixel of image 0 
 epipolar constraint this also checks the position along the epipolar line, which is what makes
 it a real test of line matches (two segments are always consistent with *some* 3D line).
 
-(Formerly ``strl_pyg.synthetic.metrics``, still importable; the pose metrics are
-:mod:`strl_pyg.metrics.two_view`.)
+(The pose metrics are :mod:`strl_pyg.metrics.two_view`.)
 """
 
 from __future__ import annotations

@@ -16,11 +16,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from strl_pyg.synthetic.config import SCENE_KINDS, SceneConfig
+from strl_pyg.synthetic.config import SceneConfig
 from strl_pyg.synthetic.motion import _rot, look_at, move_camera, scene_depth
 from strl_pyg.synthetic.textures import TextureMaker, pyramid
 
-__all__ = ["SceneConfig", "Quad", "Scene", "build_scene", "SCENE_KINDS"]
+__all__ = ["Quad", "Scene", "build_scene"]
 
 #: Per kind: the range the scene depth ``d`` of view 0 is clamped to (metres). The builders
 #: store the largest translation of the new motions as ``extra["room"]`` (free space).

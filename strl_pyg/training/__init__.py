@@ -8,48 +8,7 @@ from __future__ import annotations
 
 from strl_pyg.utils.lazy import lazy_exports
 
-__all__ = [
-    "TrainConfig",
-    "evaluate_model",
-    "mean_pose",
-    "build_datasets",
-    "shuffle_point_matches",
-    "load_checkpoint",
-    "save_checkpoint",
-    "StepBatchSampler",
-    "add_train_arguments",
-    "plot_history",
-    "train",
-    "check_run_folder",
-    "RESUME_FREE_FIELDS",
-    "run_from_args",
-    "DATASETS",
-    "DATA_CHANNELS",
-    "ABLATION_NAMES",
-    "PAPER_RECIPE",
-    "check_sources",
-    "check_graph_channels",
-    "model_input_channels",
-    "unaugmented_poses",
-    "aleatoric_loss",
-    "pose_targets",
-    "PoseLoss",
-    "GeometricLoss",
-    "WEIGHTS_DIR",
-    "DEFAULT_WEIGHTS",
-    "CHECKPOINT_VERSION",
-    "default_checkpoint",
-    "rng_state",
-    "set_rng_state",
-    "init_weights",
-    "load_training_model",
-    "TRAINING_KEYS",
-    "TrainLogger",
-    "read_log",
-]
-
-# 0.2 code read other names of the module this folder was: they resolve too
-__getattr__, __dir__ = lazy_exports(__name__, {
+_EXPORTS = {
     "TrainConfig": "strl_pyg.training.config",
     "evaluate_model": "strl_pyg.training.validation",
     "mean_pose": "strl_pyg.training.validation",
@@ -63,7 +22,7 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "train": "strl_pyg.training.loop",
     "check_run_folder": "strl_pyg.training.loop",
     "RESUME_FREE_FIELDS": "strl_pyg.training.loop",
-    "run_from_args": "strl_pyg.training.loop",
+    "run_from_args": "strl_pyg.training.commandline",
     "DATASETS": "strl_pyg.training.config",
     "DATA_CHANNELS": "strl_pyg.training.config",
     "ABLATION_NAMES": "strl_pyg.training.config",
@@ -87,4 +46,8 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "TRAINING_KEYS": "strl_pyg.training.checkpoints",
     "TrainLogger": "strl_pyg.training.log",
     "read_log": "strl_pyg.training.log",
-}, globals())
+}
+
+__all__ = list(_EXPORTS)
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

@@ -142,7 +142,8 @@ def load_training_model(path: str | os.PathLike):
     """The :class:`~strl_pyg.model.strl_pose.StrLPose` of a training checkpoint (``last.pt``): its
     ``model_config`` and ``model`` weights, in eval mode, with default metadata (the run's
     ``model.pt``, written when the run finishes, also holds the training metadata)."""
-    from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose
+    from strl_pyg.model import StrLPoseConfig
 
     path = Path(path)
     state = load_checkpoint(path)
@@ -162,7 +163,7 @@ def _mismatch(model: Any, state: dict[str, Any], saved_config: dict[str, Any] | 
     unexpected keys (the first ``shown`` of each, version-1 names upgraded) and the config
     fields in which ``saved_config`` differs from the model's (but the differences
     ``allowed`` names as ``{field: (file value, model value)}``)."""
-    from strl_pyg.model.strl_pose import upgrade_key
+    from strl_pyg.model import upgrade_key
 
     own = model.state_dict()
     given = {upgrade_key(k): v for k, v in state.items()}

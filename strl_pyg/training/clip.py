@@ -8,7 +8,7 @@ steps (99th percentile ~200). A *relative* clip (``grad_clip_relative``: that ma
 median norm of the last :data:`WINDOW` steps) follows the scale and caps the spikes only.
 It is an option, not the default: over three seeds of the study's protocol it was active on
 6-7 % of steps and trained a little worse than the fixed clip at 10
-(``benchmarks/results_pose_recipe.md``).
+(``benchmarks/studies/results_pose_recipe.md``).
 """
 
 from __future__ import annotations

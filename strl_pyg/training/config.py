@@ -84,6 +84,7 @@ class TrainConfig:
     val_scenes: list[str] | None = None
     posed_gaps: list[int] = field(default_factory=lambda: [1, 2, 3])  # posed: training pairs
     posed_max_rotation: float = 60.0  # posed: largest relative rotation of a pair (degrees)
+    posed_min_points: int = 0  # posed: training pairs with fewer point matches are left out
     # posed: validation pairs (i, i + val_gap) for every val_stride-th i
     val_gap: int = 2
     val_stride: int = 4
@@ -97,7 +98,7 @@ class TrainConfig:
     model: str = "full"  # ablation row of the paper (StrLPoseConfig.ablation)
     model_overrides: dict[str, Any] = field(default_factory=dict)  # other StrLPoseConfig fields
     # Adam's rate (the peak under a schedule). The defaults are the study's recipe
-    # (benchmarks/results_pose_recipe.md: better on the baseline, LP and full rows); the
+    # (benchmarks/studies/results_pose_recipe.md: better on the baseline, LP and full rows); the
     # paper's is lr=1e-4, lr_schedule="constant", warmup_steps=0 (PAPER_RECIPE)
     lr: float = 1e-3
     # "cosine": half a cosine from lr down to 0 at `steps`, after the warm-up | "constant" (the
@@ -253,6 +254,10 @@ class TrainConfig:
         if not self.posed_gaps or any(not isinstance(g, int) or isinstance(g, bool) or g < 1
                                       for g in self.posed_gaps):
             raise ValueError(f"Expected posed_gaps as positive integers (got {self.posed_gaps!r})")
+        if not isinstance(self.posed_min_points, int) or isinstance(self.posed_min_points, bool) \
+                or self.posed_min_points < 0:
+            raise ValueError(f"Expected posed_min_points as an integer >= 0 "
+                             f"(got {self.posed_min_points!r})")
         if not 0 < self.posed_max_rotation <= 180:
             raise ValueError(f"Expected posed_max_rotation in (0, 180] degrees "
                              f"(got {self.posed_max_rotation!r})")
@@ -285,7 +290,7 @@ class TrainConfig:
         """The :class:`~strl_pyg.StrLPoseConfig` of this run: the ablation row ``model`` with
         ``model_overrides``; unless overridden, metric translation on KITTI and patch / image
         channels of the dataset (:data:`DATA_CHANNELS`, ``patch_features = C * p * p``)."""
-        from strl_pyg.model.strl_pose import StrLPoseConfig
+        from strl_pyg.model import StrLPoseConfig
 
         overrides = dict(self.model_overrides)
         known = [f.name for f in fields(StrLPoseConfig)]
@@ -362,6 +367,9 @@ def _add_posed_arguments(ap: argparse.ArgumentParser, d: TrainConfig) -> None:
                     help="posed: capture-order gaps k of the training pairs (i, i + k)")
     ap.add_argument("--posed-max-rotation", type=float, default=d.posed_max_rotation,
                     metavar="DEG", help="posed: largest relative rotation of a pair")
+    ap.add_argument("--posed-min-points", type=int, default=d.posed_min_points, metavar="N",
+                    help="posed: leave out training pairs with fewer than N cached point "
+                         "matches (validation keeps every pair)")
     ap.add_argument("--val-gap", type=int, default=d.val_gap,
                     help="posed: validation pairs (i, i + val_gap)")
     ap.add_argument("--val-stride", type=int, default=d.val_stride,

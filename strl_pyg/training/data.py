@@ -14,6 +14,7 @@ import torch
 from torch import Tensor
 from torch.utils.data import ConcatDataset, Dataset, Sampler
 from torch_geometric.data import HeteroData
+from torch_geometric.loader.dataloader import Collater
 
 from strl_pyg.data import keys as keys_
 from strl_pyg.data.transforms import FixedSizeResample, RandomRoll, RandomSwap, roll_pose
@@ -21,7 +22,8 @@ from strl_pyg.geometry import Pose
 from strl_pyg.training.config import TrainConfig
 
 __all__ = ["build_datasets", "check_sources", "check_graph_channels", "model_input_channels",
-           "shuffle_point_matches", "StepBatchSampler", "unaugmented_poses"]
+           "shuffle_point_matches", "StepBatchSampler", "unaugmented_poses", "collater",
+           "fit_input_statistics", "ResampledPairs"]
 
 
 class _InMemory(Dataset):
@@ -41,7 +43,7 @@ class _InMemory(Dataset):
         return self.items[i]
 
 
-class _Resampled(Dataset):
+class ResampledPairs(Dataset):
     """Applies :class:`FixedSizeResample`, :class:`RandomSwap`, the outlier shuffle and
     :class:`RandomRoll` (each when asked for), seeded by the key
     ``(index, step, position)``."""
@@ -229,7 +231,6 @@ def drop_match_scores(data: HeteroData) -> HeteroData:
 def _posed_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
     """Posed photographs (training scenes, pairs by overlap; validation scenes, pairs
     ``(i, i + val_gap)``), with generated pairs mixed into training at ``synthetic_share``."""
-    from strl_pyg import datasets as D
     from strl_pyg.datasets.posed import PosedImagePairs, PosedPairOptions
 
     model_cfg = cfg.model_config()
@@ -241,7 +242,8 @@ def _posed_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
                   grayscale=grey)
     # generated graphs carry no front-end scores: a mixed batch collates the keys both have
     mixed = dict(transform=drop_match_scores) if cfg.synthetic_share > 0 else {}
-    train = PosedImagePairs([root / n for n in train_names], limit=cfg.limit, **mixed, pairs=
+    train = PosedImagePairs([root / n for n in train_names], limit=cfg.limit, **mixed,
+                            min_points=cfg.posed_min_points, pairs=
                             PosedPairOptions(gaps=tuple(cfg.posed_gaps),
                                              max_rotation_deg=cfg.posed_max_rotation), **common)
     val = PosedImagePairs([root / n for n in val_names], pairs=PosedPairOptions(
@@ -251,8 +253,9 @@ def _posed_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
         ds.build_cache(num_workers=max(1, cfg.num_workers), progress=progress)
     for role, ds in (("training", train), ("validation", val)):
         if len(ds) == 0:
-            raise ValueError(f"Expected {role} pairs the front end can match (got none of "
-                             f"{ds.num_pairs}; markers in '{ds.cache.dir}')")
+            least = f" with >= {ds.min_points} point matches" if ds.min_points else ""
+            raise ValueError(f"Expected {role} pairs the front end can match{least} (got "
+                             f"none of {ds.num_pairs}; the cache is '{ds.cache.dir}')")
     if cfg.synthetic_share == 0:
         return train, val
     from strl_pyg.synthetic import SceneConfig
@@ -396,7 +399,7 @@ def unaugmented_poses(batch: HeteroData) -> Tensor:
     """Ground-truth poses with the roll and swap augmentations undone (the trivial predictor
     is the mean pose of the data as it comes, not of the augmented data)."""
     T = batch[keys_.T_0TO1].detach()
-    if keys_.ROLL in batch:  # applied last (_Resampled), undone first
+    if keys_.ROLL in batch:  # applied last (ResampledPairs), undone first
         T = roll_pose(T, -batch[keys_.ROLL].reshape(-1))
     if keys_.SWAPPED not in batch:
         return T
@@ -404,3 +407,56 @@ def unaugmented_poses(batch: HeteroData) -> Tensor:
     T = T.clone()
     T[swapped] = Pose.from_matrix(T[swapped]).inv().matrix().to(T)
     return T
+
+
+def collater(model_cfg: Any):
+    """PyG's collater; images of different sizes (a model with ``visual='cnn'`` batches whole
+    images) are a one-line ``ValueError`` instead of torch's ``torch.cat`` error."""
+    base = Collater(None)
+
+    def collate(items):
+        try:
+            return base(items)
+        except RuntimeError as err:
+            if model_cfg.visual != "cnn" or "Sizes of tensors must match" not in str(err):
+                raise
+            sizes = sorted({tuple(getattr(d, keys_.IMAGE0).shape[-2:]) for d in items
+                            if keys_.IMAGE0 in d})
+            raise ValueError(f"Expected one image size per batch for a model with "
+                             f"visual='cnn' (its CNN batches whole images) (got sizes "
+                             f"{sizes}); train on one size or use visual='pixel'") from None
+
+    return collate
+
+
+def fit_input_statistics(model: torch.nn.Module, dataset: Any, symmetric: bool,
+                         max_pairs: int = 128, roll: float = 0.0,
+                         resample: tuple[int, int] | None = None) -> None:
+    """Sets the flow inputs' standardisation (``model.sce``) from the node coordinates of the
+    first ``max_pairs`` training pairs (with their swapped copies when ``symmetric``, and each
+    pair rolled as training rolls it (:class:`~strl_pyg.data.RandomRoll`, a fixed seed) when
+    ``roll`` > 0); they are buffers, so the checkpoint keeps them. With ``inputs="parallax"``
+    each pair is first resampled to ``resample = (points, lines)`` as training resamples it
+    (a neighbour's distance depends on the density)."""
+    roller = RandomRoll(roll, seed=0) if roll > 0 else None
+    parallax = model.config.inputs == "parallax"
+    # the parallax fit reads the nodes the model reads, at the density it trains on (its
+    # neighbours are those nodes); the flow inputs' fit keeps reading every node of every
+    # pair, as the runs already trained did
+    types = (keys_.POINT, keys_.ENDPOINT) if not parallax or model.config.use_lines \
+        else (keys_.POINT,)
+    coords, batch = [], []
+    for i in range(min(max_pairs, len(dataset))):
+        g = dataset[i]
+        if parallax and resample is not None:
+            g = FixedSizeResample(*resample, seed=i)(g)
+        if roller is not None:
+            g = roller(g)
+        for t in types:
+            if t in g.node_types and keys_.POS0 in g[t] and g[t][keys_.POS0].shape[0]:
+                coords.append(torch.cat([g[t][keys_.POS0], g[t][keys_.POS1]], -1).float())
+                batch.append(torch.full((coords[-1].shape[0],), i, dtype=torch.long))
+    if coords:
+        model.sce.fit_standardisation(torch.cat(coords).cpu(), symmetric=symmetric,
+                                      batch=torch.cat(batch))
+        model.sce.to(next(model.parameters()).device)

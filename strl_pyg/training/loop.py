@@ -14,35 +14,27 @@ Modules: :mod:`strl_pyg.training.config` (the config and its flags, torch-free),
 :mod:`strl_pyg.training.data` (datasets, resampling, the step sampler),
 :mod:`strl_pyg.training.validation` (validation metrics),
 :mod:`strl_pyg.training.checkpoints` (files),
-:mod:`strl_pyg.training.log` (CSV log, curves) and this one (the loop and its command line).
-Their public names are re-exported here.
+:mod:`strl_pyg.training.log` (CSV log, curves), :mod:`strl_pyg.training.commandline` (the
+flags) and this one (the loop).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
-import random
-import signal
-import sys
-import threading
 import time
 from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 from torch import Tensor
 from torch.utils.data import DataLoader
-from torch_geometric.loader.dataloader import Collater
 from tqdm.auto import tqdm
 
 from strl_pyg.data import keys as keys_
-from strl_pyg.data.transforms import FixedSizeResample, RandomRoll
 from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.training.checkpoints import (
     CHECKPOINT_VERSION,
@@ -53,44 +45,25 @@ from strl_pyg.training.checkpoints import (
     set_rng_state,
 )
 from strl_pyg.training.clip import GradientClip
-from strl_pyg.training.config import DATASETS, TrainConfig, add_train_arguments  # noqa: F401
+from strl_pyg.training.distributed import StopSignals, distributed_setup, seed_everything
+from strl_pyg.training.skipped import keep_skipped
+from strl_pyg.training.config import TrainConfig
 from strl_pyg.training.data import (
     StepBatchSampler,
     _InMemory,
-    _Resampled,
+    ResampledPairs,
     build_datasets,
     check_graph_channels,
-    shuffle_point_matches,
+    collater,
+    fit_input_statistics,
     unaugmented_poses,
 )
-from strl_pyg.training.log import TrainLogger, plot_history
+from strl_pyg.training.log import TrainLogger
 from strl_pyg.training.loss import GeometricLoss, PoseLoss
 from strl_pyg.training.validation import evaluate_model, mean_pose
 
-__all__ = [
-    "TrainConfig",
-    "train",
-    "TrainingDiverged",
-    "MAX_SKIPPED_STEPS",
-    "check_run_folder",
-    "RESUME_FREE_FIELDS",
-    "evaluate_model",
-    "mean_pose",
-    "build_datasets",
-    "shuffle_point_matches",
-    "load_checkpoint",
-    "save_checkpoint",
-    "StepBatchSampler",
-    "add_train_arguments",
-    "run_from_args",
-    "plot_history",
-]
-
-# former private names, kept for callers of this module
-_init_weights = init_weights
-_rng_state, _set_rng_state = rng_state, set_rng_state
-_unaugmented_poses = unaugmented_poses
-_Logger = TrainLogger
+__all__ = ["train", "TrainingDiverged", "MAX_SKIPPED_STEPS", "check_run_folder",
+           "RESUME_FREE_FIELDS", "best_value", "losses_for"]
 
 
 # ----------------------------------------------------------------------------- the loop
@@ -103,8 +76,6 @@ RESUME_FREE_FIELDS = ("steps", "out_dir", "num_workers", "device", "tensorboard"
 #: which training stops with :class:`TrainingDiverged`: it is not one bad batch then.
 MAX_SKIPPED_STEPS = 20
 
-#: At most this many skipped steps per run keep their batch and weights (``skipped/``).
-MAX_SKIPPED_DUMPS = 3
 
 
 class TrainingDiverged(RuntimeError):
@@ -123,56 +94,6 @@ def check_run_folder(out_dir: str | os.PathLike, overwrite: bool = False) -> Non
         raise ValueError(f"Expected an empty or new run folder, or --resume to continue / "
                          f"--overwrite to start afresh (got '{out_dir}' holding "
                          f"{', '.join(found)})")
-
-
-def _collater(model_cfg: Any):
-    """PyG's collater; images of different sizes (a model with ``visual='cnn'`` batches whole
-    images) are a one-line ``ValueError`` instead of torch's ``torch.cat`` error."""
-    base = Collater(None)
-
-    def collate(items):
-        try:
-            return base(items)
-        except RuntimeError as err:
-            if model_cfg.visual != "cnn" or "Sizes of tensors must match" not in str(err):
-                raise
-            sizes = sorted({tuple(getattr(d, keys_.IMAGE0).shape[-2:]) for d in items
-                            if keys_.IMAGE0 in d})
-            raise ValueError(f"Expected one image size per batch for a model with "
-                             f"visual='cnn' (its CNN batches whole images) (got sizes "
-                             f"{sizes}); train on one size or use visual='pixel'") from None
-
-    return collate
-
-
-class _StopSignals:
-    """Turns the first SIGINT / SIGTERM into a flag (the loop checkpoints and stops after the
-    step in progress); a second one raises KeyboardInterrupt as usual."""
-
-    def __init__(self) -> None:
-        self.received: str | None = None
-        self._old: dict[int, Any] = {}
-        if threading.current_thread() is not threading.main_thread():
-            return  # signal handlers can only be set from the main thread
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            self._old[sig] = signal.signal(sig, self._handle)
-
-    def _handle(self, signum: int, frame: Any) -> None:
-        if self.received is not None:
-            self.restore()
-            raise KeyboardInterrupt
-        self.received = signal.Signals(signum).name
-
-    def restore(self) -> None:
-        for sig, old in self._old.items():
-            signal.signal(sig, old)
-        self._old = {}
-
-
-def _dist_info() -> tuple[int, int]:
-    if torch.distributed.is_available() and torch.distributed.is_initialized():
-        return torch.distributed.get_rank(), torch.distributed.get_world_size()
-    return 0, 1
 
 
 def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
@@ -195,15 +116,15 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         A dict with the final validation metrics, the step reached, the validation history,
         the checkpoint path and the trained ``model`` (unwrapped from DDP).
     """
-    rank, world, device, own_group = _distributed_setup(cfg)
+    rank, world, device, own_group = distributed_setup(cfg)
     out_dir = Path(cfg.out_dir)
     ckpt_path = out_dir / "last.pt"
 
-    _seed_everything(cfg.seed)
+    seed_everything(cfg.seed)
     model_cfg = cfg.model_config()
     model = StrLPose(model_cfg).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    loss_fn, geo_fn = _losses(cfg, model_cfg)
+    loss_fn, geo_fn = losses_for(cfg, model_cfg)
     # trivial_buf: training poses, for the mean pose
     start_step, history, trivial_buf, clip = _start(cfg, model, optimizer, resume, overwrite,
                                                     rank)
@@ -230,7 +151,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
 
     if start_step >= cfg.steps:
         result["already_finished"] = True
-    stop = _StopSignals() if rank == 0 and start_step < cfg.steps else None
+    stop = StopSignals() if rank == 0 and start_step < cfg.steps else None
     last_save = time.monotonic()
     bar = tqdm(total=cfg.steps, initial=start_step, desc="train", disable=not progress or rank)
     skipped_in_a_row = dumps = 0
@@ -243,7 +164,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
             trivial_buf.append(unaugmented_poses(batch).cpu())
         logs = _train_step(cfg, ddp_model, model, optimizer, (loss_fn, geo_fn), batch, step,
                            clip)
-        dumps = _keep_skipped(logs, dumps, bar, step + 1, cfg, model, batch, rank, world)
+        dumps = keep_skipped(logs, dumps, bar, step + 1, cfg, model, batch, rank, world)
         skipped_in_a_row = _count_skipped(logs, skipped_in_a_row, step + 1, bar, ckpt_path)
         step += 1
         pairs_seen += T_gt.shape[0] * world
@@ -312,12 +233,6 @@ def _close(bar: Any, stop: Any, logger: Any, own_group: bool) -> None:
 _SHOWN = {"loss": "loss", "rot": "rot_err_deg", "trans": "trans_err_deg"}
 
 
-def _seed_everything(seed: int) -> None:
-    torch.manual_seed(seed)
-    np.random.seed(seed % 2**32)  # noqa: NPY002
-    random.seed(seed)
-
-
 def _checkpoint_due(cfg: TrainConfig, step: int, last_save: float, stop: Any) -> bool:
     """``last.pt`` is written every ``checkpoint_every`` steps, every ``checkpoint_minutes``
     and when a signal arrived (besides every validation)."""
@@ -325,22 +240,6 @@ def _checkpoint_due(cfg: TrainConfig, step: int, last_save: float, stop: Any) ->
                 or (cfg.checkpoint_minutes
                     and time.monotonic() - last_save >= 60.0 * cfg.checkpoint_minutes)
                 or (stop is not None and stop.received))
-
-
-def _distributed_setup(cfg: TrainConfig) -> tuple[int, int, str, bool]:
-    """Under ``torchrun`` (``WORLD_SIZE`` > 1) the process group (gloo on CPU, nccl on CUDA)
-    and this rank's device; ``(rank, world, device, whether the group is this run's own)``."""
-    own_group = False
-    if int(os.environ.get("WORLD_SIZE", "1")) > 1 and not torch.distributed.is_initialized():
-        backend = "nccl" if cfg.device.startswith("cuda") else "gloo"
-        torch.distributed.init_process_group(backend)
-        own_group = True
-    rank, world = _dist_info()
-    device = cfg.device
-    if device.startswith("cuda") and world > 1:
-        device = f"cuda:{int(os.environ.get('LOCAL_RANK', 0))}"
-        torch.cuda.set_device(device)
-    return rank, world, device, own_group
 
 
 def _start(cfg: TrainConfig, model: StrLPose, optimizer: torch.optim.Optimizer, resume: bool,
@@ -401,15 +300,15 @@ def _loaders(cfg: TrainConfig, model_cfg: Any, train_ds: Any, val_ds: Any, start
              rank: int, world: int) -> tuple[DataLoader, DataLoader]:
     """The training loader (resampled, swapped, from ``start_step`` on, this rank's share)
     and the validation loader (the same resampling for every validation)."""
-    collate = _collater(model_cfg)
+    collate = collater(model_cfg)
     data_seed = cfg.resolved_data_seed
     sampler = StepBatchSampler(len(train_ds), cfg.batch_size, start_step, cfg.steps, data_seed,
                                rank, world)
-    loader = DataLoader(_Resampled(train_ds, cfg.num_points, cfg.num_lines, data_seed,
+    loader = DataLoader(ResampledPairs(train_ds, cfg.num_points, cfg.num_lines, data_seed,
                                    cfg.swap_prob, cfg.outlier_augment, cfg.roll_augment),
                         batch_sampler=sampler, collate_fn=collate, num_workers=cfg.num_workers)
     val_keys = [(i, -1, i) for i in range(len(val_ds))]
-    val_loader = DataLoader(_Resampled(val_ds, cfg.num_points, cfg.num_lines, data_seed + 1),
+    val_loader = DataLoader(ResampledPairs(val_ds, cfg.num_points, cfg.num_lines, data_seed + 1),
                             batch_size=cfg.batch_size, collate_fn=collate,
                             sampler=val_keys, num_workers=cfg.num_workers)
     return loader, val_loader
@@ -495,57 +394,6 @@ def _check_finite_weights(model: StrLPose, step: int, ckpt_path: Path) -> None:
                                f"'{ckpt_path}' keeps the last good state")
 
 
-def _keep_skipped(logs: dict, dumps: int, bar: Any, step: int, cfg: TrainConfig,
-                  model: StrLPose, batch: Any, rank: int, world: int) -> int:
-    """The first :data:`MAX_SKIPPED_DUMPS` skipped steps of a run keep their batch and weights
-    (:func:`save_skipped_step`); returns how many were kept."""
-    if not float(logs["skipped"]) or dumps >= MAX_SKIPPED_DUMPS:
-        return dumps
-    # every rank keeps its own shard: the skip was decided on the all-reduced norm
-    try:
-        kept = save_skipped_step(cfg.out_dir, step, cfg, model, batch,
-                                 rank=rank if world > 1 else None)
-        bar.write(f"step {step}: its batch and weights are kept in '{kept}'")
-    except (OSError, TypeError, RuntimeError) as err:  # the run goes on without it
-        bar.write(f"step {step}: its batch could not be kept ({err})")
-    return dumps + 1
-
-
-def save_skipped_step(out_dir: str | os.PathLike, step: int, cfg: TrainConfig,
-                      model: StrLPose, batch: Any, rank: int | None = None) -> Path:
-    """Keeps what a skipped step needs to be replayed: ``<out_dir>/skipped/step<N>.pt``
-    (``step<N>_rank<r>.pt`` for a DDP rank's shard) with the run's config, the weights before
-    the step and the batch, one graph per entry (plain values, read back by
-    :func:`load_skipped_step` with safe loading)."""
-    graphs = [g.cpu().to_dict() for g in batch.to_data_list()]  # copies: the batch stays
-    name = f"step{step:06d}" + ("" if rank is None else f"_rank{rank}")
-    path = Path(out_dir) / "skipped" / f"{name}.pt"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return save_checkpoint(path, {"step": step, "config": json.loads(json.dumps(asdict(cfg))),
-                                  "model": model.state_dict(), "graphs": graphs})
-
-
-def load_skipped_step(path: str | os.PathLike) -> tuple[int, TrainConfig, StrLPose, Any]:
-    """Reads a :func:`save_skipped_step` file: ``(step, config, model, batch)``, the model with
-    the weights before the step and the batch collated as the training loop did, to replay
-    the step (``benchmarks/replay_skipped_step.py``)."""
-    from torch_geometric.data import HeteroData
-
-    from strl_pyg.utils.io import safe_torch_load
-
-    need = {"step", "config", "model", "graphs"}
-    state = safe_torch_load(Path(path), "skipped training step")
-    if not isinstance(state, dict) or not need <= set(state):
-        got = sorted(state) if isinstance(state, dict) else type(state).__name__
-        raise ValueError(f"Expected a skipped-step file with keys {sorted(need)} in '{path}' "
-                         f"(got {got})")
-    cfg = TrainConfig.from_dict(state["config"])
-    model = StrLPose(cfg.model_config())
-    model.load_state_dict(state["model"])
-    graphs = [HeteroData.from_dict(g) for g in state["graphs"]]
-    return state["step"], cfg, model, _collater(model.config)(graphs)
-
-
 def _count_skipped(logs: dict, in_a_row: int, step: int, bar: Any, ckpt_path: Path) -> int:
     """Steps skipped in a row (:func:`_train_step`'s ``logs["skipped"]``), said under the
     progress bar; :class:`TrainingDiverged` at :data:`MAX_SKIPPED_STEPS`."""
@@ -604,7 +452,7 @@ def _train_step(cfg: TrainConfig, ddp_model: torch.nn.Module, model: StrLPose,
     return logs
 
 
-def _losses(cfg: TrainConfig, model_cfg: Any) -> tuple[PoseLoss, GeometricLoss | None]:
+def losses_for(cfg: TrainConfig, model_cfg: Any) -> tuple[PoseLoss, GeometricLoss | None]:
     """The run's pose loss and, with the geometric head, its loss."""
     pose = PoseLoss(translation=model_cfg.translation, form=cfg.loss,
                     angle_weight=cfg.angle_weight, rot_weight=cfg.rot_weight,
@@ -614,198 +462,3 @@ def _losses(cfg: TrainConfig, model_cfg: Any) -> tuple[PoseLoss, GeometricLoss |
     return pose, geo
 
 
-def fit_input_statistics(model: StrLPose, dataset: Any, symmetric: bool,
-                         max_pairs: int = 128, roll: float = 0.0,
-                         resample: tuple[int, int] | None = None) -> None:
-    """Sets the flow inputs' standardisation (``model.sce``) from the node coordinates of the
-    first ``max_pairs`` training pairs (with their swapped copies when ``symmetric``, and each
-    pair rolled as training rolls it (:class:`~strl_pyg.data.RandomRoll`, a fixed seed) when
-    ``roll`` > 0); they are buffers, so the checkpoint keeps them. With ``inputs="parallax"``
-    each pair is first resampled to ``resample = (points, lines)`` as training resamples it
-    (a neighbour's distance depends on the density)."""
-    roller = RandomRoll(roll, seed=0) if roll > 0 else None
-    parallax = model.config.inputs == "parallax"
-    # the parallax fit reads the nodes the model reads, at the density it trains on (its
-    # neighbours are those nodes); the flow inputs' fit keeps reading every node of every
-    # pair, as the runs already trained did
-    types = (keys_.POINT, keys_.ENDPOINT) if not parallax or model.config.use_lines \
-        else (keys_.POINT,)
-    coords, batch = [], []
-    for i in range(min(max_pairs, len(dataset))):
-        g = dataset[i]
-        if parallax and resample is not None:
-            g = FixedSizeResample(*resample, seed=i)(g)
-        if roller is not None:
-            g = roller(g)
-        for t in types:
-            if t in g.node_types and keys_.POS0 in g[t] and g[t][keys_.POS0].shape[0]:
-                coords.append(torch.cat([g[t][keys_.POS0], g[t][keys_.POS1]], -1).float())
-                batch.append(torch.full((coords[-1].shape[0],), i, dtype=torch.long))
-    if coords:
-        model.sce.fit_standardisation(torch.cat(coords).cpu(), symmetric=symmetric,
-                                      batch=torch.cat(batch))
-        model.sce.to(next(model.parameters()).device)
-
-
-def _parse_value(text: str):
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError:
-        return text
-
-
-def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> TrainConfig:
-    """The :class:`TrainConfig` of parsed :func:`add_train_arguments` flags (``ValueError`` /
-    ``TypeError`` on bad values; a malformed ``KEY=VALUE`` is ``ap.error``)."""
-    def pairs(items):
-        out = {}
-        for item in items:
-            if "=" not in item:
-                ap.error(f"Expected --set KEY=VALUE (got {item!r})")
-            k, v = item.split("=", 1)
-            out[k] = _parse_value(v)
-        return out
-
-    split = lambda s: None if s is None else [x.strip() for x in s.split(",")]  # noqa: E731
-    return TrainConfig(
-        dataset=args.dataset, data_root=args.data_root, cache_dir=args.cache_dir,
-        scene=pairs(args.scene), scene_kinds=split(args.scene_kinds),
-        train_pairs=args.train_pairs, val_pairs=args.val_pairs, kitti_k=args.kitti_k,
-        train_sequences=split(args.train_sequences), val_sequences=split(args.val_sequences),
-        limit=args.limit, model=args.model, model_overrides=pairs(args.set), lr=args.lr,
-        batch_size=args.batch_size, steps=args.steps, val_every=args.val_every,
-        num_points=args.num_points, num_lines=args.num_lines, patch_size=args.patch_size,
-        swap_prob=args.swap_prob, roll_augment=args.roll_augment, init_from=args.init_from,
-        seed=args.seed, out_dir=args.out, num_workers=args.workers, device=args.device,
-        tensorboard=not args.no_tensorboard, scene_mix=args.scene_mix,
-        matches=args.matches, outlier_augment=args.outlier_augment,
-        geo_ess_start=args.geo_ess_start, data_seed=args.data_seed,
-        checkpoint_every=args.checkpoint_every, checkpoint_minutes=args.checkpoint_minutes,
-        loss=args.loss, grad_clip=None if args.grad_clip == 0 else args.grad_clip,
-        grad_clip_relative=args.grad_clip_relative,
-        angle_weight=args.angle_weight, rot_weight=args.rot_weight, beta=args.beta,
-        lr_schedule=args.lr_schedule, warmup_steps=args.warmup_steps,
-        train_scenes=split(args.train_scenes), val_scenes=split(args.val_scenes),
-        posed_gaps=[int(g) for g in split(args.posed_gaps)],
-        posed_max_rotation=args.posed_max_rotation, val_gap=args.val_gap,
-        val_stride=args.val_stride, synthetic_share=args.synthetic_share,
-        synthetic_pairs=args.synthetic_pairs,
-        budget_minutes=args.budget_minutes, best_metric=args.best_metric,
-    )
-
-
-#: ``add_train_arguments`` flags whose destination is not the :class:`TrainConfig` field of the
-#: same name (``None``: not a setting of the run).
-FLAG_FIELDS = {"set": "model_overrides", "workers": "num_workers", "out": "out_dir",
-               "no_tensorboard": "tensorboard", "resume": None, "overwrite": None,
-               "no_progress": None, "help": None}
-
-
-def given_fields(argv: Sequence[str]) -> set[str]:
-    """The :class:`TrainConfig` fields that the command line ``argv`` sets explicitly (a flag
-    given with the default value counts as given); tokens that are not training flags are
-    ignored."""
-    ap = argparse.ArgumentParser(add_help=False, argument_default=argparse.SUPPRESS)
-    add_train_arguments(ap)
-    for action in ap._actions:
-        action.default = argparse.SUPPRESS
-    given, _ = ap.parse_known_args(list(argv))
-    return {FLAG_FIELDS.get(dest, dest) for dest in vars(given)} - {None}
-
-
-def settings_from_run(cfg: TrainConfig, given: set[str]) -> tuple[TrainConfig, dict[str, Any]]:
-    """For ``--resume``: ``cfg`` with every setting its command line did not give (``given``:
-    :func:`given_fields`) taken from the run's ``last.pt``, so ``--out RUN --resume``
-    continues a run without retyping its options, and what was taken. The run folder, device
-    and workers stay this command's; what the command gives is kept (and checked against the
-    run by :func:`train`). No ``last.pt``: ``cfg`` unchanged (:func:`train` reports it)."""
-    last = Path(cfg.out_dir) / "last.pt"
-    if not last.is_file():
-        return cfg, {}
-    raw = load_checkpoint(last).get("train_config")
-    if not isinstance(raw, dict):
-        return cfg, {}
-    saved = asdict(TrainConfig.from_dict(raw))  # older runs: the fields added since, filled
-    own = {"out_dir", "device", "num_workers"} | set(given)
-    taken = {k: v for k, v in saved.items() if k not in own and getattr(cfg, k) != v}
-    if not taken:
-        return cfg, {}
-    return TrainConfig.from_dict({**asdict(cfg), **taken}), taken
-
-
-def run_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser,
-                  argv: Sequence[str] | None = None) -> int:
-    """Runs training from parsed :func:`add_train_arguments` flags; returns an exit code.
-    With ``--resume`` and the command line ``argv``, the settings it does not give come from
-    the run (:func:`settings_from_run`, printed); without ``argv``, every setting must match
-    the run."""
-    try:
-        cfg = config_from_args(args, ap)
-        if args.resume and not args.overwrite and argv is not None:
-            cfg, taken = settings_from_run(cfg, given_fields(argv))
-            if taken and int(os.environ.get("RANK", "0")) == 0:
-                print("resuming with the run's own settings for what the command left out: "
-                      + ", ".join(f"{k}={v!r}" for k, v in taken.items()))
-        cfg.model_config()  # validate the model overrides before any work
-        check_device(cfg.device)
-        if args.resume and args.overwrite:
-            raise ValueError("Expected at most one of --resume and --overwrite (got both)")
-        if cfg.data_root is not None and not Path(cfg.data_root).is_dir():
-            what = "a file" if Path(cfg.data_root).exists() else "no such folder"
-            raise ValueError(f"Expected --data-root to be the {cfg.dataset} dataset's folder "
-                             f"(got {what}: '{cfg.data_root}')")
-        result = train(cfg, resume=args.resume, progress=not args.no_progress,
-                       overwrite=args.overwrite)
-    except (ValueError, TypeError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    except TrainingDiverged as err:  # not a usage error: the run itself failed
-        print(f"error: {err}", file=sys.stderr)
-        return 1
-    last = Path(cfg.out_dir) / "last.pt"
-    if result.get("already_finished"):
-        how = ("pass a larger --steps with --resume to continue"
-               if cfg.lr_schedule == "constant" else
-               f"its {cfg.lr_schedule} schedule has ended: start a new run with --init-from "
-               f"'{last}' to train on")
-        print(f"run already finished: '{last}' is at step {result['step']} = --steps; nothing "
-              f"to train ({how})")
-        return 0
-    if result.get("interrupted"):
-        print(f"stopped by {result['interrupted']} at step {result['step']} of {cfg.steps}: "
-              f"kept '{last}' (model, optimiser, RNG, step); continue with the same command "
-              f"and --resume", file=sys.stderr)
-    if result.get("budget_reached"):
-        print(f"stopped at step {result['step']} of {cfg.steps}: the budget of "
-              f"{cfg.budget_minutes:g} minutes is spent; kept '{last}' (continue with the same "
-              f"command and --resume)", file=sys.stderr)
-    if result.get("history"):
-        png = plot_history(result["history"], Path(cfg.out_dir) / "curves.png",
-                           log=Path(cfg.out_dir) / "log.csv")
-        print(f"curves: {png}")
-    keys = ("rot_err_deg", "trans_err_deg", "auc10", "trivial_rot_err_deg",
-            "trivial_trans_err_deg", "pairs_per_s")
-    summary = json.dumps({"step": result["step"], **{k: result[k] for k in keys if k in result}})
-    if result.get("interrupted"):  # stdout carries the summary of a finished run only
-        return 130
-    print(summary)
-    return 0
-
-
-def check_device(device: str) -> None:
-    """One-line ``ValueError`` for a device string torch cannot parse or that is absent."""
-    try:
-        dev = torch.device(device)
-    except (RuntimeError, TypeError):
-        raise ValueError(f"Expected --device cpu, cuda, cuda:N or mps (got {device!r})") from None
-    if dev.type == "cuda" and not torch.cuda.is_available():
-        raise ValueError(f"Expected --device cpu on this machine (got {device!r}: torch "
-                         f"{torch.__version__} sees no CUDA device)")
-    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
-        raise ValueError(f"Expected a CUDA device index below {torch.cuda.device_count()} "
-                         f"(got {device!r})")
-    if dev.type == "mps" and not torch.backends.mps.is_available():
-        raise ValueError(f"Expected --device cpu on this machine (got {device!r}: MPS is not "
-                         f"available)")
-    if dev.type not in ("cpu", "cuda", "mps"):
-        raise ValueError(f"Expected --device cpu, cuda, cuda:N or mps (got {device!r})")

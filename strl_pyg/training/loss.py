@@ -91,7 +91,7 @@ class PoseLoss(nn.Module):
 
     ``form="balanced"`` (beyond the paper, the training default) keeps the predicted variances
     but changes three things that starved the translation in the paper's form (see
-    ``benchmarks/results_pose_recipe.md``): every component's term is weighted by
+    ``benchmarks/studies/results_pose_recipe.md``): every component's term is weighted by
     :func:`beta_nll` (``beta``), so the rotation's collapsing variances do not multiply its
     gradient in the shared layers; the quaternion's ``w``, whose error is second order in the
     angle, fits its variance on a detached residual (the pose gets no gradient from it, the

@@ -9,25 +9,7 @@ from __future__ import annotations
 
 from strl_pyg.utils.lazy import lazy_exports
 
-__all__ = [
-    "lazy_exports",
-    "strict_from_dict",
-    "atomic_open",
-    "check_output_file",
-    "check_output_dir",
-    "safe_torch_load",
-    "UnsafeFileError",
-    "one_line",
-    "decode_image",
-    "read_image_file",
-    "check_image",
-    "to_uint8",
-    "FRONTEND_MIN_SIDE",
-    "UsageError",
-    "OneLineArgumentParser",
-]
-
-__getattr__, __dir__ = lazy_exports(__name__, {
+_EXPORTS = {
     "lazy_exports": "strl_pyg.utils.lazy",
     "strict_from_dict": "strl_pyg.utils.dataclass",
     "atomic_open": "strl_pyg.utils.io",
@@ -43,4 +25,8 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "FRONTEND_MIN_SIDE": "strl_pyg.utils.images",
     "UsageError": "strl_pyg.utils.commandline",
     "OneLineArgumentParser": "strl_pyg.utils.commandline",
-}, globals())
+}
+
+__all__ = list(_EXPORTS)
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

@@ -17,7 +17,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from strl_pyg.geometry import Pose, as_tensor
-from strl_pyg.metrics.two_view import KittiSegmentErrors, kitti_odometry_summary
+from strl_pyg.metrics import KittiSegmentErrors, kitti_odometry_summary
 from strl_pyg.utils.io import atomic_open
 
 __all__ = ["save_figure", "plot_trajectory_topview", "plot_segment_errors"]

@@ -1,23 +1,33 @@
 """End-to-end tests of the ``strl-pose`` command line (in-process, through ``main``)."""
 
 import json
+import subprocess
+import sys
+from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
 from strl_pyg import cli
+from strl_pyg.cli import main as cli_main
 from strl_pyg.geometry import Pose
+from strl_pyg.utils import UsageError
 from strl_pyg.metrics.two_view import rotation_error_deg
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
 def checkpoint(tmp_path_factory):
     """The shipped weights when present; else a freshly initialised small model (the CLI's
     plumbing is what these tests check; the shipped model's accuracy is in the README)."""
-    if cli.DEFAULT_WEIGHTS.is_file():
-        return str(cli.DEFAULT_WEIGHTS)
-    from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
+    from strl_pyg.training.checkpoints import DEFAULT_WEIGHTS
+
+    if DEFAULT_WEIGHTS.is_file():
+        return str(DEFAULT_WEIGHTS)
+    from strl_pyg.model.strl_pose import StrLPose
+    from strl_pyg.model import StrLPoseConfig
 
     path = tmp_path_factory.mktemp("ckpt") / "tiny.pt"
     StrLPose(StrLPoseConfig(hidden=32, layers=1, heads=2, patch_features=1)).save(path)
@@ -138,7 +148,8 @@ def test_console_script_entry_point_help():
 
 
 def test_bench_prints_a_timing_table(tmp_path, capsys):
-    from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose
+    from strl_pyg.model import StrLPoseConfig
 
     ckpt = tmp_path / "tiny.pt"
     StrLPose(StrLPoseConfig(hidden=32, layers=1, heads=2, patch_features=1)).save(ckpt)
@@ -198,7 +209,7 @@ def test_import_strl_pyg_is_light_and_names_resolve_lazily():
 
 
 def test_train_choices_match_the_model_ablations():
-    from strl_pyg.model.strl_pose import ABLATIONS
+    from strl_pyg.model import ABLATIONS
     from strl_pyg.training.config import ABLATION_NAMES
 
     assert tuple(ABLATIONS) == ABLATION_NAMES
@@ -283,9 +294,9 @@ def test_bad_image_files_get_their_own_message(make, message, tmp_path, capsys):
 
 
 def test_folder_as_intrinsics_and_nan_intrinsics(tmp_path):
-    with pytest.raises(cli.UsageError, match="folder"):
+    with pytest.raises(UsageError, match="folder"):
         cli.read_intrinsics(str(tmp_path))
-    with pytest.raises(cli.UsageError, match="finite"):
+    with pytest.raises(UsageError, match="finite"):
         cli.read_intrinsics("nan,100,50,50")
 
 
@@ -355,7 +366,7 @@ def test_default_train_config_model_accepts_its_default_data():
 
     from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.training.config import DATA_CHANNELS, TrainConfig
-    from strl_pyg.training.loop import build_datasets
+    from strl_pyg.training import build_datasets
 
     cfg = replace(TrainConfig(), train_pairs=1, val_pairs=1)
     g = build_datasets(cfg)[0][0]
@@ -393,3 +404,116 @@ def test_predict_says_when_the_given_checkpoint_was_not_run(checkpoint, kitti_pa
     assert cli.main(["predict", img0, img1, "--K", calib, "--checkpoint", checkpoint,
                      "--methods", "regression"]) in (0, 3)
     assert "note:" not in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_python_dash_m_evaluation_and_the_console_script_entry_point():
+    res = subprocess.run([sys.executable, "-m", "strl_pyg.evaluation", "--help"],
+                         capture_output=True, text=True, cwd=REPO, timeout=300)
+    assert res.returncode == 0 and "--methods" in res.stdout, res.stderr[-1000:]
+    res = subprocess.run([sys.executable, "-c", "from strl_pyg.cli import main; "
+                          "raise SystemExit(main(['--help']))"],
+                         capture_output=True, text=True, cwd=REPO, timeout=300)
+    assert res.returncode == 0 and "predict" in res.stdout, res.stderr[-1000:]
+
+
+def test_a_wrong_case_flag_gets_a_suggestion(capsys):
+    assert cli_main(["predict", "a.png", "b.png", "--k", "1,1,1,1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "did you mean --K?" in err
+
+
+def test_an_unknown_method_fails_before_anything_is_loaded(capsys, monkeypatch):
+    """Before: '--methods poselibb' failed after 6 s of loading."""
+    import strl_pyg.cli.commands as commands
+
+    def boom(*a, **k):
+        raise AssertionError("read before the method names were checked")
+
+    monkeypatch.setattr(commands, "load_model", boom)
+    monkeypatch.setattr(commands, "read_pair", boom)
+    assert cli_main(["predict", "a.png", "b.png", "--methods", "poselibb"]) == 2
+    err = capsys.readouterr().err
+    assert "did you mean 'poselib'?" in err and err.count("\n") == 1
+
+
+def test_a_folder_as_checkpoint_says_folder(tmp_path, held_out_pair, capsys):
+    path = held_out_pair.matches.save(tmp_path / "m.npz")
+    assert cli_main(["predict", "--matches", str(path), "--checkpoint", str(tmp_path)]) == 2
+    assert "(got a folder)" in capsys.readouterr().err
+    assert cli_main(["predict", "--matches", str(tmp_path)]) == 2
+    assert "(got a folder)" in capsys.readouterr().err
+
+
+def test_a_missing_data_root_is_one_line(capsys):
+    """Before: two UserWarnings blaming the sequences."""
+    import warnings
+
+    from strl_pyg.cli import main
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert main(["train", "--dataset", "kitti", "--data-root", "/nonexistent/kitti",
+                     "--steps", "1", "--out", "/tmp/never_written_run"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no such folder" in err
+
+
+def test_the_focal_warning_of_a_downscaled_pair_quotes_the_users_numbers(tmp_path,
+                                                                         held_out_pair, capsys):
+    """Before: fx=153.8 at 1600 px, numbers the user never gave."""
+    import cv2
+
+    for name, img in (("a.png", held_out_pair.image0), ("b.png", held_out_pair.image1)):
+        cv2.imwrite(str(tmp_path / name), cv2.resize(img, (3200, 960)))
+    code = cli_main(["predict", str(tmp_path / "a.png"), str(tmp_path / "b.png"),
+                     "--K", "100000,100000,1600,480", "--methods", "opencv",
+                     "--bootstrap", "0"])
+    out = capsys.readouterr().out
+    assert code == 3
+    assert "fx=1e+05" in out and "(3200 px)" in out and "1600 px)" not in out
+
+
+def test_the_default_predict_does_not_build_the_network(tmp_path, held_out_pair, capsys,
+                                                        monkeypatch):
+    """Before: predict loaded the model (~80 ms a process) for the default recommended pose,
+    which on a pair with enough points is PoseLib's."""
+    import json
+
+    import cv2
+
+    from strl_pyg.model import StrLPose
+
+    def refuse(*a, **k):
+        raise AssertionError("the network was built")
+
+    monkeypatch.delenv("STRL_POSE_WEIGHTS", raising=False)
+    monkeypatch.setattr(StrLPose, "from_pretrained", classmethod(refuse))
+    monkeypatch.setattr(StrLPose, "load", classmethod(refuse))
+    for i, img in enumerate((held_out_pair.image0, held_out_pair.image1)):
+        cv2.imwrite(str(tmp_path / f"{i}.png"), img)
+    K = held_out_pair.K
+    code = cli_main(["predict", str(tmp_path / "0.png"), str(tmp_path / "1.png"), "--K",
+                     f"{K[0, 0]},{K[1, 1]},{K[0, 2]},{K[1, 2]}", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["pose"]["status"] == "ok" and out["pose"]["method"] == "poselib"
+    assert out["translation_kind"] == StrLPose.pretrained_header()[0].translation
+
+
+def test_predict_on_a_match_file_runs_the_recommended_methods_only(tmp_path, held_out_pair, capsys):
+    """Before, `predict --matches` with the default '--methods recommended' ran every method
+    (the image path ran only the ones the recommended pose needs); the pose is the same."""
+    import json
+
+    path = held_out_pair.matches.save(tmp_path / "m.npz")
+    runs = {}
+    for methods in ("recommended", "all"):
+        assert cli_main(["predict", "--matches", str(path), "--methods", methods,
+                         "--json"]) == 0
+        runs[methods] = json.loads(capsys.readouterr().out)
+    lazy, full = runs["recommended"], runs["all"]
+    assert lazy["pose"]["method"] == full["pose"]["method"]
+    np.testing.assert_allclose(lazy["pose"]["T_0to1"], full["pose"]["T_0to1"], atol=1e-12)
+    assert list(lazy["methods"]) == [lazy["pose"]["method"]]
+    assert len(full["methods"]) > 1
+

@@ -6,8 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from strl_pyg.cli.commands import _check_methods, _method_names
-from strl_pyg.cli.readers import UsageError, read_intrinsics
+from strl_pyg.cli import main as cli_main
+from strl_pyg.cli.predict import _check_methods, _method_names
+from strl_pyg.cli.readers import read_intrinsics
+from strl_pyg.utils import UsageError
 
 P0 = "7.188560e+02 0 6.071928e+02 0 0 7.188560e+02 1.852157e+02 0 0 0 1 0"
 P1 = "7.188560e+02 0 6.071928e+02 -3.861448e+02 0 7.188560e+02 1.852157e+02 0 0 0 1 0"
@@ -86,3 +88,64 @@ def test_predict_png_colours_the_support_and_threshold_is_a_flag(image_dir, tmp_
     assert cli.main(["predict", str(d / "a.png"), str(d / "b.png"), "--K", K,
                      "--threshold-px", "0"]) == 2
     assert "Expected a positive --threshold-px" in capsys.readouterr().err
+
+
+def test_predict_reads_a_match_file(tmp_path, held_out_pair, capsys):
+    path = held_out_pair.matches.save(tmp_path / "m.npz")
+    code = cli_main(["predict", "--matches", str(path), "--methods", "poselib",
+                     "--bootstrap", "0", "--json"])
+    import json
+
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["pose"]["status"] == "ok" and out["pose"]["method"] == "poselib"
+    assert out["num_points"] == held_out_pair.matches.num_points
+    assert cli_main(["predict", "a.png", "--matches", str(path)]) == 2
+    assert "either two images or --matches" in capsys.readouterr().err
+
+
+def test_intrinsics_from_colmap_and_strecha_files(tmp_path):
+    (tmp_path / "cameras.txt").write_text(
+        "# Camera list with one line of data per camera:\n"
+        "1 PINHOLE 3072 2048 2759.48 2764.16 1520.69 1006.81\n")
+    K = read_intrinsics(str(tmp_path / "cameras.txt"))
+    # COLMAP's pixel centres are at +0.5: this package's (OpenCV's) are at 0
+    np.testing.assert_allclose(K, [[2759.48, 0, 1520.19], [0, 2764.16, 1006.31], [0, 0, 1]])
+    (tmp_path / "one.txt").write_text("1 SIMPLE_RADIAL 640 480 500 320.5 240.5 0.01\n")
+    np.testing.assert_allclose(read_intrinsics(str(tmp_path / "one.txt")),
+                               [[500, 0, 320], [0, 500, 240], [0, 0, 1]])
+    (tmp_path / "two.txt").write_text("1 PINHOLE 640 480 500 500 320 240\n"
+                                      "2 PINHOLE 640 480 600 600 320 240\n")
+    with pytest.raises(UsageError, match="Expected one camera"):
+        read_intrinsics(str(tmp_path / "two.txt"))
+    (tmp_path / "0004.jpg.camera").write_text(
+        "2759.48 0 1520.69\n0 2764.16 1006.81\n0 0 1\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n"
+        "-7.2 -7.5 0.2\n3072 2048\n")
+    np.testing.assert_allclose(read_intrinsics(str(tmp_path / "0004.jpg.camera")),
+                               [[2759.48, 0, 1520.69], [0, 2764.16, 1006.81], [0, 0, 1]])
+
+
+def test_match_file_without_k_prints_one_line_each(held_out_pair, tmp_path, capsys):
+    """Before: `strl-pose predict --matches lg.npz` (a LightGlue file whose matches reuse
+    keypoints of image 1, no K, no images) printed Python's warning with its source line
+    (`.../formats.py:174: UserWarning: ...` then `kw = READERS[fmt](...)`), said
+    `regression skipped: regression skipped: ...` and warned that "the network's coordinates
+    are normalised by the image size" though the network did not run."""
+    from strl_pyg.cli import main as cli_main
+
+    m = held_out_pair.matches
+    n = 200
+    idx = np.stack([np.arange(n), np.arange(n)], 1)
+    idx[150:, 1] = idx[:50, 1]  # 50 matches onto keypoints of image 1 already matched
+    path = tmp_path / "lg.npz"
+    size = np.array(held_out_pair.image0.shape[:2][::-1])  # LightGlue's image_size is (W, H)
+    np.savez(path, keypoints0=m.points0[:n], keypoints1=m.points1[:n], matches=idx,
+             scores=np.ones(n), image_size0=size, image_size1=size)
+    rc = cli_main(["predict", "--matches", str(path)])
+    out, err = capsys.readouterr()
+    assert rc == 1 and "pose: failed" in out and "fundamental matrix" in out
+    assert "UserWarning" not in err and "formats.py" not in err and "READERS" not in err
+    assert "warning: Expected one-to-one matches in 'matches'" in err
+    assert "regression skipped: regression skipped" not in err + out
+    assert "regression skipped: the model reads the images" in out + err
+    assert "the network's coordinates are normalised" not in out + err
+

@@ -10,13 +10,14 @@ import torch
 
 from strl_pyg.data.external.formats import (
     FORMATS,
-    MatchFormatError,
     detect_format,
     from_lightglue,
     load_external_matches,
 )
+from strl_pyg.data.external import MatchFormatError
 from strl_pyg.data.external.hloc import load_hloc_matches
 from strl_pyg.data.matches import PairMatches
+from strl_pyg.inference import PoseEstimator
 
 H, W = 120, 160  # not square: a swapped (W, H) shows
 rng = np.random.default_rng(0)
@@ -250,11 +251,12 @@ def test_hloc_errors(tmp_path, monkeypatch):
 
 # ------------------------------------------------------------------------------- others
 def test_package_exports():
-    import strl_pyg.data as data
+    import strl_pyg.data.external as external
 
-    assert data.load_external_matches is load_external_matches
-    assert data.load_hloc_matches is load_hloc_matches
-    assert data.MatchFormatError is MatchFormatError and data.from_lightglue is from_lightglue
+    assert external.load_external_matches is load_external_matches
+    assert external.load_hloc_matches is load_hloc_matches
+    assert external.MatchFormatError is MatchFormatError
+    assert external.from_lightglue is from_lightglue
 
 
 def test_readers_split_by_layout():
@@ -385,3 +387,28 @@ def test_intrinsics_from_file_must_agree():
     assert load_external_matches(d, (H, W), (H, W)).has_intrinsics
     with pytest.raises(ValueError, match="K0 to agree"):
         load_external_matches(d, (H, W), (H, W), K0=2 * K + np.diag([0, 0, -1]), K1=K)
+
+
+def test_all_matches_onto_one_keypoint_warn_at_load_and_are_degenerate(held_out_pair):
+    """Before: a SuperGlue dict whose 512 matches all point at keypoint 0 of image 1 was
+    accepted silently and gave 'ok' from opencv."""
+    m = held_out_pair.matches
+    n = m.num_points
+    d = {"keypoints0": m.points0, "keypoints1": m.points1,
+         "matches0": np.zeros(n, dtype=np.int64), "matching_scores0": np.ones(n)}
+    with pytest.warns(UserWarning, match=r"onto 1 distinct keypoints of image 1"):
+        pm = load_external_matches(d, image_size0=held_out_pair.image0.shape[:2],
+                                   image_size1=held_out_pair.image1.shape[:2],
+                                   K0=held_out_pair.K, K1=held_out_pair.K)
+    est = PoseEstimator(methods=("opencv", "poselib")).estimate(pm)
+    assert est.status == "degenerate"
+    assert any("one-to-many" in w for w in est.warnings)
+
+
+def test_external_matches_take_their_images(held_out_pair):
+    m = held_out_pair.matches
+    pm = load_external_matches({"mkpts0": m.points0, "mkpts1": m.points1},
+                               image0=held_out_pair.image0, image1=held_out_pair.image1,
+                               K0=held_out_pair.K, K1=held_out_pair.K)
+    assert pm.has_images and pm.image_size0 == tuple(held_out_pair.image0.shape[:2])
+

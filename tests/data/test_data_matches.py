@@ -1,10 +1,12 @@
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from strl_pyg.data import PairMatches
-from strl_pyg.data.matches import OUT_OF_IMAGE_TOLERANCE
+from strl_pyg.data.checks import OUT_OF_IMAGE_TOLERANCE
 
 H, W = 120, 160
 
@@ -175,3 +177,61 @@ def test_an_empty_npz_is_a_one_line_value_error(tmp_path):
         PairMatches.load(path)
     assert isinstance(info.value, MatchFileKeyError) and isinstance(info.value, KeyError)
     assert "\n" not in str(info.value) and not str(info.value).startswith('"')
+
+
+def _pm(pair, p0, p1, **kw):
+    return PairMatches(p0, p1, K0=pair.K, K1=pair.K, image_size0=pair.image0.shape[:2],
+                       image_size1=pair.image1.shape[:2], **kw)
+
+
+def test_deduplicated_keeps_first_rows_and_maps_every_input_row(held_out_pair):
+    m = held_out_pair.matches
+    idx = np.array([3, 1, 3, 0, 1, 2])
+    pm = _pm(held_out_pair, m.points0[idx], m.points1[idx])
+    out, notes, inverse = pm.deduplicated()
+    np.testing.assert_array_equal(out.points0, m.points0[[3, 1, 0, 2]])
+    np.testing.assert_array_equal(inverse, [0, 1, 0, 2, 1, 3])
+    assert len(notes) == 1 and "2 repeated point matches removed" in notes[0]
+    same, none, _ = _pm(held_out_pair, m.points0, m.points1).deduplicated()
+    assert none == [] and same.num_points == m.num_points
+
+
+def test_select_keeps_the_front_ends_inlier_rows_in_step(held_out_pair):
+    """Before: select() copied info['fundamental_inliers'] unchanged, so add_lines read other
+    rows (or past the end) as the fundamental matrix's inliers."""
+    m = held_out_pair.matches
+    pm = replace(_pm(held_out_pair, m.points0[:6], m.points1[:6]),
+                 info={"fundamental_inliers": [0, 2, 3, 5]})
+    assert pm.select([5, 1, 2]).info["fundamental_inliers"] == [0, 2]
+    assert pm.select([3, 3]).info["fundamental_inliers"] == [0, 1]
+    assert pm.select(line_index=[]).info["fundamental_inliers"] == [0, 2, 3, 5]
+    stale = replace(pm, info={"fundamental_inliers": [0, 9]})
+    assert "fundamental_inliers" not in stale.select([0, 1]).info
+
+
+def test_size_given_as_w_h_is_named(held_out_pair):
+    """Before: a size passed as (W, H) = (1226, 370) with points of a 370x1226 image said
+    "inside the 370x1226 image", which read as right to the user (the message printed
+    W x H, everything else H x W), with no hint that the size was transposed."""
+    m, (h, w) = held_out_pair.matches, held_out_pair.image0.shape[:2]
+    with pytest.raises(ValueError, match=rf"inside the {w}x{h} px image \(H x W.*"
+                                         r"was image_size0 given as \(W, H\)\? Sizes are \(H, W\)"):
+        PairMatches(m.points0, m.points1, image_size0=(w, h), image_size1=(w, h))
+
+
+def test_lsd_rows_are_read_as_segments(held_out_pair):
+    """Before: OpenCV's LSD output, (N, 1, 4) rows (x1, y1, x2, y2), or its (N, 4) squeeze
+    was refused ("Expected 'lines0' of shape [N, 2, 2]") with no hint."""
+    m = held_out_pair.matches
+    ref = PairMatches(m.points0, m.points1, m.lines0, m.lines1, image_size0=m.image_size0,
+                      image_size1=m.image_size1)
+    for shape in ((-1, 4), (-1, 1, 4)):
+        got = PairMatches(m.points0, m.points1, m.lines0.reshape(shape).astype(np.float32),
+                          m.lines1.reshape(shape), image_size0=m.image_size0,
+                          image_size1=m.image_size1)
+        np.testing.assert_allclose(got.lines0, ref.lines0, rtol=1e-6)
+        np.testing.assert_array_equal(got.lines1, ref.lines1)
+    with pytest.raises(ValueError, match=r"Expected 'lines0' of shape \[N, 2, 2\] \(got \(5, 3\)\)"):
+        PairMatches(m.points0, m.points1, np.ones((5, 3)), np.ones((5, 3)),
+                    image_size0=m.image_size0, image_size1=m.image_size1)
+

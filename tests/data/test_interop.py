@@ -10,21 +10,20 @@ import pytest
 import torch
 from test_data_graph import make
 from torch import nn
-from torch_geometric.data import Batch
+from torch_geometric.data import Batch, HeteroData
 from torch_geometric.nn import to_hetero
 
 from strl_pyg.data import keys as K
-from strl_pyg.data.build import (
+from strl_pyg.data.build import build_pair_graph, load_graph, save_graph
+from strl_pyg.data import (
     ImplicitEdgesError,
     PairGraph,
-    build_pair_graph,
     edge_index_dict,
     has_implicit_complete_edges,
-    load_graph,
     materialize_complete_edges,
-    save_graph,
 )
-from strl_pyg.nn.attention import AttentionConv, CompleteEdges
+from strl_pyg.nn.attention import AttentionConv
+from strl_pyg.data import CompleteEdges
 
 SIZES = [(5, 2), (3, 0), (0, 3), (7, 1)]  # (points, lines): uneven, one graph without points
 
@@ -215,3 +214,15 @@ def test_on_cuda_equals_explicit_edges():
     assert implicit.num_edges == explicit.num_edges
     h = implicit.to_homogeneous()
     assert h.edge_index.is_cuda and h.num_edges == explicit.to_homogeneous().num_edges
+
+
+def test_materialize_complete_edges_on_a_users_graph_does_not_mutate_it():
+    """Before: TypeError in zeros() on a 'kp' graph, and a 'point' node type added."""
+    d = HeteroData()
+    d["kp"].x = torch.randn(4, 3)
+    d["kp", "all", "kp"].dense = torch.ones(1, dtype=torch.bool)
+    out = materialize_complete_edges(d)
+    assert out["kp", "all", "kp"].edge_index.shape == (2, 16)
+    assert d.node_types == ["kp"] and "edge_index" not in d["kp", "all", "kp"]
+    assert "dense" in d["kp", "all", "kp"] and "dense" not in out["kp", "all", "kp"]
+

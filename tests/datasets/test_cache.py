@@ -251,3 +251,54 @@ def test_entries_of_the_format_before_dedupe_are_not_read(tmp_path, monkeypatch)
     new = MatchCache(tmp_path, fp)
     assert new.dir != old.dir
     assert [new.status(k) for k in _keys(3)] == ["missing"] * 3
+
+
+def test_counts_read_the_match_arrays_once_and_follow_a_rewritten_entry(tmp_path, monkeypatch):
+    cache = MatchCache(tmp_path, {"kind": "fake"})
+    _build(cache, 8)
+    keys = _keys(8)
+    counts = cache.counts(keys)
+    expected = {k: (PairMatches.load(cache.path(k)).num_points, 2) for k in keys
+                if cache.path(k).is_file()}
+    assert counts == expected and len(counts) == 7  # seed 3 has no matches: left out
+    assert (cache.dir / "counts.json").is_file()
+
+    def no_reading(*args, **kwargs):
+        raise AssertionError("an entry was read again")
+
+    monkeypatch.setattr(np, "load", no_reading)
+    assert cache.counts(keys) == expected  # from counts.json alone
+    monkeypatch.undo()
+    fewer = fake_match(0).select(np.arange(2))
+    fewer.save(cache.path(keys[0]))
+    os.utime(cache.path(keys[0]), ns=(1, 1))  # a rewritten entry: another stamp
+    assert cache.counts(keys[:1]) == {keys[0]: (2, 2)}
+
+
+def test_a_dataset_leaves_out_pairs_with_few_matches(tmp_path):
+    from strl_pyg.data import build_pair_graph
+    from strl_pyg.datasets.base import CachedPairDataset
+
+    class FakePairs(CachedPairDataset):
+        def _match_fn(self):
+            return fake_match
+
+        def _payload(self, i):
+            return i
+
+        def _skip_errors(self):
+            return (FakeNoMatches,)
+
+        def _graph(self, i, matches):
+            return build_pair_graph(matches)
+
+    everything = FakePairs(_keys(20), tmp_path, lambda: {"kind": "fake"})
+    with pytest.warns(UserWarning, match="gave no matches"):
+        everything.build_cache(progress=False)
+    few = FakePairs(_keys(20), tmp_path, lambda: {"kind": "fake"}, min_points=9)
+    with pytest.warns(UserWarning, match="fewer than min_points=9"):
+        kept = [few.load_matches(i).num_points for i in range(len(few))]
+    assert kept and min(kept) >= 9
+    assert len(few) == sum(1 for s in range(20) if s % 5 != 3 and 5 + s % 7 >= 9)
+    with pytest.raises(ValueError, match="Expected min_points as an integer >= 0"):
+        FakePairs(_keys(2), tmp_path, lambda: {"kind": "fake"}, min_points=-1)

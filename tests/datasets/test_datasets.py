@@ -20,9 +20,8 @@ from torch_geometric.loader import DataLoader
 
 from strl_pyg.data import keys as K
 from strl_pyg.data.transforms import FixedSizeResample
+from strl_pyg.data.keys import PAIR_ID, SUBSET
 from strl_pyg.datasets import (
-    PAIR_ID,
-    SUBSET,
     DeMoNFolder,
     DeMoNHDF5,
     ImageSource,

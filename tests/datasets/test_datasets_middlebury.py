@@ -55,7 +55,8 @@ def test_malformed_files_raise_one_line_errors(tmp_path):
 def test_dino_pairs_have_small_epipolar_residuals():
     import cv2
 
-    from strl_pyg.frontend import epipolar_residuals, match_images
+    from strl_pyg.frontend import match_images
+    from strl_pyg.geometry import epipolar_residuals
 
     pairs = middlebury_pairs(DINO)
     assert len(pairs) == len(list(DINO.glob("*.png"))) - 1

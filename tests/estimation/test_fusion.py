@@ -19,14 +19,10 @@ from strl_pyg.estimation.pose_fusion import (
     pose_to_tangent,
     sampson_jacobian,
     sampson_residuals,
-    so3_exp,
-    so3_log,
-    sphere_exp,
-    sphere_log,
-    tangent_basis,
     tangent_to_pose,
     truncated_sigma,
 )
+from strl_pyg.geometry import so3_exp, so3_log, sphere_exp, sphere_log, tangent_basis
 from strl_pyg.geometry import Pose, essential_from_pose, normalize_points, sampson_error
 from strl_pyg.metrics.two_view import relative_pose_error
 from strl_pyg.synthetic import SceneConfig, generate_pair

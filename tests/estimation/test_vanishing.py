@@ -11,15 +11,15 @@ import torch
 
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.estimation.vanishing import (
-    _segments,
-    _vp_residual_px,
-    refine_with_lines,
+    segment_geometry,
+    vp_residual_px,
     vanishing_directions,
     vanishing_point_pose,
 )
+from strl_pyg.estimation.line_refine import refine_with_lines
 from strl_pyg.geometry.pose import rotation_angle_deg
 from strl_pyg.inference import PoseEstimator
-from strl_pyg.inference.estimator import RECOMMENDED_ORDER, recommended_order
+from strl_pyg.inference import RECOMMENDED_ORDER, recommended_order
 
 K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
 SIZE = (480, 640)
@@ -213,8 +213,8 @@ def test_line_residual_is_the_larger_endpoint_distance_to_the_vanishing_line():
     K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
     lines = rng.uniform(0, 640, (20, 2, 2))
     d = rng.normal(size=(4, 3))
-    ends, mids, _ = _segments(lines, K)
-    got = _vp_residual_px(d, K, ends, mids)
+    ends, mids, _ = segment_geometry(lines, K)
+    got = vp_residual_px(d, K, ends, mids)
     vp = d @ K.T
     for h in range(4):
         for i in range(20):
@@ -230,8 +230,8 @@ def test_line_sigmas_grow_with_the_lines_noise_and_count():
     from strl_pyg.estimation.line_refine import line_sigmas
 
     def reference(m, dirs, sigma):  # the docstring's formula, with the tested residual
-        ends, mids, _ = _segments(np.asarray(m.lines0, float), K)
-        return np.array([sigma * max(1.0, np.median(_vp_residual_px(d0[None], K, ends[mk],
+        ends, mids, _ = segment_geometry(np.asarray(m.lines0, float), K)
+        return np.array([sigma * max(1.0, np.median(vp_residual_px(d0[None], K, ends[mk],
                                                                     mids[mk])[0]) / 0.1)
                          * np.sqrt(max(1.0, mk.sum() / 10)) for d0, _, mk in dirs])
 
@@ -419,7 +419,7 @@ def test_vp_comes_first_where_points_are_few_and_only_there():
     """The point-poor order (fitted on the point-poor calibration split, +10.6 AUC@20 points
     over PoseLib): with at most 30 point matches the recommended pose is vp's where it is
     supported, else the calibrated order's; with more, the calibrated order alone."""
-    from strl_pyg.inference.estimator import POINT_POOR_MAX_POINTS, POINT_POOR_ORDER
+    from strl_pyg.inference import POINT_POOR_MAX_POINTS, POINT_POOR_ORDER
     from strl_pyg.model.strl_pose import StrLPose
 
     model = StrLPose.from_pretrained()
@@ -476,7 +476,8 @@ def test_vp_checked_takes_vp_where_the_classical_rotation_contradicts_the_lines(
     """A planted classical pose 20 deg off (as a 5-point solve on a handful of points may be)
     and as well supported as vp's: the lines' vanishing direction contradicts it, so
     vp_checked answers with vp's pose; a right classical pose is kept as it is."""
-    from strl_pyg.inference.methods import VP_CHECK_ANGLE_DEG, MethodContext, _vp_checked
+    from strl_pyg.inference.line_methods import VP_CHECK_ANGLE_DEG, VanishingPointChecked
+    from strl_pyg.inference.methods import MethodContext
 
     m, R, t = manhattan_pair(1, n_points=15, noise=0.3)
     ctx = MethodContext(bootstrap=0)
@@ -484,19 +485,20 @@ def test_vp_checked_takes_vp_where_the_classical_rotation_contradicts_the_lines(
     assert vp.status == "ok" and _rot_err(vp.T_0to1, R) < 2.0
     off = cv2.Rodrigues(np.array([0.0, np.radians(20.0), 0.0]))[0] @ R
     ctx.results = {_base(): _planted(_base(), off, t, vp.info["support_inliers"]), "vp": vp}
-    res = _vp_checked(m, ctx)
+    res = VanishingPointChecked()(m, ctx)
     assert res.status == "ok" and res.info["source"] == "vp"
     assert res.info["line_angle_deg"] > VP_CHECK_ANGLE_DEG
     np.testing.assert_array_equal(res.T_0to1, vp.T_0to1)
     # the same pose but right: kept, and the check says how close it was
     ctx.results[_base()] = _planted(_base(), R, t, vp.info["support_inliers"])
-    res = _vp_checked(m, ctx)
+    res = VanishingPointChecked()(m, ctx)
     assert res.info["source"] == _base() and res.info["line_angle_deg"] < 1.0
     np.testing.assert_array_equal(res.T_0to1, ctx.results[_base()].T_0to1)
 
 
 def test_vp_checked_keeps_a_classical_pose_that_fits_clearly_more_points():
-    from strl_pyg.inference.methods import VP_CHECK_SUPPORT_SLACK, MethodContext, _vp_checked
+    from strl_pyg.inference.line_methods import VP_CHECK_SUPPORT_SLACK, VanishingPointChecked
+    from strl_pyg.inference.methods import MethodContext
 
     m, R, t = manhattan_pair(1, n_points=15, noise=0.3)
     vp = PoseEstimator(methods=("vp",), bootstrap=0).estimate(m).methods["vp"]
@@ -504,7 +506,7 @@ def test_vp_checked_keeps_a_classical_pose_that_fits_clearly_more_points():
     more = vp.info["support_inliers"] + VP_CHECK_SUPPORT_SLACK + 1
     ctx = MethodContext(bootstrap=0, results={_base(): _planted(_base(), off, t, more),
                                               "vp": vp})
-    res = _vp_checked(m, ctx)
+    res = VanishingPointChecked()(m, ctx)
     assert res.info["source"] == _base() and "fits fewer point matches" in res.info["reason"]
 
 
@@ -582,7 +584,7 @@ def test_the_closed_form_vp_residuals_agree_with_the_cross_product_reference():
     products of the refinement, vanishing points at infinity included."""
     import torch
 
-    from strl_pyg.estimation.line_refine import _vp_residual_px, _vp_residuals
+    from strl_pyg.estimation.line_refine import vp_residual_px, _vp_residuals
 
     rng = np.random.default_rng(0)
     ends = np.concatenate([rng.uniform(0, 640, (40, 2, 2)), np.ones((40, 2, 1))], axis=-1)
@@ -592,6 +594,6 @@ def test_the_closed_form_vp_residuals_agree_with_the_cross_product_reference():
     d[:10, 2] = 0.0
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     ref = _vp_residuals(*(torch.from_numpy(a) for a in (d, K, ends, mids))).abs().numpy()
-    fast = _vp_residual_px(d, K, ends, mids)
+    fast = vp_residual_px(d, K, ends, mids)
     assert fast.shape == (300, 40)
     np.testing.assert_allclose(fast, ref, rtol=1e-9, atol=1e-9)

@@ -6,14 +6,10 @@ import cv2
 import numpy as np
 import pytest
 
-from strl_pyg.data import PairMatches, load_external_matches
-from strl_pyg.frontend import (
-    FrontendConfig,
-    NoMatchesError,
-    epipolar_residuals,
-    match_images,
-    match_lines,
-)
+from strl_pyg.data import PairMatches
+from strl_pyg.data.external import load_external_matches
+from strl_pyg.frontend import FrontendConfig, NoMatchesError, match_images, match_lines
+from strl_pyg.geometry import epipolar_residuals
 from strl_pyg.synthetic import SceneConfig, evaluate_matches, generate_pair
 
 # Thresholds, measured first (benchmarks/results_frontend.md, 18 generated pairs at 192x640):
@@ -58,7 +54,7 @@ def test_result_container(synthetic_run):
 def test_line_matcher_with_true_geometry():
     """Reference path: given the ground-truth segments as detections and the true F, the
     matcher must pair (almost) every segment with its own counterpart."""
-    from strl_pyg.frontend import fundamental_from_pose
+    from strl_pyg.geometry import fundamental_from_pose
 
     pair = generate_pair(4, SceneConfig(kind="boxes", max_lines=80))
     F = fundamental_from_pose(pair.T_0to1, pair.K, pair.K)
@@ -234,3 +230,19 @@ def test_add_lines_equals_matching_with_lines():
     np.testing.assert_array_equal(added.points0, full.points0)
     with pytest.raises(ValueError, match="Expected matches of match_images"):
         add_lines(dc_replace(points, info={}), FrontendConfig())
+
+
+def _pm(pair, p0, p1, **kw):
+    return PairMatches(p0, p1, K0=pair.K, K1=pair.K, image_size0=pair.image0.shape[:2],
+                       image_size1=pair.image1.shape[:2], **kw)
+
+
+def test_add_lines_refuses_inlier_rows_past_the_points(held_out_pair):
+    from strl_pyg.frontend.pipeline import add_lines
+
+    m = held_out_pair.matches
+    pm = _pm(held_out_pair, m.points0[:6], m.points1[:6], image0=held_out_pair.image0,
+             image1=held_out_pair.image1, info={"fundamental": None, "fundamental_inliers": [0, 9]})
+    with pytest.raises(ValueError, match=r"rows of the 6 point matches \(got indices 0\.\.9\)"):
+        add_lines(pm)
+

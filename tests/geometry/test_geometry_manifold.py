@@ -66,23 +66,10 @@ def test_signed_sampson_is_the_signed_root_of_sampson_error():
     torch.testing.assert_close(rb, torch.stack([r, r]))
 
 
-def test_moved_modules_keep_their_public_names():
-    import strl_pyg.estimation.pose_fusion as new
-
-    assert new.so3_exp is so3_exp  # one function, re-exported where fusion uses it
-    from strl_pyg.synthetic import match_quality, metrics
-
-    assert metrics.evaluate_matches is match_quality.evaluate_matches
-    from strl_pyg import cli, training
-    from strl_pyg.training import checkpoints
-
-    assert cli.default_checkpoint is checkpoints.default_checkpoint
-    assert training.load_checkpoint is checkpoints.load_checkpoint
-
-
 def test_one_image_reader_for_the_cli_and_the_datasets(tmp_path):
     cv2 = pytest.importorskip("cv2")
-    from strl_pyg.cli.readers import UsageError, read_image_file
+    from strl_pyg.cli.readers import read_image_file
+    from strl_pyg.utils import UsageError
     from strl_pyg.datasets import read_image
 
     rgb = np.random.default_rng(0).integers(0, 256, (20, 30, 3), dtype=np.uint8)

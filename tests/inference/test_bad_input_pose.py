@@ -24,7 +24,8 @@ import torch
 from strl_pyg import cli
 from strl_pyg.data import PairMatches
 from strl_pyg.inference import estimator as inference
-from strl_pyg.inference.estimator import MethodResult, PoseEstimator
+from strl_pyg.inference.estimator import PoseEstimator
+from strl_pyg.inference import MethodResult
 from strl_pyg.metrics.two_view import relative_pose_error
 from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.synthetic import generate_pair

@@ -107,7 +107,7 @@ def _assert_widened_by(on, off, key: str, covariance) -> None:
 
 
 def test_the_swap_check_widens_the_regression_covariance_by_the_disagreement():
-    from strl_pyg.inference.methods import swap_covariance
+    from strl_pyg.estimation.uncertainty import swap_covariance
 
     m = generate_pair(2_000_005).matches
     on = PoseEstimator(methods="regression", data_check=False).estimate(m).methods["regression"]
@@ -119,7 +119,7 @@ def test_the_swap_check_widens_the_regression_covariance_by_the_disagreement():
 
 
 def test_the_data_check_widens_the_regression_covariance_by_its_distance_to_the_classical():
-    from strl_pyg.inference.methods import data_covariance
+    from strl_pyg.estimation.uncertainty import data_covariance
 
     m = generate_pair(2_000_005).matches
     on = PoseEstimator(methods="regression").estimate(m).methods["regression"]

@@ -145,7 +145,7 @@ def test_the_focal_check_reads_the_implied_essential_matrix(monkeypatch):
 
 
 def test_the_cli_exit_code_of_a_rotation_is_documented():
-    from strl_pyg.cli.commands import EXIT_CODES, STATUS_EXIT
+    from strl_pyg.cli.predict import EXIT_CODES, STATUS_EXIT
     from strl_pyg.inference.record import STATUSES
 
     assert set(STATUSES) - {"skipped"} == set(STATUS_EXIT)

@@ -4,6 +4,8 @@ says what it needs."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -103,7 +105,7 @@ def test_onnxruntime_equals_pytorch_for_the_flow_inputs(inputs, tmp_path):
     """The flow inputs' products and standardisation are part of the exported graph."""
     ort = pytest.importorskip("onnxruntime")
     pytest.importorskip("onnx")
-    from strl_pyg.model.strl_pose import StrLPoseConfig
+    from strl_pyg.model import StrLPoseConfig
 
     torch.manual_seed(0)
     m = StrLPose(StrLPoseConfig.ablation("full", hidden=16, layers=1, heads=2, inputs=inputs,
@@ -117,3 +119,16 @@ def test_onnxruntime_equals_pytorch_for_the_flow_inputs(inputs, tmp_path):
                                                         strict=True)})
     for o, r in zip(outs, (ref.quaternion, ref.translation, ref.log_var), strict=True):
         np.testing.assert_allclose(o, r.numpy(), atol=1e-4)
+
+
+def test_onnx_inputs_of_a_pair_without_lines_fail_before_the_runtime(held_out_pair):
+    from strl_pyg.inference.export import onnx_inputs
+    from strl_pyg.inference.network import prepare_graph
+    from strl_pyg.model import StrLPose
+
+    model = StrLPose.from_pretrained()
+    no_lines = replace(held_out_pair.matches, lines0=None, lines1=None)
+    with pytest.raises(ValueError, match=r"Expected a pair graph at the exported sizes .*"
+                                         r"'endpoints': 0"):
+        onnx_inputs(model, prepare_graph(no_lines, model))
+

@@ -9,9 +9,10 @@ from strl_pyg.data import build_pair_graph
 from strl_pyg.data.transforms import FixedSizeResample
 from strl_pyg.estimation.classical import estimate_relative_pose, normalised_matches
 from strl_pyg.estimation.guided import guided_estimate, msac_cost
-from strl_pyg.frontend import epipolar_residuals
+from strl_pyg.geometry import epipolar_residuals
 from strl_pyg.metrics.two_view import relative_pose_error
-from strl_pyg.model.strl_pose import ABLATIONS, StrLPose, StrLPoseConfig
+from strl_pyg.model.strl_pose import StrLPose
+from strl_pyg.model import ABLATIONS, StrLPoseConfig
 from strl_pyg.synthetic import SceneConfig, generate_pair
 from strl_pyg.training.loss import GeometricLoss
 

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from strl_pyg.estimation.classical import estimate_relative_pose
-from strl_pyg.estimation.uncertainty import bootstrap_covariance, cap_covariance
+from strl_pyg.estimation.uncertainty import MAX_SIGMA_DEG, bootstrap_covariance, cap_covariance
 from strl_pyg.inference.estimator import PoseEstimator
 from strl_pyg.synthetic import SceneConfig, generate_pair
 
@@ -41,7 +42,8 @@ def test_bootstrap_is_seeded_psd_and_grows_with_the_noise(pair):
 def _serial_bootstrap(m, pose, method, n, thr, seed):
     """The bootstrap as one loop of PairMatches resamples (the code before the resamples were
     threaded and, for PoseLib, cut from the pair normalised once): the reference path."""
-    from strl_pyg.estimation.pose_fusion import pose_to_tangent, tangent_basis
+    from strl_pyg.estimation.pose_fusion import pose_to_tangent
+    from strl_pyg.geometry import tangent_basis
 
     R0, t0 = pose.R.double(), pose.t.double() / pose.t.double().norm()
     basis, rng, xs = tangent_basis(t0), np.random.default_rng(seed), []
@@ -216,7 +218,8 @@ def test_fused_covariance_adds_the_classical_bootstrap(pair):
 def test_pose_to_tangent_batched_equals_one_by_one():
     import torch
 
-    from strl_pyg.estimation.pose_fusion import pose_to_tangent, sphere_log, tangent_basis
+    from strl_pyg.estimation.pose_fusion import pose_to_tangent
+    from strl_pyg.geometry import sphere_log, tangent_basis
     from strl_pyg.geometry import Pose
     from strl_pyg.geometry.manifold import so3_exp
 
@@ -237,3 +240,24 @@ def test_pose_to_tangent_batched_equals_one_by_one():
     torch.testing.assert_close(got[6, 3:], torch.tensor([torch.pi, 0.0], dtype=torch.float64))
     torch.testing.assert_close(sphere_log(t0, basis, -t0), got[6, 3:])
     assert sphere_log(t0, basis, t[:3].reshape(3, 1, 3)).shape == (3, 1, 2)
+
+
+def test_cap_covariance_bounds_each_block_at_180_degrees():
+    """Before: 'ok', 2.1 / 1.5 deg off, sigma 203 / 127 deg (a Strecha wide pair)."""
+    cov = np.diag([4.0, 4.0, 4.0, 0.01, 0.01])  # rotation RMS ~ 198 deg
+    cov[0, 3] = cov[3, 0] = 0.1
+    capped, was = cap_covariance(cov)
+    assert was
+    assert math.degrees(math.sqrt(np.trace(capped[:3, :3]))) == pytest.approx(MAX_SIGMA_DEG)
+    np.testing.assert_allclose(capped[3:, 3:], cov[3:, 3:])  # the other block unchanged
+    assert np.all(np.linalg.eigvalsh(capped) >= -1e-12)
+    small = np.diag([1e-4] * 5)
+    np.testing.assert_array_equal(cap_covariance(small)[0], small)
+    assert not cap_covariance(small)[1]
+
+
+def test_a_clean_pair_has_no_far_bootstrap_resamples(held_out_pair):
+    est = PoseEstimator(methods="poselib").estimate(held_out_pair.matches)
+    assert est.pose.info["bootstrap_far"] == 0
+    assert not any("resamples found another pose" in w for w in est.warnings)
+

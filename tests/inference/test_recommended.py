@@ -10,7 +10,8 @@ import pytest
 
 from strl_pyg.frontend import FrontendConfig, match_images
 from strl_pyg.inference.estimator import PoseEstimator
-from strl_pyg.inference.recommended import estimate_methods, estimate_recommended, methods_needed
+from strl_pyg.inference.recommended import estimate_methods, estimate_recommended
+from strl_pyg.inference import methods_needed
 from strl_pyg.synthetic import SceneConfig, generate_pair
 
 
@@ -63,7 +64,7 @@ def test_few_points_put_the_line_solver_first_with_the_same_pose(model):
     import strl_pyg.frontend as frontend
     from strl_pyg.frontend import pipeline
     from strl_pyg.geometry.pose import rotation_angle_deg
-    from strl_pyg.inference.estimator import POINT_POOR_MAX_POINTS
+    from strl_pyg.inference import POINT_POOR_MAX_POINTS
 
     p = generate_pair(2, SceneConfig(kind="street", image_size=(240, 320)))
     cfg = FrontendConfig(max_keypoints=40)
@@ -153,7 +154,7 @@ def test_the_recommended_path_runs_each_method_at_most_once(model, pair, monkeyp
     the earlier prefixes (fused failing -> regression and opencv ran again for 'opencv')."""
     import dataclasses
 
-    from strl_pyg.inference.estimator import METHODS
+    from strl_pyg.inference import METHODS
     from strl_pyg.inference.record import MethodResult
 
     calls: dict[str, int] = {}
@@ -193,7 +194,7 @@ def test_a_pair_is_normalised_once_on_the_default_path(model, pair, monkeypatch)
     """Before, the classical solve, its covariance, its bootstrap and the support check each
     normalised the pair again (8 normalize_points calls on every default predict)."""
     from strl_pyg.estimation import classical
-    from strl_pyg.inference.estimator import classical_method
+    from strl_pyg.inference.registry import classical_method
 
     m = match_images(pair.image0, pair.image1, pair.K, pair.K, FrontendConfig(lines=False))
     calls = _counting(monkeypatch, classical, "normalize_points")
@@ -219,7 +220,9 @@ def test_the_recommended_path_checks_a_point_poor_pair_once(model, monkeypatch):
         estimator.METHODS["vp"], fn=lambda m, ctx: MethodResult("vp", "failed",
                                                                 warnings=["planted"])))
     dedup = _counting(monkeypatch, PairMatches, "deduplicated")
-    problems = _counting(monkeypatch, estimator, "intrinsics_problems")
+    from strl_pyg.inference import pair as pair_run
+
+    problems = _counting(monkeypatch, pair_run, "intrinsics_problems")
     est = estimate_recommended(model, p.image0, p.image1, p.K, p.K,
                                FrontendConfig(max_keypoints=40))
     assert est.methods["vp"].status == "failed" and est.num_lines > 0
@@ -231,7 +234,7 @@ def test_recommended_is_a_methods_value_of_the_estimator(model, pair):
     """The recommended walk on given matches: the pose of the run of every method, with only
     the methods it needs; 'recommended' is no method name."""
     from strl_pyg.inference.config import EstimatorConfig
-    from strl_pyg.inference.estimator import RECOMMENDED, register_method
+    from strl_pyg.inference import RECOMMENDED, register_method
 
     m = match_images(pair.image0, pair.image1, pair.K, pair.K)
     lazy = PoseEstimator(model, methods=RECOMMENDED).estimate(m)
@@ -245,10 +248,10 @@ def test_recommended_is_a_methods_value_of_the_estimator(model, pair):
 
 
 def test_lines_join_a_pair_without_its_check_or_its_point_results_again(model, pair):
-    """_Pair.add_lines: the points' results stay, repeated line matches count once, other
+    """PairRun.add_lines: the points' results stay, repeated line matches count once, other
     points are refused."""
     from strl_pyg.frontend.pipeline import add_lines
-    from strl_pyg.inference.estimator import classical_method
+    from strl_pyg.inference.registry import classical_method
 
     cfg = FrontendConfig(lines=False)
     pts = match_images(pair.image0, pair.image1, pair.K, pair.K, cfg)
@@ -305,7 +308,7 @@ def test_known_results_are_taken_by_the_recommended_walk(model, pair, monkeypatc
     import dataclasses
 
     from strl_pyg.inference import estimator
-    from strl_pyg.inference.estimator import classical_method
+    from strl_pyg.inference.registry import classical_method
 
     m = match_images(pair.image0, pair.image1, pair.K, pair.K, FrontendConfig(lines=False))
     first = PoseEstimator(model, methods="recommended").estimate(m)

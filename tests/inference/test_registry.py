@@ -27,11 +27,13 @@ def toy(method_registry):
 def test_a_method_registered_once_is_everywhere(toy, tmp_path, capsys):
     assert toy in face.SUPPORT_CHECKED and toy not in face.BOOTSTRAPPED
     assert toy not in face.NETWORK_METHODS and face.DEPENDENCIES[toy] == ("classical",)
-    assert est_mod.METHOD_LABELS[toy] == "a toy that says identity"
+    from strl_pyg.inference import registry
+
+    assert registry.METHOD_LABELS[toy] == "a toy that says identity"
     from strl_pyg.evaluation import run
 
-    assert toy in run.METHODS and run.resolve_methods([toy], None) == (toy,)
-    from strl_pyg.inference.recommended import methods_needed
+    assert toy in run.registered_methods() and run.resolve_methods([toy], None) == (toy,)
+    from strl_pyg.inference import methods_needed
 
     assert methods_needed([toy])[-1] == toy and len(methods_needed([toy])) == 2
     # predict --methods knows it, runs its dependency, checks its support, prints its label
@@ -77,12 +79,108 @@ def test_one_name_per_regime_and_per_bound():
 
     from strl_pyg.cli.readers import bootstrap_count
     from strl_pyg.estimation.uncertainty import MIN_BOOTSTRAP
-    from strl_pyg.inference import estimator, methods
+    from strl_pyg.inference import estimator, methods, policy
 
-    assert estimator.POINT_POOR_MAX_POINTS is methods.POINT_POOR_MAX_POINTS
+    assert policy.POINT_POOR_MAX_POINTS is methods.POINT_POOR_MAX_POINTS
     assert not hasattr(methods, "VP_CHECK_MAX_POINTS")
     assert bootstrap_count(str(MIN_BOOTSTRAP)) == MIN_BOOTSTRAP
     with pytest.raises(argparse.ArgumentTypeError):
         bootstrap_count(str(MIN_BOOTSTRAP - 1))
     with pytest.raises(ValueError, match=f"integer >= {MIN_BOOTSTRAP}"):
         estimator.PoseEstimator(bootstrap=MIN_BOOTSTRAP - 1)
+
+
+def test_a_pose_method_class_registers_with_its_own_spec(method_registry, tmp_path):
+    from strl_pyg.inference import PoseEstimator
+    from strl_pyg.inference.registry import PoseMethod
+
+    class Identity(PoseMethod):
+        name = "identity"
+        label = "says identity"
+        needs_intrinsics = False
+        support_checked = False
+        depends_on = ("classical",)
+
+        def __call__(self, matches, ctx):
+            assert "opencv" in ctx.results or "poselib" in ctx.results  # ran after its base
+            return MethodResult(self.name, "ok", np.eye(4))
+
+    est_mod.register_method(Identity())
+    spec = method_registry.METHODS["identity"]
+    assert spec.label == "says identity" and spec.depends_on == ("classical",)
+    assert not spec.needs_intrinsics and not spec.support_checked and spec.available()
+    pair = generate_pair(2_000_017)
+    est = PoseEstimator(methods=("identity",), bootstrap=0).estimate(pair.matches)
+    rec = est.methods["identity"]
+    assert rec.status == "ok", (rec.status, rec.warnings)
+    np.testing.assert_array_equal(rec.T_0to1, np.eye(4))
+    with pytest.raises(ValueError, match="already registered"):
+        est_mod.register_method(Identity())
+    with pytest.raises(ValueError, match="Expected a PoseMethod alone"):
+        est_mod.register_method(Identity(), label="x")
+    with pytest.raises(ValueError, match="Expected a PoseMethod with a name"):
+        est_mod.register_method(PoseMethod())
+    with pytest.raises(NotImplementedError, match="runs no pose method"):
+        PoseMethod()(pair.matches, None)
+    with pytest.raises(TypeError, match="Expected fn"):
+        est_mod.register_method("nothing", None)
+
+
+def test_the_built_in_methods_are_classes_with_their_needs():
+    from strl_pyg.estimation.classical import have_poselib
+    from strl_pyg.inference.line_methods import VanishingPointChecked
+    from strl_pyg.inference.methods import Classical, Regression
+
+    specs = est_mod.METHODS
+    assert isinstance(specs["regression"].fn, Regression)
+    assert not specs["regression"].needs_intrinsics and specs["regression"].uses_network
+    assert isinstance(specs["opencv"].fn, Classical) and specs["opencv"].label == "OpenCV MAGSAC"
+    assert specs["poselib"].available() == have_poselib() and specs["opencv"].available()
+    assert specs["vp_checked"].fn.angle_deg == VanishingPointChecked.angle_deg
+    with pytest.raises(ValueError, match="Expected a classical solver"):
+        Classical("colmap")
+
+
+def test_calibration_and_bad_intrinsics_are_typed_on_the_record():
+    """Decisions read typed fields, never warning text: a covariance scaled by a measured
+    calibration is ``calibrated=True``; one without a scale is ``calibrated=False`` with one
+    warning; a pose computed with intrinsics that fail the checks is ``bad_intrinsics``."""
+    import dataclasses
+
+    from strl_pyg.inference import PoseEstimator
+    from strl_pyg.model import StrLPose, StrLPoseConfig
+
+    pair = generate_pair(2_000_017)
+    rec = PoseEstimator(methods=("opencv",)).estimate(pair.matches).methods["opencv"]
+    assert rec.status == "ok" and rec.calibrated is True and not rec.bad_intrinsics
+    rec = PoseEstimator(methods=("opencv",), bootstrap=0).estimate(pair.matches).methods["opencv"]
+    assert rec.calibrated is False  # the scale was fitted with the bootstrap: not this sigma
+    assert sum("not calibrated" in w for w in rec.warnings) == 1
+    tiny = StrLPose(StrLPoseConfig(hidden=16, layers=1, heads=2, patch_features=1))
+    rec = PoseEstimator(tiny, methods=("regression",)).estimate(pair.matches).methods["regression"]
+    assert rec.covariance is not None and rec.calibrated is False
+    assert sum("not calibrated" in w for w in rec.warnings) == 1
+    bad_K = pair.matches.K0.copy()
+    bad_K[0, 0] = bad_K[1, 1] = 1.0  # a one-pixel focal length fails the plausibility check
+    matches = dataclasses.replace(pair.matches, K0=bad_K, K1=bad_K)
+    rec = PoseEstimator(methods=("opencv",), bootstrap=0).estimate(matches).methods["opencv"]
+    assert rec.bad_intrinsics and rec.status == "unreliable"
+
+
+def test_a_method_asked_for_alone_runs_with_the_methods_it_reads():
+    """Before: ``PoseEstimator(methods=("fused",))`` ran fused without the regression and the
+    classical pose it combines: always ``"failed"`` ("fused needs an 'ok' regression and an
+    'ok' classical estimate")."""
+    from strl_pyg.inference import PoseEstimator
+
+    pair = generate_pair(2_000_017)
+    est = PoseEstimator(methods=("fused",), bootstrap=0).estimate(pair.matches)
+    assert list(est.methods) == ["fused"]  # what was asked for, in that order
+    assert est.methods["fused"].status == "ok", est.methods["fused"].warnings
+
+
+def test_a_classical_dependency_is_the_solver_asked_for():
+    from strl_pyg.inference import methods_needed
+
+    assert methods_needed(["opencv", "fused"]) == ("regression", "opencv", "fused")
+    assert methods_needed(["fused"])[:2] == ("regression", est_mod.classical_method())

@@ -144,3 +144,20 @@ def test_the_gate_refuses_a_planted_wrong_pose_on_few_points(method):
                           few)
     assert wrong.status == "failed" and wrong.info["unsupported"]
     assert "do not support this pose" in wrong.warnings[-1]
+
+
+def test_check_support_leaves_a_regression_record_as_it_is_by_default(held_out_pair):
+    """Before: check_support's default checked=True failed the regression's record, which the
+    estimator never checks."""
+    from strl_pyg.inference.record import MethodResult
+    from strl_pyg.inference.support import check_support
+
+    m = held_out_pair.matches
+    wrong = np.eye(4)
+    wrong[:3, 3] = [0.0, 1.0, 0.0]
+    reg = check_support(MethodResult("regression", "ok", wrong), m)
+    assert reg.status == "ok" and "support_inliers" not in reg.info
+    assert check_support(MethodResult("regression", "ok", wrong), m, checked=True).status \
+        == "failed"
+    assert check_support(MethodResult("poselib", "ok", wrong), m).status == "failed"
+

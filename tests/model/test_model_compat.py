@@ -16,7 +16,8 @@ import torch
 from torch_geometric.data import Batch
 
 from strl_pyg.data import PairGraph
-from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig, upgrade_key
+from strl_pyg.model.strl_pose import StrLPose
+from strl_pyg.model import StrLPoseConfig, upgrade_key
 
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "legacy_model.pt"
 TINY = ["full", "full_geometric", "baseline", "V", "LP_metric"]

@@ -148,7 +148,7 @@ def test_training_fits_the_parallax_statistics_on_pairs_resampled_as_it_trains()
     inputs' fit is unchanged)."""
     from strl_pyg.data import keys
     from strl_pyg.data.transforms import FixedSizeResample
-    from strl_pyg.training.loop import fit_input_statistics
+    from strl_pyg.training.data import fit_input_statistics
 
     m = StrLPose(StrLPoseConfig.ablation("baseline", hidden=16, layers=1, inputs="parallax"))
     pairs = [prepare_graph(generate_pair(s).matches, m) for s in (1, 2)]

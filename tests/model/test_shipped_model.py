@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from strl_pyg.cli.commands import DEFAULT_WEIGHTS
+from strl_pyg.training import DEFAULT_WEIGHTS
 from strl_pyg.evaluation.run import predict_pose
 from strl_pyg.geometry import Pose
 from strl_pyg.metrics.two_view import rotation_error_deg, translation_angle_error_deg
@@ -82,3 +82,11 @@ def test_the_shipped_files_are_in_the_current_layout(name):
     assert payload["version"] == StrLPose._VERSION
     assert [k for k in payload["state_dict"] if upgrade_key(k) != k] == []
     assert payload["metadata"]["training_data"]
+
+
+def test_shipped_checkpoints_load_unchanged():
+    from strl_pyg.model import StrLPose
+
+    geometric = StrLPose.from_pretrained("geometric")
+    assert geometric.metadata["recommended_order"][0] == "poselib"
+    assert geometric.config.geometric and not StrLPose.from_pretrained("synthetic").config.geometric

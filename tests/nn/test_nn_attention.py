@@ -8,7 +8,8 @@ import pytest
 import torch
 
 from strl_pyg.nn import DenseLayout
-from strl_pyg.nn.attention import AttentionConv, CompleteEdges
+from strl_pyg.nn.attention import AttentionConv
+from strl_pyg.data import CompleteEdges
 
 
 def complete_edges(b_src: torch.Tensor, b_dst: torch.Tensor) -> torch.Tensor:
@@ -346,3 +347,100 @@ def test_complete_edges_marker_moves_like_a_tensor():
     assert CompleteEdges().to(torch.device("cpu")).batch_src is None
     edges = {("a", "to", "a"): m, ("a", "near", "a"): torch.tensor([[0], [1]])}
     assert set({k: v.to("cpu") for k, v in edges.items()}) == set(edges)
+
+
+def _complete(bs, bd):
+    from strl_pyg.data.pair_graph import complete_edge_index
+
+    return complete_edge_index(bs, bd, int(max(bs.max(), bd.max())) + 1)
+
+
+def test_attention_conv_lazy_channels_and_attention_weights():
+    torch.manual_seed(0)
+    lazy = AttentionConv((-1, 16), heads=2)
+    xs, xd = torch.randn(5, 7), torch.randn(4, 16)
+    bs, bd = torch.tensor([0, 0, 1, 1, 1]), torch.tensor([0, 0, 1, 1])
+    dense = lazy((xs, xd), complete=True, batch=(bs, bd))
+    assert lazy.lin_k.weight.shape == (16, 7)
+    ei = _complete(bs, bd)
+    sparse, (ei2, alpha) = lazy((xs, xd), ei, return_attention_weights=True)
+    torch.testing.assert_close(dense, sparse, atol=1e-5, rtol=1e-5)
+    assert torch.equal(ei2, ei) and alpha.shape == (ei.shape[1], 2)
+    sums = torch.zeros(4, 2).index_add_(0, ei[1], alpha)
+    torch.testing.assert_close(sums, torch.ones(4, 2))
+    out, (ei3, alpha3) = lazy((xs, xd), complete=True, batch=(bs, bd),
+                              return_attention_weights=True)
+    torch.testing.assert_close(out, dense, atol=1e-5, rtol=1e-5)
+    assert torch.equal(ei3, ei) and torch.allclose(alpha3, alpha)
+    with pytest.raises(ValueError, match="target channels"):
+        AttentionConv(-1)
+
+
+def test_attention_conv_edge_features():
+    torch.manual_seed(1)
+    conv = AttentionConv(16, heads=4, edge_dim=3)
+    x = torch.randn(4, 16)
+    ei = torch.tensor([[0, 1, 2, 0], [1, 2, 3, 3]])
+    ea = torch.randn(4, 3)
+    a, b = conv(x, ei, edge_attr=ea), conv(x, ei, edge_attr=2 * ea)
+    assert a.shape == (4, 16) and not torch.allclose(a[1:], b[1:])
+    torch.testing.assert_close(a[0], b[0])  # node 0 receives no edge
+    assert "edge_dim=3" in repr(conv)
+    with pytest.raises(ValueError, match="edge_attr of shape"):
+        conv(x, ei, edge_attr=ea[:2])
+    with pytest.raises(ValueError, match="edge_attr exactly when"):
+        conv(x, ei)
+    with pytest.raises(ValueError, match="explicit edges with edge_attr"):
+        conv(x, complete=True, edge_attr=ea)
+    gx = torch.randn(4, 16, dtype=torch.float64, requires_grad=True)
+    conv64 = conv.double()
+    assert torch.autograd.gradcheck(lambda t: conv64(t, ei, edge_attr=ea.double()), (gx,))
+
+
+def test_complete_edges_of_unsorted_graph_ids_join_only_one_graphs_nodes():
+    """Before: complete_edge_index assumed sorted ids, so AttentionConv's attention weights
+    on a user's unsorted batch came with edges between graphs."""
+    bs, bd = torch.tensor([1, 0, 1, 0, 2, 1]), torch.tensor([2, 0, 1, 1, 0])
+    ei = _complete(bs, bd)
+    want = {(j, i) for j in range(6) for i in range(5) if bs[j] == bd[i]}
+    assert {tuple(e) for e in ei.t().tolist()} == want and ei.shape[1] == len(want)
+    torch.manual_seed(0)
+    conv = AttentionConv(8, heads=2)
+    xs, xd = torch.randn(6, 8), torch.randn(5, 8)
+    dense = conv((xs, xd), complete=True, batch=(bs, bd))
+    out, (ei2, alpha) = conv((xs, xd), complete=True, batch=(bs, bd),
+                             return_attention_weights=True)
+    torch.testing.assert_close(out, dense, atol=1e-5, rtol=1e-5)
+    assert {tuple(e) for e in ei2.t().tolist()} == want
+    torch.testing.assert_close(torch.zeros(5, 2).index_add_(0, ei2[1], alpha),
+                               torch.ones(5, 2))
+
+
+def test_attention_conv_pyg_habits_get_one_line_each():
+    """Before: `AttentionConv(32, 64)` (GATConv's in, out) said "got 64 heads for 32
+    channels" without saying the second argument is heads; `out_channels=64` was a raw
+    TypeError from MessagePassing.__init__; an int32 edge_index was
+    `RuntimeError: expected scalar type Long but found Int` from PyG's scatter."""
+    import torch
+
+    from strl_pyg.nn import AttentionConv, LineEndpointConv
+
+    with pytest.raises(ValueError, match=r"got 64 heads for 32 channels\) \(AttentionConv"
+                                         r"\(channels, heads\): the second argument"):
+        AttentionConv(32, 64)
+    with pytest.raises(TypeError, match=r"^Expected no out_channels .*\(got out_channels=64\)$"):
+        AttentionConv(32, out_channels=64)
+    torch.manual_seed(0)
+    conv = AttentionConv(32, heads=4)
+    x = torch.randn(6, 32)
+    ei = torch.tensor([[0, 1, 2, 3, 4, 5, 0], [1, 2, 3, 4, 5, 0, 3]])
+    torch.testing.assert_close(conv(x, ei.int()), conv(x, ei))
+    from torch_geometric import EdgeIndex
+
+    torch.testing.assert_close(conv(x, EdgeIndex(ei.int(), sparse_size=(6, 6))), conv(x, ei))
+    with pytest.raises(ValueError, match=r"^Expected an integer edge_index \(got torch.float32\)$"):
+        conv(x, ei.float())
+    line = LineEndpointConv(32, line_channels=8)
+    lf = torch.randn(6, 8)
+    torch.testing.assert_close(line(x, ei.int(), lf), line(x, ei, lf))
+

@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from strl_pyg.nn import CompleteEdges, DenseLayout, DualGraphLayer
+from strl_pyg.data import CompleteEdges
+from strl_pyg.nn import DenseLayout, DualGraphLayer
 
 C, CL = 16, 8
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from strl_pyg.frontend import epipolar_residuals
+from strl_pyg.geometry import epipolar_residuals
 from strl_pyg.geometry import relative_pose_from_c2w
 from strl_pyg.synthetic import SCENE_KINDS, SceneConfig, generate_pair
 from strl_pyg.synthetic.match_quality import line_transfer_error, point_transfer_error

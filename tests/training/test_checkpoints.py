@@ -12,15 +12,10 @@ import pytest
 import torch
 
 from strl_pyg import cli
-from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
-from strl_pyg.training.loop import (
-    CHECKPOINT_VERSION,
-    _init_weights,
-    _rng_state,
-    _set_rng_state,
-    load_checkpoint,
-    save_checkpoint,
-)
+from strl_pyg.model.strl_pose import StrLPose
+from strl_pyg.model import StrLPoseConfig
+from strl_pyg.training.checkpoints import init_weights, rng_state, set_rng_state
+from strl_pyg.training import CHECKPOINT_VERSION, load_checkpoint, save_checkpoint
 from strl_pyg.utils.io import UnsafeFileError, one_line, safe_torch_load
 
 REPO = Path(__file__).resolve().parents[2]
@@ -76,7 +71,7 @@ def test_init_weights_refuses_a_planted_pickle(tmp_path):
     for wrap in (False, True):
         path = _plant(tmp_path / f"evil{wrap}.pt", marker, wrap_as_training=wrap)
         with pytest.raises(UnsafeFileError):
-            _init_weights(tiny_model(), path)
+            init_weights(tiny_model(), path)
     assert not marker.exists()
 
 
@@ -126,14 +121,14 @@ def test_training_checkpoint_loads_with_weights_only_and_restores_rng(tmp_path):
     np.random.normal()  # noqa: NPY002  (sets numpy's cached-gaussian flag)
     state = {"version": CHECKPOINT_VERSION, "train_config": {"seed": 0}, "step": 3,
              "model_config": model.config.to_dict(), "model": model.state_dict(),
-             "optimizer": opt.state_dict(), "rng": _rng_state(), "history": [{"step": 3}]}
+             "optimizer": opt.state_dict(), "rng": rng_state(), "history": [{"step": 3}]}
     expected = (torch.rand(3), np.random.rand(3), np.random.normal(), random.random())  # noqa: NPY002
     path = save_checkpoint(tmp_path / "last.pt", state)
     raw = torch.load(path, weights_only=True)  # the safe loader reads every value
     assert raw["step"] == 3 and raw["optimizer"]["param_groups"][0]["lr"] == 1e-3
     loaded = load_checkpoint(path)
     torch.rand(10), np.random.rand(10), random.random()  # noqa: NPY002  (move the generators)
-    _set_rng_state(loaded["rng"])
+    set_rng_state(loaded["rng"])
     got = (torch.rand(3), np.random.rand(3), np.random.normal(), random.random())  # noqa: NPY002
     assert torch.equal(got[0], expected[0]) and np.array_equal(got[1], expected[1])
     assert got[2] == expected[2] and got[3] == expected[3]
@@ -230,12 +225,12 @@ def test_init_from_names_geometric_only_where_it_is_not_allowed(tmp_path):
     tiny_model().save(plain)
     StrLPose(StrLPoseConfig(hidden=16, layers=1, heads=2, patch_features=1,
                             geometric=True)).save(geo)
-    _init_weights(StrLPose(StrLPoseConfig(hidden=16, layers=1, heads=2, patch_features=1,
+    init_weights(StrLPose(StrLPoseConfig(hidden=16, layers=1, heads=2, patch_features=1,
                                           geometric=True)), plain)  # allowed
     with pytest.raises(ValueError, match=r"geometric True vs False"):
-        _init_weights(tiny_model(), geo)
+        init_weights(tiny_model(), geo)
     wider = StrLPose(StrLPoseConfig(hidden=32, layers=1, heads=2, patch_features=1,
                                     geometric=True))
     with pytest.raises(ValueError, match=r"hidden 16 vs 32") as exc:
-        _init_weights(wider, plain)
+        init_weights(wider, plain)
     assert "geometric False vs True" not in str(exc.value)

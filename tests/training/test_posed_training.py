@@ -126,18 +126,47 @@ def test_an_interrupted_run_prints_no_summary_line(monkeypatch, tmp_path, capsys
     """Before: a stray '{"step": 32}' line on stdout after Ctrl-C."""
     import argparse
 
-    from strl_pyg.training import loop
+    from strl_pyg.training import commandline
     from strl_pyg.training.config import add_train_arguments
 
     def interrupted(cfg, **kw):
         return {"step": 32, "history": [], "interrupted": "SIGINT"}
 
-    monkeypatch.setattr(loop, "train", interrupted)
+    monkeypatch.setattr(commandline, "train", interrupted)
     ap = add_train_arguments(argparse.ArgumentParser())
     args = ap.parse_args(["--out", str(tmp_path / "run"), "--no-tensorboard"])
-    assert loop.run_from_args(args, ap, []) == 130
+    assert commandline.run_from_args(args, ap, []) == 130
     out, err = capsys.readouterr()
     assert out == "" and "stopped by SIGINT at step 32" in err
-    monkeypatch.setattr(loop, "train", lambda cfg, **kw: {"step": 4, "history": []})
-    assert loop.run_from_args(args, ap, []) == 0
+    monkeypatch.setattr(commandline, "train", lambda cfg, **kw: {"step": 4, "history": []})
+    assert commandline.run_from_args(args, ap, []) == 0
     assert json.loads(capsys.readouterr().out.strip().splitlines()[-1]) == {"step": 4}
+
+
+def test_posed_min_points_is_a_flag_recorded_in_the_config():
+    import argparse
+
+    from strl_pyg.training.commandline import config_from_args
+    from strl_pyg.training.config import add_train_arguments
+
+    ap = argparse.ArgumentParser()
+    add_train_arguments(ap)
+    cfg = config_from_args(ap.parse_args(["--posed-min-points", "40"]), ap)
+    assert cfg.posed_min_points == 40 and TrainConfig().posed_min_points == 0
+    with pytest.raises(ValueError, match="Expected posed_min_points as an integer >= 0"):
+        TrainConfig(posed_min_points=-1)
+
+
+@pytest.mark.slow
+def test_posed_min_points_leaves_out_training_pairs_with_few_matches(posed_root, tmp_path):
+    cfg = posed_config(posed_root, tmp_path)
+    train_ds, val_ds = build_datasets(cfg, progress=False)
+    counts = sorted(train_ds.load_matches(i).num_points for i in range(len(train_ds)))
+    assert len(counts) == 2
+    cut = replace(cfg, posed_min_points=counts[1])  # the pair with fewer matches goes
+    with pytest.warns(UserWarning, match=f"fewer than min_points={counts[1]}"):
+        train_ds, val_ds = build_datasets(cut, progress=False)
+    assert len(train_ds) == 1 and train_ds.load_matches(0).num_points == counts[1]
+    assert len(val_ds) == 1  # validation keeps every pair
+    with pytest.raises(ValueError, match=r"with >= 100000 point matches \(got none of 2"):
+        build_datasets(replace(cfg, posed_min_points=100_000), progress=False)

@@ -9,13 +9,13 @@ import pytest
 import torch
 
 from strl_pyg.geometry import Pose
-from strl_pyg.training.loop import (
+from strl_pyg.training.loop import train
+from strl_pyg.training import (
     StepBatchSampler,
     TrainConfig,
     load_checkpoint,
     mean_pose,
     plot_history,
-    train,
 )
 
 REPO = Path(__file__).resolve().parents[2]
@@ -141,7 +141,8 @@ def test_the_rotation_weight_reaches_the_pose_loss():
     import torch
 
     from strl_pyg.training.config import add_train_arguments
-    from strl_pyg.training.loop import _losses, config_from_args
+    from strl_pyg.training.loop import losses_for
+    from strl_pyg.training.commandline import config_from_args
 
     ap = add_train_arguments(argparse.ArgumentParser())
     cfg = config_from_args(ap.parse_args(["--rot-weight", "3"]), ap)
@@ -149,8 +150,8 @@ def test_the_rotation_weight_reaches_the_pose_loss():
     assert TrainConfig.from_dict({"steps": 3, "loss": "balanced"}).rot_weight == 1.0
     out, T = _random_poses(torch.zeros(4, 7))
     model_cfg = cfg.model_config()
-    one = _losses(TrainConfig(), model_cfg)[0](out, T)
-    three = _losses(cfg, model_cfg)[0](out, T)
+    one = losses_for(TrainConfig(), model_cfg)[0](out, T)
+    three = losses_for(cfg, model_cfg)[0](out, T)
     # loss = w_R l_rot + l_trans, the terms themselves unchanged
     torch.testing.assert_close(three["loss_rot"], one["loss_rot"])
     assert float(one["loss_rot"]) != 0.0
@@ -167,7 +168,8 @@ def test_beta_reaches_the_pose_loss():
     import torch
 
     from strl_pyg.training.config import add_train_arguments
-    from strl_pyg.training.loop import _losses, config_from_args
+    from strl_pyg.training.loop import losses_for
+    from strl_pyg.training.commandline import config_from_args
 
     ap = add_train_arguments(argparse.ArgumentParser())
     cfg = config_from_args(ap.parse_args(["--beta", "1"]), ap)
@@ -175,7 +177,7 @@ def test_beta_reaches_the_pose_loss():
     assert TrainConfig.from_dict({"steps": 3, "loss": "balanced"}).beta == 0.5
     out, T = _random_poses(torch.full((4, 7), math.log(4.0)))
     model_cfg = cfg.model_config()
-    losses = {b: _losses(TrainConfig(beta=b, angle_weight=0.0), model_cfg)[0](out, T)
+    losses = {b: losses_for(TrainConfig(beta=b, angle_weight=0.0), model_cfg)[0](out, T)
               for b in (0.0, 0.5, 1.0)}
     assert float(losses[0.0]["loss_rot"]) > 0.0
     torch.testing.assert_close(losses[0.5]["loss_rot"], 2.0 * losses[0.0]["loss_rot"])
@@ -258,9 +260,11 @@ def test_init_from_loads_weights_and_rejects_other_architectures(tmp_path):
 
 
 def test_geometric_head_trains_on_a_scene_distribution_from_regression_weights(tmp_path):
-    from strl_pyg.model.strl_pose import StrLPose, StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose
+    from strl_pyg.model import StrLPoseConfig
     from strl_pyg.training.config import TrainConfig
-    from strl_pyg.training.loop import shuffle_point_matches, train
+    from strl_pyg.training.loop import train
+    from strl_pyg.training import shuffle_point_matches
 
     base = StrLPose(StrLPoseConfig.ablation("full", hidden=16, layers=1, heads=2,
                                             patch_features=1))
@@ -374,7 +378,7 @@ def test_the_default_recipe_is_the_studys_and_the_papers_is_one_dict_away():
 
     from strl_pyg.training import PAPER_RECIPE
     from strl_pyg.training.config import add_train_arguments
-    from strl_pyg.training.loop import config_from_args
+    from strl_pyg.training.commandline import config_from_args
 
     d = TrainConfig()
     assert (d.lr, d.lr_schedule, d.warmup_steps, d.beta, d.loss) == (
@@ -445,7 +449,7 @@ def test_roll_augment_rolls_training_pairs_and_their_statistics(tmp_path):
     from strl_pyg.data import keys as K
     from strl_pyg.data.transforms import roll_cameras
     from strl_pyg.training.config import add_train_arguments
-    from strl_pyg.training.data import _Resampled, build_datasets
+    from strl_pyg.training.data import ResampledPairs, build_datasets
 
     args = add_train_arguments(argparse.ArgumentParser()).parse_args(["--roll-augment", "45"])
     assert args.roll_augment == 45.0
@@ -455,8 +459,8 @@ def test_roll_augment_rolls_training_pairs_and_their_statistics(tmp_path):
                       model_overrides={"hidden": 16, "layers": 1, "heads": 2,
                                        "patch_features": 1, "inputs": "flow"})
     train_ds, _ = build_datasets(cfg, progress=False)
-    plain = _Resampled(train_ds, 32, 16, seed=0)
-    rolled = _Resampled(train_ds, 32, 16, seed=0, roll_max=90.0)
+    plain = ResampledPairs(train_ds, 32, 16, seed=0)
+    rolled = ResampledPairs(train_ds, 32, 16, seed=0, roll_max=90.0)
     angles = []
     for key in [(i, 0, i) for i in range(6)]:
         a, b = plain[key], rolled[key]
@@ -476,7 +480,7 @@ def test_roll_augment_rolls_training_pairs_and_their_statistics(tmp_path):
 
     from strl_pyg.training.data import unaugmented_poses
 
-    both = _Resampled(train_ds, 32, 16, seed=0, swap_prob=0.5, roll_max=180.0)
+    both = ResampledPairs(train_ds, 32, 16, seed=0, swap_prob=0.5, roll_max=180.0)
     keys = [(i, 0, i) for i in range(6)]
     batch = Batch.from_data_list([both[k] for k in keys])
     assert 0 < int(batch[K.SWAPPED].sum()) < 6 and bool((batch[K.ROLL].abs() > 0.01).all())
@@ -539,3 +543,34 @@ def test_a_relative_clip_run_logs_its_threshold_and_resumes_with_its_norms(tmp_p
     a = load_checkpoint(tmp_path / "full" / "last.pt")
     b = load_checkpoint(tmp_path / "split" / "last.pt")
     assert states_equal(a["model"], b["model"])
+
+
+def test_no_progress_reaches_the_match_cache_bar(monkeypatch):
+    """Before: --no-progress left the front-end cache's bar on."""
+    from strl_pyg.datasets import SyntheticPairs
+    from strl_pyg.training.config import TrainConfig
+    from strl_pyg.training.data import build_datasets
+
+    seen = []
+    monkeypatch.setattr(SyntheticPairs, "build_cache",
+                        lambda self, num_workers=0, **kw: seen.append(kw.get("progress")))
+    for mix in (None, "lines_small"):  # without a mix, --matches frontend was ignored
+        seen.clear()
+        cfg = TrainConfig(matches="frontend", scene_mix=mix, train_pairs=2, val_pairs=1)
+        try:
+            build_datasets(cfg, progress=False)
+        except Exception:  # the patched cache builds nothing; what matters is what it was told
+            pass
+        assert seen and not any(seen), (mix, seen)
+
+
+def test_mistyped_set_key_names_the_closest(capsys):
+    """Before: `--set hiden=3` listed every field without the "did you mean" that `--k` and
+    `--methods poselibb` get."""
+    from strl_pyg.training.config import TrainConfig
+
+    with pytest.raises(ValueError, match=r"\(got hiden\); did you mean hidden\?$"):
+        TrainConfig(model_overrides={"hiden": 3}).model_config()
+    with pytest.raises(ValueError, match=r"\(got zzz\)$"):
+        TrainConfig(model_overrides={"zzz": 3}).model_config()
+

@@ -18,7 +18,9 @@ import pytest
 import torch
 
 from strl_pyg.training import TrainConfig, train
-from strl_pyg.training.loop import check_device, check_run_folder
+from strl_pyg.training.skipped import load_skipped_step
+from strl_pyg.training.commandline import check_device
+from strl_pyg.training.loop import check_run_folder
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -134,7 +136,7 @@ def test_a_cnn_row_on_a_mix_of_image_sizes_is_refused_before_any_matching(tmp_pa
 def test_images_of_two_sizes_in_one_cnn_batch_are_one_line():
     from strl_pyg.data import PairMatches, build_pair_graph
     from strl_pyg.model import StrLPoseConfig
-    from strl_pyg.training.loop import _collater
+    from strl_pyg.training.data import collater
 
     rng = torch.Generator().manual_seed(0)
 
@@ -145,7 +147,7 @@ def test_images_of_two_sizes_in_one_cnn_batch_are_one_line():
                         image1=img)
         return build_pair_graph(m, keep_images=True)
 
-    collate = _collater(StrLPoseConfig.ablation("R"))
+    collate = collater(StrLPoseConfig.ablation("R"))
     assert collate([graph(40, 60), graph(40, 60)]).num_graphs == 2
     with pytest.raises(ValueError, match=r"one image size per batch .*\(got sizes \[\(32, 48\), "
                                          r"\(40, 60\)\]\)"):
@@ -170,7 +172,7 @@ def _nan_gradients_on(monkeypatch, calls: set):
     ``calls``-th calls (1-based): sqrt(0 * x) has 0 * inf as its derivative."""
     from strl_pyg.training import loop
 
-    real = loop._losses
+    real = loop.losses_for
     count = [0]
 
     def losses(cfg, model_cfg):
@@ -185,7 +187,7 @@ def _nan_gradients_on(monkeypatch, calls: set):
 
         return planted, geo
 
-    monkeypatch.setattr(loop, "_losses", losses)
+    monkeypatch.setattr(loop, "losses_for", losses)
 
 
 def test_a_step_with_nan_gradients_is_skipped_not_applied(tmp_path, monkeypatch):
@@ -265,7 +267,7 @@ def test_a_skipped_step_keeps_its_batch_and_weights_to_reproduce_it(tmp_path, mo
     train(cfg, progress=False)
     files = sorted((tmp_path / "run" / "skipped").iterdir())
     assert [f.name for f in files] == ["step000002.pt"]
-    step, cfg_back, model, batch = loop.load_skipped_step(files[0])
+    step, cfg_back, model, batch = load_skipped_step(files[0])
     assert step == 2 and cfg_back == cfg
     for k, v in model.state_dict().items():
         assert torch.equal(v, seen["weights"][k]), k
@@ -280,7 +282,7 @@ def test_a_file_that_is_not_a_skipped_step_is_one_line(tmp_path):
 
     torch.save({"step": 3}, tmp_path / "x.pt")
     with pytest.raises(ValueError, match="Expected a skipped-step file"):
-        loop.load_skipped_step(tmp_path / "x.pt")
+        load_skipped_step(tmp_path / "x.pt")
 
 
 def test_resume_takes_what_the_command_line_left_out_from_the_run(tmp_path):
@@ -290,7 +292,7 @@ def test_resume_takes_what_the_command_line_left_out_from_the_run(tmp_path):
     from dataclasses import asdict, replace
 
     from strl_pyg.training.config import add_train_arguments
-    from strl_pyg.training.loop import config_from_args, given_fields, settings_from_run
+    from strl_pyg.training.commandline import config_from_args, given_fields, settings_from_run
 
     out = tmp_path / "run"
     first = _cfg(out, steps=4, val_every=4, lr=5e-4)
@@ -353,7 +355,7 @@ def test_every_training_flag_names_a_config_field():
     from dataclasses import fields
 
     from strl_pyg.training.config import add_train_arguments
-    from strl_pyg.training.loop import FLAG_FIELDS, given_fields
+    from strl_pyg.training.commandline import FLAG_FIELDS, given_fields
 
     ap = argparse.ArgumentParser()
     add_train_arguments(ap)

@@ -6,7 +6,7 @@ from matplotlib import image as mpimg
 from matplotlib.figure import Figure
 
 from strl_pyg.geometry import Pose
-from strl_pyg.metrics.two_view import kitti_odometry_errors, kitti_odometry_summary
+from strl_pyg.metrics import kitti_odometry_errors, kitti_odometry_summary
 from strl_pyg.viz.plots import plot_segment_errors, plot_trajectory_topview, save_figure
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

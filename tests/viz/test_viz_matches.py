@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -61,3 +63,20 @@ def test_errors(pair, tmp_path):
         draw_matches(no_img)
     with pytest.raises(ValueError, match=".png"):
         save_matches_png(tmp_path / "m.jpg", pair.matches)
+
+
+def test_the_match_drawing_has_a_title_a_legend_and_subsamples(held_out_pair):
+    from strl_pyg.viz.matches import draw_matches
+
+    m = replace(held_out_pair.matches, image0=held_out_pair.image0, image1=held_out_pair.image1)
+    plain = draw_matches(m, layout="horizontal")
+    few = draw_matches(m, layout="horizontal", max_points=10, max_lines=5, title="t",
+                       legend=True, point_inliers=np.ones(m.num_points, bool))
+    assert few.shape[1] == plain.shape[1] and few.shape[0] > plain.shape[0]  # header band
+    band = few[: few.shape[0] - plain.shape[0]]
+    assert (band < 128).any() and (band == 255).mean() > 0.8  # text on white
+    # fewer matches drawn: less of the image is covered by drawing
+    changed = lambda c: (c[-plain.shape[0]:] != plain).any(-1).mean()  # noqa: E731
+    assert changed(few) > 0 and (draw_matches(m, layout="horizontal", max_points=10,
+                                               max_lines=5) != plain).any()
+

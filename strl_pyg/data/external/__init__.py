@@ -8,29 +8,7 @@ from __future__ import annotations
 
 from strl_pyg.utils.lazy import lazy_exports
 
-__all__ = [
-    "MatchFormatError",
-    "FORMATS",
-    "detect_format",
-    "load_external_matches",
-    "from_lightglue",
-    "RANKS",
-    "READERS",
-    "as_numpy",
-    "unbatch",
-    "index_per_node",
-    "index_pairs",
-    "as_indices",
-    "scores_at",
-    "keypoints",
-    "image_size_from",
-    "build_matches",
-    "filter_scores",
-    "load_hloc_matches",
-    "hloc_pair_names",
-]
-
-__getattr__, __dir__ = lazy_exports(__name__, {
+_EXPORTS = {
     "MatchFormatError": "strl_pyg.data.external.checks",
     "FORMATS": "strl_pyg.data.external.formats",
     "detect_format": "strl_pyg.data.external.formats",
@@ -50,4 +28,8 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "filter_scores": "strl_pyg.data.external.checks",
     "load_hloc_matches": "strl_pyg.data.external.hloc",
     "hloc_pair_names": "strl_pyg.data.external.hloc",
-}, globals())
+}
+
+__all__ = list(_EXPORTS)
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from strl_pyg.data.matches import PairMatches, _as_array, _check_size
+from strl_pyg.data.checks import as_array, check_size
+from strl_pyg.data.matches import PairMatches
 
 __all__ = [
     "MatchFormatError",
@@ -40,7 +41,7 @@ def as_numpy(value: Any, name: str, batch_index: int | None) -> np.ndarray:
     """``value`` (array, tensor, or a batch as a list of them, as LightGlue) -> numpy."""
     if isinstance(value, (list, tuple)) and value and all(hasattr(v, "shape") for v in value):
         value = value[_pick(len(value), name, batch_index)]  # a batch as a list (LightGlue)
-    return _as_array(value, name, dtype=None)
+    return as_array(value, name, dtype=None)
 
 
 def _pick(batch: int, name: str, batch_index: int | None) -> int:
@@ -124,7 +125,7 @@ def warn_one_to_many(idx: np.ndarray, image: int, name: str) -> None:
 
 def as_indices(arr: np.ndarray, name: str) -> np.ndarray:
     """Integer-valued ``arr`` (any dtype) -> int64; non-integers raise."""
-    arr = _as_array(arr, name)
+    arr = as_array(arr, name)
     if not np.all(np.isfinite(arr)) or np.any(arr != np.round(arr)):
         raise MatchFormatError(f"Expected integer indices in '{name}' (got non-integers)")
     return arr.astype(np.int64)
@@ -134,7 +135,7 @@ def scores_at(d: dict, key: str, n: int, idx: np.ndarray | None):
     """``d[key]`` of length ``n`` at ``idx`` (all with ``None``); ``None`` when absent."""
     if key not in d:
         return None
-    s = _as_array(d[key], key).reshape(-1)
+    s = as_array(d[key], key).reshape(-1)
     if len(s) != n:
         raise MatchFormatError(f"Expected '{key}' of length {n} (got {len(s)})")
     return s if idx is None else s[idx]
@@ -142,7 +143,7 @@ def scores_at(d: dict, key: str, n: int, idx: np.ndarray | None):
 
 def keypoints(d: dict, i: int) -> np.ndarray:
     """``d["keypoints{i}"]`` as ``[N, 2]``."""
-    kp = _as_array(d[f"keypoints{i}"], f"keypoints{i}")
+    kp = as_array(d[f"keypoints{i}"], f"keypoints{i}")
     if kp.size == 0:
         return np.zeros((0, 2))
     if kp.ndim != 2 or kp.shape[1] != 2:
@@ -155,12 +156,12 @@ def image_size_from(arg, stored, order, i, has_image, fmt, source) -> tuple[int,
     the input in ``order`` (``"HW"`` or ``"WH"``; ``None``: the format stores none), which
     must agree; an error when neither is known and there is no image."""
     name = f"image_size{i}"
-    given = None if arg is None else _check_size(arg, name)
+    given = None if arg is None else check_size(arg, name)
     if stored is None or order is None:
         if given is None and not has_image:
             raise ValueError(f"Expected {name}=(H, W) for {fmt} matches (got none in {source})")
         return given
-    a, b = _check_size(stored, f"{name} stored as {order}")
+    a, b = check_size(stored, f"{name} stored as {order}")
     from_file = (a, b) if order == "HW" else (b, a)
     if given is not None and given != from_file:
         raise ValueError(

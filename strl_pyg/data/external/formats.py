@@ -65,15 +65,10 @@ from strl_pyg.data.external.checks import (
     unbatch,
 )
 from strl_pyg.data.external.readers import RANKS, READERS
-from strl_pyg.data.matches import PairMatches, _as_array, _load_npz
+from strl_pyg.data.checks import as_array, load_npz
+from strl_pyg.data.matches import PairMatches
 
-__all__ = [
-    "FORMATS",
-    "MatchFormatError",
-    "detect_format",
-    "load_external_matches",
-    "from_lightglue",
-]
+__all__ = ["FORMATS", "detect_format", "load_external_matches", "from_lightglue"]
 
 FORMATS = ("strl", "matched", "superglue", "lightglue", "gluestick", "kornia")
 
@@ -186,7 +181,7 @@ def load_external_matches(
     for i, arg in ((0, K0), (1, K1)):
         stored = d.get(f"K{i}")
         if arg is not None and stored is not None and not np.allclose(
-                _as_array(arg, f"K{i}"), _as_array(stored, f"K{i}")):
+                as_array(arg, f"K{i}"), as_array(stored, f"K{i}")):
             raise ValueError(f"Expected K{i} to agree with the one in {source} (got another)")
         kw[f"K{i}"] = arg if arg is not None else stored
     if fmt != "strl":
@@ -207,7 +202,7 @@ def _read_source(path_or_dict) -> tuple[str, Mapping]:
                 raise MatchFormatError(
                     f"Expected an .npz match file at '{path}' (got an HDF5 file): read hloc "
                     "features/matches .h5 with load_hloc_matches(features, matches, name0, name1)")
-    data = _load_npz(path)
+    data = load_npz(path)
     if not data:
         raise MatchFormatError(f"Expected one known layout, {_KNOWN} (got an empty '{path}')")
     return f"'{path}'", data

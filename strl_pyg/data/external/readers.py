@@ -23,7 +23,7 @@ from strl_pyg.data.external.checks import (
     keypoints,
     scores_at,
 )
-from strl_pyg.data.matches import _as_array
+from strl_pyg.data.checks import as_array
 
 __all__ = ["RANKS", "READERS"]
 
@@ -146,7 +146,7 @@ def _read_gluestick(d, batch_index, line_endpoints) -> dict:
 
 
 def _lines(d: dict, i: int) -> np.ndarray:
-    lines = _as_array(d.get(f"lines{i}", np.zeros((0, 2, 2))), f"lines{i}")
+    lines = as_array(d.get(f"lines{i}", np.zeros((0, 2, 2))), f"lines{i}")
     if lines.size == 0:
         return np.zeros((0, 2, 2))
     if lines.shape[1:] != (2, 2) or lines.ndim != 3:
