@@ -20,6 +20,7 @@ import argparse
 import ast
 import functools
 import importlib
+import json
 import os
 import re
 import shlex
@@ -354,11 +355,60 @@ def test_the_pages_have_what_this_test_checks():
     assert any(c.program == "strl-pose" for p in PAGES for c in page_commands(p))
 
 
+#: Runs blocks one after another in one interpreter (each as ``__main__`` in a folder of its
+#: own), so the suite pays torch's import once, not once per block.
+_RUNNER = """
+import contextlib, io, json, os, runpy, sys, traceback
+out = {}
+for where, path in json.load(open(sys.argv[1])):
+    os.chdir(os.path.dirname(path))
+    buf = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(buf):
+            runpy.run_path(path, run_name="__main__")
+        out[where] = None
+    except SystemExit as err:
+        out[where] = None if err.code in (0, None) else f"exit code {err.code}"
+    except BaseException:
+        out[where] = buf.getvalue()[-1500:] + traceback.format_exc()[-3000:]
+json.dump(out, open(sys.argv[2], "w"))
+"""
+
+
+def _trains(block: Block) -> bool:
+    return "train(" in block.text
+
+
+@pytest.fixture(scope="module")
+def block_runs(tmp_path_factory):
+    """``where -> None`` (ran) or the failure, for every runnable block that does not train
+    (a block that trains is in the slow tier and runs in its own process)."""
+    root = tmp_path_factory.mktemp("blocks")
+    plan = []
+    for i, block in enumerate(b for b in RUNNABLE if not _trains(b) and b.lang == "python"):
+        (root / str(i)).mkdir()
+        script = root / str(i) / "snippet.py"
+        script.write_text(block.text)
+        plan.append((block.where, str(script)))
+    (root / "plan.json").write_text(json.dumps(plan))
+    (root / "runner.py").write_text(_RUNNER)
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    res = subprocess.run([sys.executable, str(root / "runner.py"), str(root / "plan.json"),
+                          str(root / "out.json")], cwd=root, env=env, capture_output=True,
+                         text=True, timeout=1200)
+    assert res.returncode == 0, f"the block runner failed:\n{res.stderr[-3000:]}"
+    return json.loads((root / "out.json").read_text())
+
+
 @pytest.mark.parametrize("block", [
-    pytest.param(b, marks=pytest.mark.slow) if "train(" in b.text else b for b in RUNNABLE
+    pytest.param(b, marks=pytest.mark.slow) if _trains(b) else b for b in RUNNABLE
 ], ids=[b.where for b in RUNNABLE])  # a block that trains is in the slow tier
-def test_marked_python_block_runs_as_a_script(block, tmp_path):
+def test_marked_python_block_runs_as_a_script(block, tmp_path, request):
     assert block.lang == "python", f"{block.where}: {RUN_MARKER} before a {block.lang!r} block"
+    if not _trains(block):
+        failure = request.getfixturevalue("block_runs")[block.where]
+        assert failure is None, f"{block.where} failed:\n{failure}"
+        return
     script = tmp_path / "snippet.py"
     script.write_text(block.text)
     env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}

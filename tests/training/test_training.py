@@ -402,6 +402,7 @@ def test_the_default_recipe_is_the_studys_and_the_papers_is_one_dict_away():
         TrainConfig(steps=10, warmup_steps=-1)
 
 
+@pytest.mark.slow  # a resume variant: test_resume_equals_uninterrupted is the fast one
 def test_a_cosine_run_logs_its_rates_and_resumes_on_the_same_schedule(tmp_path, monkeypatch):
     import os
     import signal
@@ -512,6 +513,7 @@ def test_roll_augment_on_pairs_without_intrinsics_is_refused_before_training(tmp
     assert not (tmp_path / "run" / "last.pt").exists()
 
 
+@pytest.mark.slow  # a resume variant: test_resume_equals_uninterrupted is the fast one
 def test_a_relative_clip_run_logs_its_threshold_and_resumes_with_its_norms(tmp_path, monkeypatch):
     """The threshold of each step is ``relative`` x the median of the norms logged before it;
     a resumed run reads those norms from last.pt (without them its third step would clip at
