@@ -382,7 +382,7 @@ def fit_calibration(estimator, pairs):
                        fusion_inflation=k):
             fused_rows = run_set(type(estimator)(model, methods=[
                 m for m in ("regression", "poselib", "opencv", "fused")
-                if m in estimator.method_names], bootstrap=estimator.bootstrap), pairs, None)
+                if m in estimator.method_names], bootstrap=estimator.config.bootstrap), pairs, None)
         scales.update(_fit_scales(estimator, fused_rows, ["fused"]))
         for row, fused in zip(rows, fused_rows, strict=True):
             row["methods"]["fused"] = fused["methods"].get("fused", {"status": "failed"})
@@ -439,7 +439,7 @@ def fit_fusion_inflation(estimator, pairs, s_reg: float) -> tuple[float, dict]:
     for k in FUSION_INFLATIONS:
         cls_e, fus_e = [], []
         for m, T, net, cls, extra in solved:
-            f = fuse_poses(net, None, cls, m, threshold_px=estimator.threshold_px,
+            f = fuse_poses(net, None, cls, m, threshold_px=estimator.config.threshold_px,
                            network_scale=s_reg * k, network_extra=extra)
             if f.source == "network":  # too few inliers: the fused method reports "failed"
                 continue
@@ -493,7 +493,7 @@ def _fit_scales(estimator, rows, names) -> dict[str, float]:
         d2 = [r["methods"][name]["d2"] for r in rows
               if r["methods"].get(name, {}).get("d2") is not None]
         if len(d2) >= 10:
-            if name in BOOTSTRAPPED and estimator.bootstrap:
+            if name in BOOTSTRAPPED and estimator.config.bootstrap:
                 # first order + bootstrap: the gross failures (wrong RANSAC solutions,
                 # near-degenerate pairs) get large sigmas of their own, so the scale can be
                 # matched where the target is, at the 2-sigma quantile
@@ -614,7 +614,7 @@ def main(argv=None) -> int:
         print(markdown({"calibration split (mixed_small, seeds 3,000,000+)": stats}, order))
         md = dict(model.metadata)
         md["calibration"] = scales
-        md["calibration_bootstrap"] = fit_estimator.bootstrap  # what the fit used
+        md["calibration_bootstrap"] = fit_estimator.config.bootstrap  # what the fit used
         md["recommended_order"] = order
         md["recommended_evidence"] = {m: [float(v) for v in e] for m, e in evidence.items()}
         md["fusion_inflation"] = float(fusion["inflation"])

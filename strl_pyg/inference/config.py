@@ -52,6 +52,11 @@ class EstimatorConfig:
     swap_check: bool = True
     data_check: bool = True
 
+    @property
+    def support(self) -> tuple[float, int, float]:
+        """The support check's ``(min_inlier_ratio, min_inliers, min_in_front)``."""
+        return self.min_inlier_ratio, self.min_inliers, self.min_in_front
+
     def __post_init__(self) -> None:
         if self.methods is not None:
             object.__setattr__(self, "methods", checked_method_names(self.methods))

@@ -180,17 +180,6 @@ class PoseEstimator:
         if cfg.device is not None and self._model is not None:
             self._model = self._model.to(cfg.device)
 
-    # the options, read from the one config
-    seed = property(lambda self: self.config.seed)
-    threshold_px = property(lambda self: self.config.threshold_px)
-    bootstrap = property(lambda self: self.config.bootstrap)
-    min_inlier_ratio = property(lambda self: self.config.min_inlier_ratio)
-    min_inliers = property(lambda self: self.config.min_inliers)
-    min_in_front = property(lambda self: self.config.min_in_front)
-    resample = property(lambda self: self.config.resample)
-    device = property(lambda self: self.config.device)
-    raise_errors = property(lambda self: self.config.raise_errors)
-
     @property
     def model_config(self) -> Any:
         """The model's :class:`~strl_pyg.model.StrLPoseConfig`, without building the shipped
@@ -221,8 +210,8 @@ class PoseEstimator:
             from strl_pyg.model.strl_pose import StrLPose
 
             self._model = StrLPose.from_pretrained()
-            if self.device is not None:
-                self._model = self._model.to(self.device)
+            if self.config.device is not None:
+                self._model = self._model.to(self.config.device)
             self._settings = None  # now read from the model itself
         return self._model
 
@@ -269,17 +258,12 @@ class PoseEstimator:
         if degenerate is None and not problems and checked.has_intrinsics:
             # the configuration and the focal check, from the same checked matches
             with normalisation_scope(memo):
-                geometry = pair_geometry(checked, self.threshold_px, self.seed)
+                geometry = pair_geometry(checked, self.config.threshold_px, self.config.seed)
             focal = focal_problem(geometry)
             if focal is not None:
                 problems = [*problems, focal]
                 warnings.append(focal)
-        ctx = MethodContext(self.seed, self.threshold_px, self.bootstrap, self.device,
-                            self.resample, load_model=lambda: self.model,
-                            settings=self.settings, swap_check=self.config.swap_check,
-                            data_check=self.config.data_check,
-                            support=(self.min_inlier_ratio, self.min_inliers,
-                                     self.min_in_front))
+        ctx = MethodContext(self.config, load_model=lambda: self.model, settings=self.settings)
         return PairRun(checked, warnings, rows, degenerate, problems, ctx, memo, geometry)
 
     def _run_methods(self, pair: PairRun, names: Any,
@@ -298,7 +282,7 @@ class PoseEstimator:
                     continue
                 res = self._support(self._run(name, pair.matches, pair.ctx, pair.degenerate),
                                     pair.matches)
-                results[name] = calibrate(name, res, pair.ctx.settings, self.bootstrap)
+                results[name] = calibrate(name, res, pair.ctx.settings, self.config.bootstrap)
 
     def _finish(self, pair: PairRun, names: Any, fundamental: bool = True) -> PoseEstimate:
         """The estimate of the methods ``names`` of the pair (in that order): the rules that
@@ -312,7 +296,8 @@ class PoseEstimator:
         estimate.point_rows = pair.rows
         if fundamental and not pair.matches.has_intrinsics:
             with normalisation_scope(pair.memo):
-                attach_fundamental(estimate, pair.matches, self.threshold_px, self.seed,
+                cfg = self.config
+                attach_fundamental(estimate, pair.matches, cfg.threshold_px, cfg.seed,
                                     pair.rows)
         return estimate
 
@@ -383,7 +368,7 @@ class PoseEstimator:
         try:
             return spec.fn(matches, ctx)
         except Exception as err:
-            if self.raise_errors:
+            if self.config.raise_errors:
                 raise
             first = str(err).splitlines()[0] if str(err) else ""
             return MethodResult(name, "failed", info={"raised": type(err).__name__},
@@ -446,8 +431,8 @@ class PoseEstimator:
         return self._recommended(self._pair(matches), more)
 
     def _support(self, res: MethodResult, matches: PairMatches) -> MethodResult:
-        return check_support(res, matches, self.threshold_px, self.min_inlier_ratio,
-                             self.min_inliers, self.min_in_front)  # checked: the registry's
+        # checked: the registry's support_checked methods
+        return check_support(res, matches, self.config.threshold_px, *self.config.support)
 
     def _recommend(self, results: dict[str, MethodResult], warnings: list[str],
                    matches: PairMatches, geometry: Any = None) -> PoseEstimate:
@@ -474,8 +459,8 @@ class PoseEstimator:
                 continue
             if r.status == "ok" and not METHODS[m].support_checked:
                 # a learned pose is recommended only with the matches' support
-                r = learned_pose_evidence(r, matches, self.threshold_px, (
-                    self.min_inlier_ratio, self.min_inliers, self.min_in_front), geometry)
+                r = learned_pose_evidence(r, matches, self.config.threshold_px,
+                                          self.config.support, geometry)
             if r.status == "ok":
                 pose = replace(r, warnings=unique_in_order(warnings + notes + r.warnings))
                 return PoseEstimate(pose, results, matches.num_points, matches.num_lines,

@@ -35,8 +35,8 @@ from strl_pyg.estimation.two_view import TwoViewGeometry, classify_two_view, pla
 from strl_pyg.inference.record import MethodResult, PoseEstimate
 from strl_pyg.inference.support import check_support
 
-__all__ = ["LEARNED_SUPPORT_SHARE", "FOCAL_SV_RATIO_MIN", "FOCAL_MIN_INLIERS", "PLANAR_AGREE_DEG", "pair_geometry",
-           "focal_consistency", "apply_configuration", "learned_pose_evidence"]
+__all__ = ["LEARNED_SUPPORT_SHARE", "FOCAL_SV_RATIO_MIN", "FOCAL_MIN_INLIERS", "PLANAR_AGREE_DEG",
+           "pair_geometry", "focal_consistency", "apply_configuration", "learned_pose_evidence"]
 
 #: Below this ratio of the implied essential matrix's two singular values, the intrinsics do
 #: not fit the matches (module docstring).

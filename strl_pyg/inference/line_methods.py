@@ -64,15 +64,16 @@ class VanishingPoint(PoseMethod):
             cls = ctx.results.get(base) or ctx.cache.get("vp_start")
             if cls is None:
                 cls = ctx.cache["vp_start"] = check_support(
-                    Classical(base)(matches, ctx), matches, ctx.threshold_px, *ctx.support)
+                    Classical(base)(matches, ctx), matches, ctx.config.threshold_px,
+                    *ctx.config.support)
             starts = [cls.T_0to1] if cls.status == "ok" else []
-        res = vanishing_point_pose(matches, ctx.threshold_px, seed=ctx.seed,
+        res = vanishing_point_pose(matches, ctx.config.threshold_px, seed=ctx.config.seed,
                                    directions=_vanishing_directions(matches, ctx), starts=starts,
                                    line_sigma_px=sigma)
         if not res.success:
             return MethodResult("vp", "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
                                 info=dict(res.info), warnings=[f"vp: {res.info['reason']}"])
-        rec = with_covariance("vp", res.pose, matches, ctx.threshold_px,
+        rec = with_covariance("vp", res.pose, matches, ctx.config.threshold_px,
                                time_ms=res.time_ms, info=dict(res.info), raw=res)
         if rec.covariance is not None:  # the documented key (the CLI prints it)
             rec.info["covariance"] = "first-order"
@@ -80,12 +81,12 @@ class VanishingPoint(PoseMethod):
 
 
 def _vanishing_directions(matches: PairMatches, ctx: MethodContext) -> list:
-    """The matched lines' vanishing directions (default thresholds, ``ctx.seed``), found once
+    """The matched lines' vanishing directions (default thresholds, ``ctx.config.seed``), found once
     per pair and shared by ``vp`` and ``vp_checked``."""
     from strl_pyg.estimation.vanishing import vanishing_directions
 
     if "vanishing_directions" not in ctx.cache:
-        ctx.cache["vanishing_directions"] = vanishing_directions(matches, seed=ctx.seed)
+        ctx.cache["vanishing_directions"] = vanishing_directions(matches, seed=ctx.config.seed)
     return ctx.cache["vanishing_directions"]
 
 
@@ -110,7 +111,7 @@ def _result_of(name: str, matches: PairMatches, ctx: MethodContext) -> MethodRes
     if res is None:
         res = (VanishingPoint() if name == "vp" else Classical(name))(matches, ctx)
     if res.status == "ok" and "support_inliers" not in res.info:
-        res = check_support(res, matches, ctx.threshold_px, min_inlier_ratio=0.0,
+        res = check_support(res, matches, ctx.config.threshold_px, min_inlier_ratio=0.0,
                             min_inliers=0, min_in_front=0.0)
     return res
 

@@ -40,7 +40,7 @@ from strl_pyg.estimation.uncertainty import (
     data_covariance,
     swap_covariance,
 )
-from strl_pyg.inference.config import CheckpointSettings
+from strl_pyg.inference.config import CheckpointSettings, EstimatorConfig
 from strl_pyg.inference.network import network_pose
 from strl_pyg.inference.record import MethodResult
 from strl_pyg.inference.registry import PoseMethod
@@ -52,29 +52,18 @@ __all__ = ["MethodContext", "MethodFn", "POINT_POOR_MAX_POINTS", "Regression", "
 # ----------------------------------------------------------------------------- context
 @dataclass
 class MethodContext:
-    """What a method sees besides the matches: the settings of the run (seed, classical
-    inlier threshold, bootstrap count), the model (loaded on first use by ``load_model``),
-    the results of the methods run before it, and shared work (e.g. a forward pass)."""
+    """What a method sees besides the matches: the estimator's one read-only configuration
+    (:class:`~strl_pyg.inference.config.EstimatorConfig`: seed, classical inlier threshold,
+    bootstrap count, device, resampling, the swap and data checks, the support thresholds),
+    the model (loaded on first use by ``load_model``), what the checkpoint says, the results
+    of the methods run before it, and shared work (e.g. a forward pass)."""
 
-    seed: int = 0
-    threshold_px: float = 1.0
-    bootstrap: int = 8
-    device: Any = None  # where the network runs (None: the model's device)
-    resample: Any = "model"  # the regression's input resampling (prepare_graph)
+    config: EstimatorConfig = field(default_factory=EstimatorConfig)
     load_model: Callable[[], torch.nn.Module] | None = field(default=None, repr=False)
     results: dict[str, MethodResult] = field(default_factory=dict)
     cache: dict[str, Any] = field(default_factory=dict)
     #: what the checkpoint says (calibration, fusion inflation); None: read from ``model``
     settings: CheckpointSettings | None = None
-    #: the regression also runs on the swapped pair and widens its covariance by the two
-    #: passes' disagreement (:func:`swap_covariance`)
-    swap_check: bool = True
-    #: the regression's covariance is widened by the distance to the classical pose of the
-    #: same matches (:func:`data_covariance`)
-    data_check: bool = True
-    #: the support check's ``(min_inlier_ratio, min_inliers, min_in_front)``, for methods that
-    #: check a pose themselves (``vp``'s classical start); None: check_support's defaults
-    support: tuple = ()
 
     @property
     def model(self) -> torch.nn.Module:
@@ -109,7 +98,7 @@ class Regression(PoseMethod):
         start = time.perf_counter()
         # the swap check runs its own forward pass: one batch of both pairs measured 2x slower on
         # a CPU (330 ms against 81 + 80 ms on KITTI: the batched graph loses the one-pair path)
-        out = network_pose(model, matches, ctx.seed, ctx.resample, ctx.device)
+        out = network_pose(model, matches, ctx.config.seed, ctx.config.resample, ctx.config.device)
         ms = (time.perf_counter() - start) * 1e3
         q, t, lv = (x[0].detach().cpu().double() for x in (out.quaternion, out.translation,
                                                            out.log_var))
@@ -122,7 +111,7 @@ class Regression(PoseMethod):
                 "translation_kind": model.config.translation}
         pose = Pose.from_quaternion(q, t)
         warnings = []
-        if ctx.swap_check:
+        if ctx.config.swap_check:
             start = time.perf_counter()
             try:
                 found = _swap_disagreement(model, matches, ctx, pose)
@@ -140,7 +129,7 @@ class Regression(PoseMethod):
                 cov = cov + swap_covariance(rot, trans)
                 info["swap_disagreement_deg"] = {"rotation": math.degrees(rot),
                                                  "translation": math.degrees(trans)}
-        if ctx.data_check:
+        if ctx.config.data_check:
             start = time.perf_counter()
             try:
                 found = _data_disagreement(matches, pose, ctx)
@@ -170,7 +159,8 @@ def _solve(name: str, matches: PairMatches, ctx: MethodContext) -> Any:
     classical method share it)."""
     key = f"solve_{name}"
     if key not in ctx.cache:
-        ctx.cache[key] = estimate_relative_pose(matches, name, ctx.threshold_px, seed=ctx.seed)
+        ctx.cache[key] = estimate_relative_pose(matches, name, ctx.config.threshold_px,
+                                                seed=ctx.config.seed)
     return ctx.cache[key]
 
 
@@ -213,7 +203,8 @@ def _swap_disagreement(model: torch.nn.Module, matches: PairMatches, ctx: Method
     from strl_pyg.geometry import Pose
 
     if back is None:
-        back = network_pose(model, matches.swapped(), ctx.seed, ctx.resample, ctx.device)
+        cfg = ctx.config
+        back = network_pose(model, matches.swapped(), cfg.seed, cfg.resample, cfg.device)
     qb, tb = (x[0].detach().cpu().double() for x in (back.quaternion, back.translation))
     if not (bool(torch.isfinite(qb).all()) and bool(torch.isfinite(tb).all())
             and float(tb.norm()) > 1e-12):
@@ -246,7 +237,7 @@ class Classical(PoseMethod):
         name = self.name
         from strl_pyg.estimation.pose_fusion import classical_covariance
 
-        thr = ctx.threshold_px
+        thr = ctx.config.threshold_px
         res = _solve(name, matches, ctx)
         if not res.success:
             return MethodResult(name, "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
@@ -260,17 +251,17 @@ class Classical(PoseMethod):
             warnings.append(f"{name}: no covariance ({err})")
         rec = MethodResult(name, "ok", res.pose, cov, warnings, res.time_ms,
                            res.num_inliers, info=info, raw=res)
-        if cov is not None and ctx.bootstrap:
+        if cov is not None and ctx.config.bootstrap:
             # first order (noise around a right solution) + bootstrap (instability of the
             # solution itself), see strl_pyg.estimation.uncertainty
             start = time.perf_counter()
-            boot = bootstrap_resamples(matches, res.pose, name, ctx.bootstrap, thr,
-                                       ctx.seed)
+            boot = bootstrap_resamples(matches, res.pose, name, ctx.config.bootstrap, thr,
+                                       ctx.config.seed)
             rec.time_ms += (time.perf_counter() - start) * 1e3
             ctx.cache[f"bootstrap_{name}"] = boot  # guided and fused reuse it
         else:
             boot = None
-        return _add_bootstrap(rec, boot, ctx.bootstrap, "first-order")
+        return _add_bootstrap(rec, boot, ctx.config.bootstrap, "first-order")
 
 
 #: The point-poor regime, one bound for everything that depends on it: at or below this many
@@ -286,7 +277,7 @@ def _full_forward(matches: PairMatches, ctx: MethodContext):
     if "full_forward" not in ctx.cache:
         model = ctx.model
         start = time.perf_counter()
-        out = network_pose(model, matches, ctx.seed, None, ctx.device)
+        out = network_pose(model, matches, ctx.config.seed, None, ctx.config.device)
         ctx.cache["full_forward"] = (out, (time.perf_counter() - start) * 1e3)
     return ctx.cache["full_forward"]
 
@@ -347,10 +338,10 @@ class Geometric(PoseMethod):
         w = torch.sigmoid(geo.point_logits.double().cpu())
         x0, x1, focal = normalised_matches(matches)
         R, t = refine_pose(geo.R[:1].cpu(), geo.t[:1].cpu(), x0[None], x1[None], w[None],
-                           iterations=10, tau=ctx.threshold_px / focal)
+                           iterations=10, tau=ctx.config.threshold_px / focal)
         T = Pose(R[0], t[0])
         ms += (time.perf_counter() - start) * 1e3
-        return with_covariance("geometric", T, matches, ctx.threshold_px, time_ms=ms,
+        return with_covariance("geometric", T, matches, ctx.config.threshold_px, time_ms=ms,
                                 info={"mean_weight": float(w.mean())}, raw=out)
 
 
@@ -378,7 +369,7 @@ class Guided(PoseMethod):
         w = torch.sigmoid(out.geometric.point_logits.double().cpu()).numpy()
         prior = ctx.results.get(base)
         classical = prior.raw if prior is not None and prior.status == "ok" else None
-        res = guided_estimate(matches, w, base, ctx.threshold_px, seed=ctx.seed,
+        res = guided_estimate(matches, w, base, ctx.config.threshold_px, seed=ctx.config.seed,
                               classical=classical)
         ms += res.time_ms
         if not res.success:
@@ -386,8 +377,8 @@ class Guided(PoseMethod):
                                 warnings=[f"guided {base}: no hypothesis found"])
         info = {"base": base, "candidate": res.info["candidate"], "refined": res.info["refined"]}
         rec = with_covariance("guided", res.pose, matches,
-                               ctx.threshold_px, time_ms=ms, info=info, raw=res)
-        boot, n_boot, resampled = None, ctx.bootstrap, None
+                               ctx.config.threshold_px, time_ms=ms, info=info, raw=res)
+        boot, n_boot, resampled = None, ctx.config.bootstrap, None
         if rec.covariance is not None and n_boot:
             # the same bootstrap as the classical records, of the solve guided kept: on all the
             # matches (then it is the base method's own, computed once) or on the network's top
@@ -401,7 +392,7 @@ class Guided(PoseMethod):
             else:
                 sub = matches if subset is None else matches.select(point_index=subset)
                 boot = bootstrap_resamples(sub, res.pose, base, n_boot,
-                                           ctx.threshold_px, ctx.seed)
+                                           ctx.config.threshold_px, ctx.config.seed)
             rec.time_ms += (time.perf_counter() - start) * 1e3
         return _add_bootstrap(rec, boot, n_boot, "first-order", resampled=resampled)
 
@@ -452,14 +443,15 @@ class Fused(PoseMethod):
                     if c in ctx.results and ctx.results[c].status == "ok"), None)
         if net is None or net.status != "ok" or cls is None:
             return MethodResult("fused", "failed", warnings=[
-                "fused needs an 'ok' regression and an 'ok' classical estimate (poselib or opencv)"])
+                "fused needs an 'ok' regression and an 'ok' classical estimate (poselib or "
+                "opencv)"])
         start = time.perf_counter()
         # the regression's calibrated variance, times the fusion's own inflation (fitted on the
         # held-out calibration pairs by benchmarks/bench_pose.py --calibrate: the smallest that
         # keeps the 95 % upper bound of the median change against the classical pose <= +5 %)
         settings = ctx.settings if ctx.settings is not None else CheckpointSettings.of(ctx.model)
         scale = settings.calibration.get("regression", 1.0) * settings.fusion_inflation
-        f = fuse_poses(net.raw, None, cls.raw, matches, threshold_px=ctx.threshold_px,
+        f = fuse_poses(net.raw, None, cls.raw, matches, threshold_px=ctx.config.threshold_px,
                        network_scale=scale, network_extra=swap_term(net))
         ms = (time.perf_counter() - start) * 1e3 + net.time_ms + cls.time_ms
         if f.source == "network":
@@ -477,6 +469,6 @@ class Fused(PoseMethod):
         # the classical bootstrap term (instability of the solve, which the information form
         # cannot see) is added, as for the classical record itself (its warning, if any, is there)
         boot = ctx.cache.get(f"bootstrap_{cls.method}")
-        rec = _add_bootstrap(rec, boot, 0 if boot is None else ctx.bootstrap,
+        rec = _add_bootstrap(rec, boot, 0 if boot is None else ctx.config.bootstrap,
                              "information form", f"{cls.method} ")
         return rec

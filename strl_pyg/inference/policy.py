@@ -22,8 +22,8 @@ __all__ = ["RECOMMENDED_ORDER", "POINT_POOR_ORDER", "POSELIB_MISSING", "recommen
 RECOMMENDED_ORDER: tuple[str, ...] = ("poselib", "opencv", "regression")
 #: Where a pair has at most :data:`POINT_POOR_MAX_POINTS` point matches, these methods come
 #: before the recommended order. Fitted on the point-poor calibration split of
-#: ``benchmarks/studies/bench_vanishing.py --sets calibration`` (100 generated pairs of other seeds than
-#: the evaluation's, <= 30 point and >= 20 line matches; the bound 30 is that split's
+#: ``benchmarks/studies/bench_vanishing.py --sets calibration`` (100 generated pairs of other
+#: seeds than the evaluation's, <= 30 point and >= 20 line matches; the bound 30 is that split's
 #: definition, not a fit): the recommended pose with ``vp`` first beats PoseLib beyond the
 #: paired-bootstrap noise, without it it does not (``benchmarks/studies/results_vanishing.md``).
 POINT_POOR_ORDER: tuple[str, ...] = ("vp",)

@@ -477,10 +477,11 @@ def test_vp_checked_takes_vp_where_the_classical_rotation_contradicts_the_lines(
     and as well supported as vp's: the lines' vanishing direction contradicts it, so
     vp_checked answers with vp's pose; a right classical pose is kept as it is."""
     from strl_pyg.inference.line_methods import VP_CHECK_ANGLE_DEG, VanishingPointChecked
+    from strl_pyg.inference.config import EstimatorConfig
     from strl_pyg.inference.methods import MethodContext
 
     m, R, t = manhattan_pair(1, n_points=15, noise=0.3)
-    ctx = MethodContext(bootstrap=0)
+    ctx = MethodContext(EstimatorConfig(bootstrap=0))
     vp = PoseEstimator(methods=("vp",), bootstrap=0).estimate(m).methods["vp"]
     assert vp.status == "ok" and _rot_err(vp.T_0to1, R) < 2.0
     off = cv2.Rodrigues(np.array([0.0, np.radians(20.0), 0.0]))[0] @ R
@@ -498,13 +499,14 @@ def test_vp_checked_takes_vp_where_the_classical_rotation_contradicts_the_lines(
 
 def test_vp_checked_keeps_a_classical_pose_that_fits_clearly_more_points():
     from strl_pyg.inference.line_methods import VP_CHECK_SUPPORT_SLACK, VanishingPointChecked
+    from strl_pyg.inference.config import EstimatorConfig
     from strl_pyg.inference.methods import MethodContext
 
     m, R, t = manhattan_pair(1, n_points=15, noise=0.3)
     vp = PoseEstimator(methods=("vp",), bootstrap=0).estimate(m).methods["vp"]
     off = cv2.Rodrigues(np.array([0.0, np.radians(20.0), 0.0]))[0] @ R
     more = vp.info["support_inliers"] + VP_CHECK_SUPPORT_SLACK + 1
-    ctx = MethodContext(bootstrap=0, results={_base(): _planted(_base(), off, t, more),
+    ctx = MethodContext(EstimatorConfig(bootstrap=0), results={_base(): _planted(_base(), off, t, more),
                                               "vp": vp})
     res = VanishingPointChecked()(m, ctx)
     assert res.info["source"] == _base() and "fits fewer point matches" in res.info["reason"]

@@ -208,7 +208,7 @@ def test_a_device_this_machine_lacks_is_refused_at_construction(model, monkeypat
     assert "\n" not in str(exc.value) and str(exc.value).startswith("Expected")
     with pytest.raises(ValueError, match="Expected a torch device"):
         PoseEstimator(model, device="gpu")
-    assert PoseEstimator(model, device="cpu").device == torch.device("cpu")
+    assert PoseEstimator(model, device="cpu").config.device == torch.device("cpu")
 
 
 def test_a_network_method_that_cannot_run_is_named_in_the_recommended_pose(model, pair,
