@@ -221,8 +221,7 @@ def _predict_pairs(args, methods: str) -> int:
     from strl_pyg.frontend import FrontendConfig
 
     pairs = read_pairs_file(args.pairs, args.image_dir)
-    names = (methods if methods == "recommended" else None if methods == "all"
-             else _method_names(methods))
+    names = _method_names(methods)
     estimator, errors = None, 0
     for a, b in tqdm(pairs, desc="pairs", file=sys.stderr):
         one = copy(args)
@@ -278,8 +277,7 @@ def cmd_predict(args) -> int:
     # one estimator for both inputs: "recommended" (estimator.RECOMMENDED) walks the
     # recommended order (the images matched once), "all" runs every installed method; torch
     # is imported only once the inputs are read
-    names = (methods if methods == "recommended" else None if methods == "all"
-             else _method_names(methods))
+    names = _method_names(methods)
     if args.matches:
         if args.image0 or args.image1:
             raise UsageError(f"Expected either two images or --matches (got both: "
@@ -346,32 +344,24 @@ def _intrinsics_in_original_frame(est, inputs) -> None:
             rec.info["unreliable"] = [fix(w) for w in rec.info["unreliable"]]
 
 
-def _method_names(methods: str) -> tuple[str, ...]:
-    """The names of ``--methods``, matched to the registered ones without regard to case
-    (``OpenCV`` is ``opencv``)."""
-    from strl_pyg.inference import METHODS
+def _method_names(methods: str) -> tuple[str, ...] | str:
+    """``--methods``: :data:`~strl_pyg.inference.RECOMMENDED`, or the names to run (``all``:
+    every installed method), parsed by the registry's one parser (any case); a name it does
+    not know is one line naming the closest registered name."""
+    if methods.strip().lower() == "recommended":  # the default: nothing to import for it
+        return "recommended"
+    from strl_pyg.inference import checked_method_names  # the registry with its methods
 
-    by_lower = {m.lower(): m for m in METHODS}
-    return tuple(by_lower.get(m.strip().lower(), m.strip()) for m in methods.split(",")
-                 if m.strip())
+    try:
+        return checked_method_names(methods)
+    except ValueError as err:
+        raise UsageError(str(err).replace("Expected methods from", "Expected --methods from",
+                                          1)) from None
 
 
 def _check_methods(methods: str) -> None:
-    """``--methods``: 'recommended', 'all' or registered names; one line naming the closest
-    registered name otherwise (checked before any image or model is read)."""
-    if methods.lower() in ("recommended", "all"):
-        return
-    import difflib
-
-    from strl_pyg.inference import METHODS
-
-    names = _method_names(methods)
-    unknown = [m for m in names if m not in METHODS]
-    if unknown or not names:
-        close = difflib.get_close_matches(unknown[0], list(METHODS), n=1) if unknown else []
-        hint = f"; did you mean '{close[0]}'?" if close else ""
-        raise UsageError(f"Expected --methods 'recommended', 'all' or names from "
-                         f"{', '.join(METHODS)} (got {methods!r}){hint}")
+    """``--methods`` checked before any image or model is read."""
+    _method_names(methods)
 
 
 def _read_match_file(args):

@@ -1,7 +1,12 @@
-"""Pose of one image pair by every method: :class:`PoseEstimator` and the method registry
-(:mod:`.estimator`), the methods (:mod:`.methods`), the support check (:mod:`.support`),
-input checks and the network's input graph (:mod:`.inputs`), the records (:mod:`.record`)
-and the lazy recommended path (:mod:`.recommended`).
+"""Pose of one image pair by every method: :class:`PoseEstimator` (:mod:`.estimator`), the
+method registry (:mod:`.registry`), the method classes (:mod:`.methods`, :mod:`.line_methods`),
+the support check (:mod:`.support`), the input checks (:mod:`.checks`), the network's input
+graph (:mod:`.network`), the records (:mod:`.record`) and the lazy recommended path
+(:mod:`.recommended`).
+
+Every name of this face is read after :mod:`.estimator` has registered the built-in methods, so
+``from strl_pyg.inference import METHODS`` (or ``EstimatorConfig``, ``methods_needed``, ...)
+sees them; importing :mod:`.registry` directly gives the registry as it stands.
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ _EXPORTS = {
     "estimate_methods": "strl_pyg.inference.recommended",
     "methods_needed": "strl_pyg.inference.registry",
     "methods_where": "strl_pyg.inference.registry",
+    "checked_method_names": "strl_pyg.inference.registry",
     "POSELIB_MISSING": "strl_pyg.inference.policy",
     "BAD_INTRINSICS": "strl_pyg.inference.checks",
     "NO_INTRINSICS": "strl_pyg.inference.pair",
@@ -62,8 +68,11 @@ _DERIVED = ("SUPPORT_CHECKED", "BOOTSTRAPPED", "NETWORK_METHODS", "DEPENDENCIES"
 
 
 def __getattr__(name: str):
-    if name in _DERIVED:
-        from strl_pyg.inference import registry
+    if name.startswith("__"):
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import strl_pyg.inference.estimator  # noqa: F401  (registers the built-in methods)
+    import strl_pyg.inference.registry
 
-        return registry.DERIVED[name]()
+    if name in _DERIVED:
+        return strl_pyg.inference.registry.DERIVED[name]()
     return _lazy_getattr(name)

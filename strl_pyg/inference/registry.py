@@ -195,20 +195,28 @@ def classical_method() -> str:
 
 def checked_method_names(methods: Any) -> tuple[str, ...] | str:
     """Method names to run (``None`` or ``"all"``: every installed one; one ``str``: one
-    method, or comma-separated names as ``strl-pose predict --methods`` takes them;
-    :data:`RECOMMENDED` stays as it is)."""
-    if isinstance(methods, str) and methods == RECOMMENDED:
+    method, or comma-separated names as ``strl-pose predict --methods`` takes them, in any
+    case: ``"OpenCV"`` is ``opencv``; :data:`RECOMMENDED` stays as it is). The one parser of
+    method names: the estimator, its configuration and the command line call it."""
+    if isinstance(methods, str) and methods.strip().lower() == RECOMMENDED:
         return RECOMMENDED
-    if isinstance(methods, str) and methods == "all":
+    if isinstance(methods, str) and methods.strip().lower() == "all":
         methods = None
     if isinstance(methods, str):
-        methods = tuple(n.strip() for n in methods.split(","))
+        by_lower = {m.lower(): m for m in METHODS}
+        methods = tuple(by_lower.get(n.strip().lower(), n.strip())
+                        for n in methods.split(",") if n.strip())
     names = tuple(methods) if methods is not None else tuple(
         n for n, s in METHODS.items() if s.available())
     unknown = [n for n in names if n not in METHODS]
     if unknown or not names:
+        import difflib
+
+        close = difflib.get_close_matches(str(unknown[0]), list(METHODS), n=1) \
+            if unknown else []
+        hint = f"; did you mean '{close[0]}'?" if close else ""
         raise ValueError(f"Expected methods from {tuple(METHODS)}, 'all' or "
-                         f"'{RECOMMENDED}' (got {list(names)})")
+                         f"'{RECOMMENDED}' (got {list(names)}){hint}")
     missing = [n for n in names if not METHODS[n].available()]
     if missing:
         raise ValueError(f"Expected installed methods (got {missing}: not importable here)")

@@ -184,3 +184,28 @@ def test_a_classical_dependency_is_the_solver_asked_for():
 
     assert methods_needed(["opencv", "fused"]) == ("regression", "opencv", "fused")
     assert methods_needed(["fused"])[:2] == ("regression", est_mod.classical_method())
+
+
+def test_the_face_gives_the_registry_with_its_built_in_methods():
+    """Before: in a fresh process ``from strl_pyg.inference import METHODS`` was an empty
+    registry and ``EstimatorConfig(methods="opencv")`` refused every name (the built-in
+    methods are registered by the estimator module, which nothing had imported yet)."""
+    import subprocess
+    import sys
+
+    code = ("from strl_pyg.inference import METHODS, EstimatorConfig\n"
+            "assert list(METHODS)[:3] == ['regression', 'opencv', 'poselib'], list(METHODS)\n"
+            "assert EstimatorConfig(methods='OpenCV').methods == ('opencv',)\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+
+
+def test_one_parser_of_method_names_with_a_suggestion():
+    from strl_pyg.inference.registry import RECOMMENDED, checked_method_names
+
+    assert checked_method_names("OpenCV, PoseLib") == ("opencv", "poselib")
+    assert checked_method_names("Recommended") == RECOMMENDED
+    assert checked_method_names("ALL") == checked_method_names(None)
+    with pytest.raises(ValueError, match="did you mean 'poselib'"):
+        checked_method_names("poselibb")
