@@ -8,6 +8,12 @@ network).
 
     python benchmarks/calibrate_regression.py --model runs/real/best_model.pt \\
         --out strl_pyg/weights/strl_pose_real.pt --training-data "..."
+
+Your own posed photographs (any format of ``strl_pyg.datasets.read_posed_folder``: real_scenes,
+COLMAP, NeRF, LLFF), scenes the model was not trained on::
+
+    python benchmarks/calibrate_regression.py --model runs/mine/best_model.pt \\
+        --data-root my_scenes --scenes hall,garden --out runs/mine/calibrated.pt
 """
 
 from __future__ import annotations
@@ -24,6 +30,28 @@ import bench_two_view as btv  # noqa: E402
 from strl_bench_common import banner  # noqa: E402
 
 QUANTILE = 0.9545  # the 2-sigma region's share under a calibrated covariance
+
+
+def posed_pairs(root: Path, scenes: list[str], cache: Path, gap: int = 2, stride: int = 4):
+    """``(scene/i-j, matches, T_0to1)`` of the pairs ``(i, i + gap)`` for every ``stride``-th
+    ``i`` of each scene folder (the front end's matches, cached)."""
+    from strl_pyg.datasets.camera_files import read_posed_folder
+    from strl_pyg.frontend import NoMatchesError, match_images
+
+    out = []
+    for scene in scenes:
+        images = read_posed_folder(root / scene)
+        for i in range(0, len(images) - gap, stride):
+            a, b = images[i], images[i + gap]
+            T = np.linalg.inv(b.T_c2w) @ a.T_c2w
+            try:
+                m = bp._cached(cache, f"posed_{scene}_{i}_{i + gap}", lambda a=a, b=b:
+                               match_images(bp._read(a.path), bp._read(b.path), K0=a.K,
+                                            K1=b.K))
+            except NoMatchesError:
+                continue
+            out.append((f"{scene}/{i}-{i + gap}", m, T))
+    return out
 
 
 def mahalanobis(model, pairs, own: bool = False) -> tuple[np.ndarray, list[str]]:
@@ -58,6 +86,12 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=None, help="write the calibrated checkpoint here")
     ap.add_argument("--training-data", default=None, help="metadata: what it was trained on")
     ap.add_argument("--cache", default="outputs/bench_cache")
+    ap.add_argument("--data-root", default=None,
+                    help="a folder of posed scene folders (default: the real_scenes "
+                         "validation scenes' (i, i+2) pairs)")
+    ap.add_argument("--scenes", default=None,
+                    help="with --data-root: the scene folders to calibrate on, comma-separated "
+                         "(scenes the model was not trained on)")
     ap.add_argument("--own", action="store_true",
                     help="the network's own covariance (no swap / data check); no --out")
     args = ap.parse_args(argv)
@@ -70,7 +104,16 @@ def main(argv=None) -> int:
 
     torch.set_num_threads(1)
     model = StrLPose.load(args.model)
-    pairs = btv.real_val_pairs(Path(args.cache), 2, 4)
+    if args.data_root:
+        if not args.scenes:
+            ap.error("--data-root needs --scenes (the held-out scenes to calibrate on)")
+        pairs = posed_pairs(Path(args.data_root), [s.strip() for s in args.scenes.split(",")
+                                                   if s.strip()], Path(args.cache))
+    else:
+        pairs = btv.real_val_pairs(Path(args.cache), 2, 4)
+    if not pairs:
+        print("error: expected matched pairs to calibrate on (got none)", file=sys.stderr)
+        return 2
     d2, scenes = mahalanobis(model, pairs, own=args.own)
     scale = fit(d2)
     print(banner())
