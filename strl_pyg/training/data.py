@@ -235,7 +235,9 @@ def _posed_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
 
     model_cfg = cfg.model_config()
     keep = model_cfg.visual == "cnn"
-    grey = model_input_channels(model_cfg, cfg.patch_size) == 1
+    # a model that reads no pixels gets the generated pairs' grey patches too: a mixed batch
+    # collates only graphs whose patches have the same channels
+    grey = model_input_channels(model_cfg, cfg.patch_size) in (None, 1)
     train_names, val_names = posed_scenes(cfg)
     root = Path(cfg.data_root)
     common = dict(cache_dir=cfg.cache_dir, patch_size=cfg.patch_size, keep_images=keep,

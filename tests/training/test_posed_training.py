@@ -29,7 +29,8 @@ def posed_root(tmp_path_factory):
         T1 = np.linalg.inv(np.asarray(p.T_0to1, dtype=np.float64))  # camera 1 to camera 0
         ims = []
         for i, (img, T) in enumerate(((p.image0, np.eye(4)), (p.image1, T1))):
-            cv2.imwrite(str(d / "images" / f"{i}.png"), img)
+            colour = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR) if img.ndim == 2 else img
+            cv2.imwrite(str(d / "images" / f"{i}.png"), colour)  # photographs are in colour
             ims.append({"file": f"images/{i}.png", "K": np.asarray(p.K).tolist(),
                         "T_cam_to_world": T.tolist(), "width": 256, "height": 96})
         (d / "cameras.json").write_text(json.dumps({"images": ims}))
@@ -170,3 +171,17 @@ def test_posed_min_points_leaves_out_training_pairs_with_few_matches(posed_root,
     assert len(val_ds) == 1  # validation keeps every pair
     with pytest.raises(ValueError, match=r"with >= 100000 point matches \(got none of 2"):
         build_datasets(replace(cfg, posed_min_points=100_000), progress=False)
+
+
+@pytest.mark.slow
+def test_photographs_and_generated_pairs_collate_for_a_model_without_pixels(posed_root, tmp_path):
+    """Before: with ``--model baseline`` (no visual branch) the photographs' graphs carried
+    RGB patches and the generated ones grey patches, and the first mixed batch failed in
+    torch.cat with a traceback."""
+    from strl_pyg.training.data import collater
+
+    for row in ("baseline", "LP"):
+        cfg = posed_config(posed_root, tmp_path / row, synthetic_share=0.5, model=row)
+        train_ds, _ = build_datasets(cfg, progress=False)
+        batch = collater(cfg.model_config())([train_ds[i] for i in range(len(train_ds))])
+        assert batch.num_graphs == len(train_ds) == 4
