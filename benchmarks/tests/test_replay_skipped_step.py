@@ -47,6 +47,7 @@ def _nan_gradients_on(monkeypatch, calls: set):
     monkeypatch.setattr(loop, "losses_for", losses)
 
 
+@pytest.mark.slow  # a training run: the slow tier
 def test_the_replay_names_the_operation_whose_backward_gave_nan(tmp_path, monkeypatch):
     _nan_gradients_on(monkeypatch, {2})
     train(_tiny(tmp_path / "run"), progress=False)

@@ -238,6 +238,7 @@ def test_table3_needs_a_scored_baseline(tmp_path, monkeypatch):
         spr.main(["table3", "nothing", "--out", str(tmp_path / "t3.md")])
 
 
+@pytest.mark.slow  # a training run: the slow tier
 def test_gradient_shares_use_the_runs_own_loss(tmp_path, monkeypatch):
     """Before: the study built its loss without the run's beta (0.5 for every run, also the
     default recipe's beta 0.25 runs), so their gradient shares were another loss's."""

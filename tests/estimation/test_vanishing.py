@@ -254,6 +254,7 @@ def test_line_sigmas_grow_with_the_lines_noise_and_count():
         line_sigmas(m, dirs, 0.0)
 
 
+@pytest.mark.slow  # a training run: the slow tier
 def test_joint_refinement_beats_the_points_alone_on_few_noisy_points():
     # measured over 20 seeds at 8 points, 0.5 px noise, VP_LINE_SIGMA_PX 0.03: median rotation
     # 0.58 deg (joint) against 1.26 (points alone), translation 2.5 against 6.6 deg (at 0.1:

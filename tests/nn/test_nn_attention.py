@@ -284,6 +284,7 @@ def test_layout_misuse_is_a_one_line_error():
         conv(x, None, complete=True, layout=batch)
 
 
+@pytest.mark.slow  # a training run: the slow tier
 def test_the_layout_path_does_not_break_a_compiled_graph():
     """No host synchronisation inside the layer once the layout is built: dynamo traces the
     dense path of an uneven batch as one graph (the graph-id path breaks it)."""

@@ -245,6 +245,7 @@ def test_torchrun_two_ranks_identical_and_equal_to_single_process(tmp_path, monk
         torch.testing.assert_close(w0[k], single[k], rtol=1e-4, atol=1e-5)
 
 
+@pytest.mark.slow  # a training run: the slow tier
 def test_init_from_loads_weights_and_rejects_other_architectures(tmp_path):
     first = train(tiny_config(tmp_path / "a", steps=2), progress=False)["model"]
     cfg = tiny_config(tmp_path / "b", steps=1, init_from=str(tmp_path / "a" / "model.pt"),
@@ -259,6 +260,7 @@ def test_init_from_loads_weights_and_rejects_other_architectures(tmp_path):
         train(bad, progress=False)
 
 
+@pytest.mark.slow  # a training run: the slow tier
 def test_geometric_head_trains_on_a_scene_distribution_from_regression_weights(tmp_path):
     from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.model import StrLPoseConfig
@@ -328,6 +330,7 @@ def test_tensorboard_absent_is_said_once_and_recorded(tmp_path, monkeypatch):
     assert config["warmup_steps"] == 0
 
 
+@pytest.mark.slow  # a training run: the slow tier
 def test_curves_show_the_training_loss_beside_validation(tmp_path):
     from strl_pyg.training.log import _train_pose_loss, read_log
 
@@ -439,6 +442,7 @@ def test_a_cosine_run_logs_its_rates_and_resumes_on_the_same_schedule(tmp_path, 
         train(tiny_config(tmp_path / "full", steps=8, **kw), resume=True, progress=False)
 
 
+@pytest.mark.slow  # a training run: the slow tier
 def test_roll_augment_rolls_training_pairs_and_their_statistics(tmp_path):
     """--roll-augment: each training pair's cameras are rolled by an angle within the range
     (coordinates and pose together, the appearance untouched), the validation pairs are not,

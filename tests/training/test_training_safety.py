@@ -48,6 +48,7 @@ def test_last_pt_is_written_every_n_steps_not_only_at_validation(tmp_path, monke
     assert seen == [2, 4, 5]  # every 2 steps, then the validation at the end
 
 
+@pytest.mark.slow  # a training run: the slow tier
 def test_a_signal_checkpoints_the_step_in_progress_and_resume_continues(tmp_path, monkeypatch):
     from strl_pyg.training import loop
 
@@ -89,6 +90,7 @@ def test_an_existing_run_folder_needs_resume_or_overwrite(tmp_path):
     check_run_folder(tmp_path / "empty")  # a new folder is fine
 
 
+@pytest.mark.slow  # a training run: the slow tier
 def test_a_moved_run_folder_resumes_and_a_finished_run_says_so(tmp_path):
     out = tmp_path / "run"
     train(_cfg(out, steps=2, val_every=2), progress=False)
@@ -190,6 +192,7 @@ def _nan_gradients_on(monkeypatch, calls: set):
     monkeypatch.setattr(loop, "losses_for", losses)
 
 
+@pytest.mark.slow  # a training run: the slow tier
 def test_a_step_with_nan_gradients_is_skipped_not_applied(tmp_path, monkeypatch):
     """Found on a 3000-pair run (issue 30): at step 569 one batch gave a finite loss with NaN
     gradients; the step was applied, every weight became NaN, and the run went on for
@@ -221,6 +224,7 @@ def test_steps_without_finite_gradients_stop_the_run_with_one_line(tmp_path, mon
         train(_tiny(tmp_path / "run"), progress=False)
 
 
+@pytest.mark.slow  # a training run: the slow tier
 def test_non_finite_weights_are_never_checkpointed(tmp_path, monkeypatch):
     """last.pt keeps the last finite state (step 2 here) when the weights stop being numbers."""
     from strl_pyg.training import loop
@@ -243,6 +247,7 @@ def test_non_finite_weights_are_never_checkpointed(tmp_path, monkeypatch):
     assert load_checkpoint(tmp_path / "run" / "last.pt")["step"] == 2
 
 
+@pytest.mark.slow  # a training run: the slow tier
 def test_a_skipped_step_keeps_its_batch_and_weights_to_reproduce_it(tmp_path, monkeypatch):
     """The step-569 batch of issue 30 could not be looked at afterwards: the skipped step now
     leaves ``skipped/stepN.pt`` (safe loading), from which the same forward pass is rebuilt
