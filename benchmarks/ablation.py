@@ -445,9 +445,12 @@ def cmd_report(args: argparse.Namespace) -> int:
     refs = {p.stem: json.loads(p.read_text())
             for p in sorted((ev / "reference").glob("*.json"))}
     names = list(sets)
-    lines = ["# The ablation (Table 3) in our implementation", "", "```", banner(), "```", "",
-             f"`python benchmarks/ablation.py report` (from `{_rel(ev)}`, written by "
-             f"`ablation.py train --eval`); "
+    recipe = "" if args.recipe == "paper" else f" --recipe {args.recipe}"
+    title = ("Table 3 on real photographs" if args.recipe == "real"
+             else "The ablation (Table 3) in our implementation")
+    lines = [f"# {title}", "", "```", banner(), "```", "",
+             f"`python benchmarks/ablation.py{recipe} report` (from `{_rel(ev)}`, written by "
+             f"`ablation.py{recipe} train --eval`); "
              f"runs: {', '.join(f'{r} ({len(v)} seed(s))' for r, v in runs.items())}. Median "
              "rotation and translation-direction errors (deg) over the pairs where the method "
              "gave a pose, [95 % bootstrap interval over pairs] of seed 0, (range of the "
