@@ -131,7 +131,8 @@ def test_the_results_that_must_outlive_the_machine_are_not_git_ignored():
     repo = BENCH.parent
     if shutil.which("git") is None or not (repo / ".git").exists():
         pytest.skip("not a git checkout")
-    for folder in ("benchmarks/results_ablation", "benchmarks/studies/results_ablation_balanced"):
+    for folder in ("benchmarks/results_ablation", "benchmarks/studies/results_ablation_balanced",
+                   "benchmarks/results_ablation/real_photographs"):
         for rel in ("runs/full-s0.json", "history/full-s0.json", "sets.json", "poselib.json"):
             path = f"{folder}/{rel}"
             out = subprocess.run(["git", "check-ignore", "--no-index", "-v", path], cwd=repo,
