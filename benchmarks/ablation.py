@@ -123,7 +123,8 @@ PLAN_BALANCED = ([(r, 0) for r in ("baseline", "LP", "V", "full", "L")]
 #: training, ``--dataset posed``), scored on the 4 validation scenes and the KITTI 06, DeMoN and
 #: dino slices (``bench_real_scenes.pair_sets``). Seed 0 of the three rows first.
 PLAN_REAL = [(r, s) for s in (0, 1, 2) for r in ("baseline", "LP", "full")]
-#: The real recipe's budget: steps of batch 16 per run (about 70 minutes of one CPU core).
+#: The real recipe's budget: steps of batch 16 per run (on one core of the 2-core development
+#: CPU: baseline 11 minutes, LP about 35).
 REAL_STEPS = 1200
 #: The real_scenes folder (``$STRL_REAL_SCENES``, default ``../shared/data/real_scenes``).
 REAL_SCENES = os.environ.get("STRL_REAL_SCENES", str(
