@@ -17,7 +17,7 @@ _EXPORTS = {
     "main": "strl_pyg.cli.commands",
     "check_train_files": "strl_pyg.cli.commands",
     "build_parser": "strl_pyg.cli.commands",
-    "predict_pair": "strl_pyg.cli.commands",
+    "predict_pair": "strl_pyg.cli.predict",
     "read_pair": "strl_pyg.cli.readers",
     "non_negative_int": "strl_pyg.cli.readers",
     "bootstrap_count": "strl_pyg.cli.readers",

@@ -44,7 +44,7 @@ __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 if TYPE_CHECKING:  # for type checkers and IDEs; never executed
     from strl_pyg.data import keys
     from strl_pyg.data.build import build_pair_graph, load_graph, save_graph
-    from strl_pyg.data import (
+    from strl_pyg.data.pair_graph import (
         ImplicitEdgesError,
         PairGraph,
         complete_edge_index,

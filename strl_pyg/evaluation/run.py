@@ -48,8 +48,8 @@ from strl_pyg.synthetic.config import LINE_SCENE_KINDS, SCENE_KINDS
 from strl_pyg.utils.commandline import OneLineArgumentParser, UsageError
 from strl_pyg.utils.io import one_line
 
-__all__ = ["LEGACY_METHOD_NAMES", "available_methods", "resolve_methods", "predict_pose",
-           "evaluate_pairs", "build_parser", "main"]
+__all__ = ["LEGACY_METHOD_NAMES", "registered_methods", "available_methods", "resolve_methods",
+           "predict_pose", "evaluate_pairs", "build_parser", "main"]
 
 def registered_methods() -> tuple[str, ...]:
     """The methods ``evaluate`` scores: the registry of

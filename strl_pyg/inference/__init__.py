@@ -11,6 +11,8 @@ sees them; importing :mod:`.registry` directly gives the registry as it stands.
 
 from __future__ import annotations
 
+import sys
+
 from strl_pyg.utils.lazy import lazy_exports
 
 _EXPORTS = {
@@ -60,7 +62,7 @@ _EXPORTS = {
 
 __all__ = [*_EXPORTS, "SUPPORT_CHECKED", "NETWORK_METHODS", "DEPENDENCIES", "BOOTSTRAPPED"]
 
-_lazy_getattr, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
+_lazy_getattr, _lazy_dir = lazy_exports(__name__, _EXPORTS, globals())
 
 #: Tables derived from the method registry on every access (never cached on the face): a
 #: method registered later is in them.
@@ -68,11 +70,18 @@ _DERIVED = ("SUPPORT_CHECKED", "BOOTSTRAPPED", "NETWORK_METHODS", "DEPENDENCIES"
 
 
 def __getattr__(name: str):
-    if name.startswith("__"):
+    if name.startswith("_"):
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     import strl_pyg.inference.estimator  # noqa: F401  (registers the built-in methods)
     import strl_pyg.inference.registry
 
     if name in _DERIVED:
         return strl_pyg.inference.registry.DERIVED[name]()
+    module = sys.modules.get(f"{__name__}.{name}")  # a submodule the import above loaded
+    if module is not None and name not in _EXPORTS:
+        return module
     return _lazy_getattr(name)
+
+
+def __dir__() -> list[str]:
+    return sorted(set(_lazy_dir()) | set(_DERIVED))

@@ -16,11 +16,11 @@ from typing import Any
 import numpy as np
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.estimation.classical import have_poselib
 from strl_pyg.inference.methods import (
     POINT_POOR_MAX_POINTS,
     MethodContext,
     Classical,
+    classical_base,
     with_covariance,
 )
 from strl_pyg.inference.record import MethodResult
@@ -60,7 +60,7 @@ class VanishingPoint(PoseMethod):
         if sigma is not None:
             from strl_pyg.inference.support import check_support
 
-            base = "poselib" if have_poselib() else "opencv"
+            base = classical_base(ctx)
             cls = ctx.results.get(base) or ctx.cache.get("vp_start")
             if cls is None:
                 cls = ctx.cache["vp_start"] = check_support(
@@ -137,7 +137,7 @@ class VanishingPointChecked(PoseMethod):
         why; the covariance is that pose's own record's (calibrated when that record was:
         ``info["calibration_scale"]``)."""
         start = time.perf_counter()
-        base = "poselib" if have_poselib() else "opencv"
+        base = classical_base(ctx)
         cls = _result_of(base, matches, ctx)
         info: dict[str, Any] = {"classical": base}
 
@@ -146,13 +146,15 @@ class VanishingPointChecked(PoseMethod):
             if rec.status != "ok":
                 return MethodResult("vp_checked", rec.status, time_ms=ms, info={**info,
                                     "reason": reason}, warnings=[f"vp_checked: {reason}"]
-                                    + [w for w in rec.warnings if w not in reason])
+                                    + [w for w in rec.warnings if w not in reason],
+                                    bad_intrinsics=rec.bad_intrinsics)
             return MethodResult("vp_checked", "ok", rec.as_pose(), rec.covariance,
                                 list(rec.warnings), ms, rec.num_inliers,
                                 info={**info, "source": rec.method, "reason": reason,
                                       "covariance": rec.info.get("covariance"),
                                       "calibration_scale": rec.info.get("calibration_scale")},
-                                raw=rec.raw)
+                                raw=rec.raw, calibrated=rec.calibrated,
+                                bad_intrinsics=rec.bad_intrinsics)
 
         if matches.num_distinct_points > POINT_POOR_MAX_POINTS:
             return take(cls, f"{matches.num_distinct_points} distinct point matches (> "

@@ -1,11 +1,12 @@
-"""The pose methods :class:`~strl_pyg.inference.PoseEstimator` runs, one function each, and
-the context they share; :mod:`strl_pyg.inference.estimator` registers them in :data:`METHODS
-<strl_pyg.inference.estimator.METHODS>`, in this order:
+"""The pose methods :class:`~strl_pyg.inference.PoseEstimator` runs, one small class each
+(:class:`~strl_pyg.inference.registry.PoseMethod`), and the context they share;
+:mod:`strl_pyg.inference.estimator` registers them in :data:`METHODS
+<strl_pyg.inference.registry.METHODS>`, in this order:
 
 * ``regression``: the network's pose head (resampled graph, as in training).
 * ``opencv``, ``poselib``: the classical essential-matrix solvers
   (:mod:`strl_pyg.estimation.classical`).
-* ``fused`` (:func:`_fused`): the network and the first ``"ok"`` classical pose combined in
+* ``fused`` (:class:`Fused`): the network and the first ``"ok"`` classical pose combined in
   information form (:func:`~strl_pyg.estimation.pose_fusion.fuse_poses`).
 * ``geometric``: the weighted eight-point solve of the geometric head, refined.
 * ``guided``: the classical solver guided by the geometric head's inlier weights
@@ -46,7 +47,7 @@ from strl_pyg.inference.record import MethodResult
 from strl_pyg.inference.registry import PoseMethod
 
 __all__ = ["MethodContext", "MethodFn", "POINT_POOR_MAX_POINTS", "Regression", "Classical",
-           "Geometric", "Guided", "Fused", "with_covariance"]
+           "Geometric", "Guided", "Fused", "with_covariance", "classical_base"]
 
 
 # ----------------------------------------------------------------------------- context
@@ -264,6 +265,14 @@ class Classical(PoseMethod):
         return _add_bootstrap(rec, boot, ctx.config.bootstrap, "first-order")
 
 
+def classical_base(ctx: MethodContext) -> str:
+    """The classical solver a method reads: the one the run holds a result of (PoseLib first),
+    else PoseLib where installed, else OpenCV; a method's ``"classical"`` dependency is that
+    solver (:func:`~strl_pyg.inference.registry.methods_needed`)."""
+    return next((c for c in ("poselib", "opencv") if c in ctx.results),
+                "poselib" if have_poselib() else "opencv")
+
+
 #: The point-poor regime, one bound for everything that depends on it: at or below this many
 #: point matches the recommended order puts the line solver first (``POINT_POOR_ORDER``) and
 #: ``vp_checked`` consults the lines (above it, it is the classical pose). It is the definition
@@ -364,7 +373,7 @@ class Guided(PoseMethod):
         bad = _no_head("guided", ctx)
         if bad is not None:
             return bad
-        base = "poselib" if have_poselib() else "opencv"
+        base = classical_base(ctx)
         out, ms = _full_forward(matches, ctx)
         w = torch.sigmoid(out.geometric.point_logits.double().cpu()).numpy()
         prior = ctx.results.get(base)

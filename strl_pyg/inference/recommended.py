@@ -3,7 +3,7 @@
 :class:`~strl_pyg.inference.PoseEstimator` with its default runs every installed method and
 then picks the recommended pose: the first ``"ok"`` method of the checkpoint's recommended
 order (:func:`~strl_pyg.inference.policy.recommended_order`). With ``methods="recommended"``
-(:data:`~strl_pyg.inference.estimator.RECOMMENDED`; :func:`estimate_recommended` here) it gives
+(:data:`~strl_pyg.inference.registry.RECOMMENDED`; :func:`estimate_recommended` here) it gives
 the same recommended pose in one pass over the pair: the images matched once (the points
 first, the line segments added to them only once a method that reads them, the network's or
 ``vp``, is about to run: the classical solvers use points only), the matches checked and
@@ -60,15 +60,14 @@ def estimate_methods(model: Any, image0: np.ndarray, image1: np.ndarray, K0: Any
                      frontend_config: Any, methods: str = "recommended", **estimator_kw: Any):
     """``strl-pose predict --methods``: ``"recommended"`` (:func:`estimate_recommended`),
     ``"all"`` (every installed method) or comma-separated names of
-    :data:`~strl_pyg.inference.estimator.METHODS` (``ValueError`` for others); these override
+    :data:`~strl_pyg.inference.registry.METHODS` (``ValueError`` for others); these override
     the methods of a ``config=``."""
     from strl_pyg.inference.estimator import PoseEstimator
-    from strl_pyg.inference import METHODS
+    from strl_pyg.inference.registry import RECOMMENDED, checked_method_names
 
-    if methods == "recommended":
+    names = checked_method_names(methods)  # the registry's one parser (any case, "all")
+    if names == RECOMMENDED:
         return estimate_recommended(model, image0, image1, K0, K1, frontend_config,
                                     **estimator_kw)
-    names = (tuple(n for n, s in METHODS.items() if s.available()) if methods == "all"
-             else tuple(m.strip() for m in methods.split(",") if m.strip()))
     return PoseEstimator(model, methods=names, **estimator_kw).estimate_images(
         image0, image1, K0, K1, frontend_config=frontend_config)

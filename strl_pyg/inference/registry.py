@@ -203,11 +203,10 @@ def checked_method_names(methods: Any) -> tuple[str, ...] | str:
     if isinstance(methods, str) and methods.strip().lower() == "all":
         methods = None
     if isinstance(methods, str):
-        by_lower = {m.lower(): m for m in METHODS}
-        methods = tuple(by_lower.get(n.strip().lower(), n.strip())
-                        for n in methods.split(",") if n.strip())
-    names = tuple(methods) if methods is not None else tuple(
-        n for n, s in METHODS.items() if s.available())
+        methods = tuple(n for n in methods.split(",") if n.strip())
+    by_lower = {m.lower(): m for m in METHODS}
+    names = tuple(by_lower.get(str(n).strip().lower(), n) for n in methods) \
+        if methods is not None else tuple(n for n, s in METHODS.items() if s.available())
     unknown = [n for n in names if n not in METHODS]
     if unknown or not names:
         import difflib

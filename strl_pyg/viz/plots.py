@@ -66,7 +66,7 @@ def plot_trajectory_topview(
         gt: **camera-to-world** poses (:class:`~strl_pyg.geometry.Pose` ``[N]``,
             ``[N, 4, 4]``, ``[N, 3, 4]``, KITTI rows ``[N, 12]``) or positions ``[N, 3]``.
         estimates: ``{label: poses or positions}`` in the same frame as ``gt`` (align them
-            first, e.g. with :func:`~strl_pyg.metrics.two_view.absolute_trajectory_error`).
+            first, e.g. with :func:`~strl_pyg.metrics.absolute_trajectory_error`).
         axes: the two world axes to draw (default ``("x", "z")``, KITTI's ground plane).
         title: optional figure title.
 
@@ -105,7 +105,7 @@ def plot_segment_errors(
         path: output ``.png`` file.
         errors: ``{label: KittiSegmentErrors}`` (from
             :func:`~strl_pyg.metrics.kitti_odometry_errors`) or ``{label: summary}`` (the dict of
-            :func:`~strl_pyg.metrics.two_view.kitti_odometry_summary`), one curve per label.
+            :func:`~strl_pyg.metrics.kitti_odometry_summary`), one curve per label.
         title: optional figure title.
 
     Returns:

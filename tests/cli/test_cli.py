@@ -425,13 +425,13 @@ def test_a_wrong_case_flag_gets_a_suggestion(capsys):
 
 def test_an_unknown_method_fails_before_anything_is_loaded(capsys, monkeypatch):
     """Before: '--methods poselibb' failed after 6 s of loading."""
-    import strl_pyg.cli.commands as commands
+    import strl_pyg.cli.predict as predict
 
     def boom(*a, **k):
         raise AssertionError("read before the method names were checked")
 
-    monkeypatch.setattr(commands, "load_model", boom)
-    monkeypatch.setattr(commands, "read_pair", boom)
+    monkeypatch.setattr(predict, "load_model", boom)
+    monkeypatch.setattr(predict, "read_pair", boom)
     assert cli_main(["predict", "a.png", "b.png", "--methods", "poselibb"]) == 2
     err = capsys.readouterr().err
     assert "did you mean 'poselib'?" in err and err.count("\n") == 1

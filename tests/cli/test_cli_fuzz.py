@@ -84,7 +84,9 @@ def stubs(files):
     with fast stand-ins for the duration of the module."""
     import strl_pyg.evaluation.run as evaluation
     import strl_pyg.synthetic as synthetic
-    import strl_pyg.training.loop as training
+    import strl_pyg.training.commandline as commandline
+    from strl_pyg.model.strl_pose import StrLPose
+    from strl_pyg.training.checkpoints import init_weights, load_checkpoint
 
     real_generate = synthetic.generate_pair
 
@@ -98,15 +100,15 @@ def stubs(files):
 
     def fake_train(cfg, resume=False, progress=True, datasets=None):
         if resume:
-            training.load_checkpoint(Path(cfg.out_dir) / "last.pt")
+            load_checkpoint(Path(cfg.out_dir) / "last.pt")
         if cfg.init_from:
-            training._init_weights(training.StrLPose(cfg.model_config()), cfg.init_from)
+            init_weights(StrLPose(cfg.model_config()), cfg.init_from)
         return {"step": 0, "history": []}
 
     with pytest.MonkeyPatch.context() as mp:
         mp.chdir(files["dir"])  # relative outputs (defaults, garbage values) land in tmp
         mp.setattr(synthetic, "generate_pair", generate_small)
-        mp.setattr(training, "train", fake_train)
+        mp.setattr(commandline, "train", fake_train)  # what run_from_args calls
         mp.setattr(evaluation, "synthetic_eval_pairs", lambda *a, **k: [])
         yield
 

@@ -36,7 +36,7 @@ keypoints are in the resized image, so pass that size and a scaled K, or run ``-
 A leading batch dimension (PyTorch outputs, LightGlue's lists) is removed only where a key
 has one rank more than its layout says: size 1 is dropped, a larger batch needs
 ``batch_index``. Points outside the image (beyond
-:data:`~strl_pyg.data.matches.OUT_OF_IMAGE_TOLERANCE`) raise, with a hint when the size looks
+:data:`~strl_pyg.data.checks.OUT_OF_IMAGE_TOLERANCE`) raise, with a hint when the size looks
 transposed. GlueStick matches lines regardless of endpoint order; :func:`load_external_matches`
 orients each matched line by its endpoints' point matches (``line_endpoints="auto"``) and
 drops, with a warning, lines whose order cannot be told.
