@@ -209,3 +209,18 @@ def test_one_parser_of_method_names_with_a_suggestion():
     assert checked_method_names("ALL") == checked_method_names(None)
     with pytest.raises(ValueError, match="did you mean 'poselib'"):
         checked_method_names("poselibb")
+
+
+def test_a_classical_base_is_the_solver_of_the_run():
+    """Before: with only OpenCV asked for, vp_checked (and guided, vp) solved PoseLib on their
+    own, uncalibrated and with the support thresholds at 0, beside the OpenCV record."""
+    from strl_pyg.inference import PoseEstimator
+
+    pair = generate_pair(2_000_017)
+    est = PoseEstimator(methods=("opencv", "vp_checked"), bootstrap=0).estimate(pair.matches)
+    vc, cv = est.methods["vp_checked"], est.methods["opencv"]
+    assert vc.info["classical"] == "opencv" and vc.info["source"] == "opencv"
+    np.testing.assert_array_equal(vc.T_0to1, cv.T_0to1)
+    assert vc.calibrated == cv.calibrated  # the record it takes, with its calibration
+    assert sum("not calibrated" in w for w in vc.warnings) == sum(
+        "not calibrated" in w for w in cv.warnings)
