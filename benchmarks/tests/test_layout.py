@@ -72,14 +72,29 @@ def test_the_package_tests_never_import_a_benchmark(tmp_path):
     assert len(_benchmark_use(planted, modules)) == 3
 
 
+RUNNABLE = [p for p in SCRIPTS if p.name not in HELPERS]
+
+
+@pytest.fixture(scope="module")
+def help_runs():
+    """Every script's ``--help``, two processes at a time (one per core of a small machine)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+
+    def run(script):
+        return subprocess.run([sys.executable, str(script), "--help"], cwd=REPO, env=env,
+                              capture_output=True, text=True, timeout=300)
+
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        return dict(zip(RUNNABLE, pool.map(run, RUNNABLE)))
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("script", [p for p in SCRIPTS if p.name not in HELPERS],
-                         ids=lambda p: str(p.relative_to(BENCH)))
-def test_every_script_answers_help_from_where_it_is(script):
+@pytest.mark.parametrize("script", RUNNABLE, ids=lambda p: str(p.relative_to(BENCH)))
+def test_every_script_answers_help_from_where_it_is(script, help_runs):
     """A moved script still finds the shared helpers and the scripts it reads (and this
     checkout's package)."""
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    res = subprocess.run([sys.executable, str(script), "--help"], cwd=REPO, env=env,
-                         capture_output=True, text=True, timeout=300)
+    res = help_runs[script]
     assert res.returncode == 0, res.stderr[-2000:]
     assert "usage:" in res.stdout
