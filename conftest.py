@@ -30,3 +30,32 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture
+def plant_nan_gradients(monkeypatch):
+    """``plant(calls)``: the training loss gets a term whose value is 0 and whose gradient is
+    NaN on the ``calls``-th calls (1-based; -1: every call): sqrt(0 * x) has 0 * inf as its
+    derivative."""
+    from strl_pyg.training import loop
+
+    real = loop.losses_for
+
+    def plant(calls: set) -> None:
+        count = [0]
+
+        def losses(cfg, model_cfg):
+            pose, geo = real(cfg, model_cfg)
+
+            def planted(out, T):
+                logs = pose(out, T)
+                count[0] += 1
+                if count[0] in calls or -1 in calls:
+                    logs["loss"] = logs["loss"] + (0.0 * out.quaternion.sum()).sqrt()
+                return logs
+
+            return planted, geo
+
+        monkeypatch.setattr(loop, "losses_for", losses)
+
+    return plant

@@ -45,6 +45,15 @@ def demon_root(shared_data) -> Path:
 # benchmarks/tests/ shares.
 
 
+@pytest.fixture(scope="module")
+def model():
+    """The shipped model in eval mode, once per test module (a module's own ``model`` fixture,
+    e.g. a tiny one, takes its place there)."""
+    from strl_pyg.model.strl_pose import StrLPose
+
+    return StrLPose.from_pretrained().eval()
+
+
 @pytest.fixture
 def method_registry():
     """The method registry (``strl_pyg.inference.registry``), restored after the test: a test

@@ -24,36 +24,14 @@ def _tiny(out_dir, **kw):
     return replace(base, **kw)
 
 
-def _nan_gradients_on(monkeypatch, calls: set):
-    """The pose loss, plus a term whose value is 0 and whose gradient is NaN on the
-    ``calls``-th calls (1-based; -1: every call): sqrt(0 * x) has 0 * inf as its derivative."""
-    from strl_pyg.training import loop
-
-    real = loop.losses_for
-    count = [0]
-
-    def losses(cfg, model_cfg):
-        pose, geo = real(cfg, model_cfg)
-
-        def planted(out, T):
-            logs = pose(out, T)
-            count[0] += 1
-            if count[0] in calls or -1 in calls:
-                logs["loss"] = logs["loss"] + (0.0 * out.quaternion.sum()).sqrt()
-            return logs
-
-        return planted, geo
-
-    monkeypatch.setattr(loop, "losses_for", losses)
-
 
 @pytest.mark.slow  # a training run: the slow tier
-def test_the_replay_names_the_operation_whose_backward_gave_nan(tmp_path, monkeypatch):
-    _nan_gradients_on(monkeypatch, {2})
+def test_the_replay_names_the_operation_whose_backward_gave_nan(tmp_path, plant_nan_gradients):
+    plant_nan_gradients({2})
     train(_tiny(tmp_path / "run"), progress=False)
     files = sorted((tmp_path / "run" / "skipped").iterdir())
     assert [f.name for f in files] == ["step000002.pt"]
-    _nan_gradients_on(monkeypatch, {-1})  # the replay's loss carries the planted term too
+    plant_nan_gradients({-1})  # the replay's loss carries the planted term too
     # sqrt(0 * x): sqrt's backward gives inf, the product's backward 0 * inf = NaN
     with pytest.warns(UserWarning, match="Error detected in MulBackward0"):
         r = replay.replay(str(files[0]))

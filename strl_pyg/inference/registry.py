@@ -9,7 +9,7 @@ themselves are registered by :mod:`strl_pyg.inference.estimator`.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 from strl_pyg.estimation.classical import BASELINE_METHODS, MIN_POINTS
@@ -88,10 +88,9 @@ class PoseMethod:
 
     def spec(self) -> MethodSpec:
         """This method's :class:`MethodSpec`."""
-        return MethodSpec(self, self.min_points, self.needs_intrinsics, self.available,
-                          self.label or self.name, self.reads_lines, self.uses_network,
-                          tuple(self.depends_on), self.support_checked, self.bootstrapped,
-                          self.classical_base, self.needs_geometric_head)
+        given = {f.name: getattr(self, f.name) for f in fields(MethodSpec) if f.name != "fn"}
+        return MethodSpec(self, **{**given, "label": self.label or self.name,
+                                   "depends_on": tuple(self.depends_on)})
 
 
 #: ``name -> MethodSpec``, run in this order.

@@ -27,16 +27,10 @@ from strl_pyg.inference import estimator as inference
 from strl_pyg.inference.estimator import PoseEstimator
 from strl_pyg.inference import MethodResult
 from strl_pyg.metrics.two_view import relative_pose_error
-from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.synthetic import generate_pair
 
 SEED = 2_000_017  # held out from training
 DINO = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "middlebury_dino"
-
-
-@pytest.fixture(scope="module")
-def model():
-    return StrLPose.from_pretrained()
 
 
 @pytest.fixture(scope="module")

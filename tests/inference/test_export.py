@@ -22,11 +22,6 @@ from strl_pyg.synthetic import generate_pair
 
 
 @pytest.fixture(scope="module")
-def model():
-    return StrLPose.from_pretrained().eval()
-
-
-@pytest.fixture(scope="module")
 def graph(model):
     return prepare_graph(generate_pair(7).matches, model)
 

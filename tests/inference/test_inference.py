@@ -49,11 +49,6 @@ SNIPPET = readme_python_block("PoseEstimator")
 
 # ----------------------------------------------------------------------------- fixtures
 @pytest.fixture(scope="module")
-def model():
-    return StrLPose.from_pretrained()
-
-
-@pytest.fixture(scope="module")
 def pair():
     return generate_pair(SEED)
 

@@ -15,11 +15,6 @@ from strl_pyg.synthetic import SceneConfig, generate_pair
 K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
 
 
-@pytest.fixture(scope="module")
-def model():
-    return StrLPose.from_pretrained()
-
-
 def _noise(n=300, seed=0):
     rng = np.random.default_rng(seed)
     pts = [rng.uniform([0, 0], [639, 479], size=(n, 2)) for _ in range(2)]

@@ -169,31 +169,9 @@ def _tiny(out_dir, **kw):
     return replace(base, **kw)
 
 
-def _nan_gradients_on(monkeypatch, calls: set):
-    """The pose loss, plus a term whose value is 0 and whose gradient is NaN on the
-    ``calls``-th calls (1-based): sqrt(0 * x) has 0 * inf as its derivative."""
-    from strl_pyg.training import loop
-
-    real = loop.losses_for
-    count = [0]
-
-    def losses(cfg, model_cfg):
-        pose, geo = real(cfg, model_cfg)
-
-        def planted(out, T):
-            logs = pose(out, T)
-            count[0] += 1
-            if count[0] in calls or -1 in calls:
-                logs["loss"] = logs["loss"] + (0.0 * out.quaternion.sum()).sqrt()
-            return logs
-
-        return planted, geo
-
-    monkeypatch.setattr(loop, "losses_for", losses)
-
 
 @pytest.mark.slow  # a training run: the slow tier
-def test_a_step_with_nan_gradients_is_skipped_not_applied(tmp_path, monkeypatch):
+def test_a_step_with_nan_gradients_is_skipped_not_applied(tmp_path, plant_nan_gradients):
     """Found on a 3000-pair run (issue 30): at step 569 one batch gave a finite loss with NaN
     gradients; the step was applied, every weight became NaN, and the run went on for
     hundreds of steps overwriting last.pt with them."""
@@ -201,7 +179,7 @@ def test_a_step_with_nan_gradients_is_skipped_not_applied(tmp_path, monkeypatch)
 
     from strl_pyg.training.checkpoints import load_checkpoint
 
-    _nan_gradients_on(monkeypatch, {2})
+    plant_nan_gradients({2})
     result = train(_tiny(tmp_path / "run"), progress=False)
     assert result["step"] == 4
     assert all(bool(torch.isfinite(t).all()) for t in result["model"].state_dict().values()
@@ -214,12 +192,12 @@ def test_a_step_with_nan_gradients_is_skipped_not_applied(tmp_path, monkeypatch)
                if t.is_floating_point())
 
 
-def test_steps_without_finite_gradients_stop_the_run_with_one_line(tmp_path, monkeypatch,
-                                                                  capsys):
+def test_steps_without_finite_gradients_stop_the_run_with_one_line(tmp_path, monkeypatch, capsys,
+                                                                   plant_nan_gradients):
     from strl_pyg.training import loop
 
     monkeypatch.setattr(loop, "MAX_SKIPPED_STEPS", 2)
-    _nan_gradients_on(monkeypatch, {-1})
+    plant_nan_gradients({-1})
     with pytest.raises(loop.TrainingDiverged, match="2 steps in a row"):
         train(_tiny(tmp_path / "run"), progress=False)
 
@@ -248,7 +226,8 @@ def test_non_finite_weights_are_never_checkpointed(tmp_path, monkeypatch):
 
 
 @pytest.mark.slow  # a training run: the slow tier
-def test_a_skipped_step_keeps_its_batch_and_weights_to_reproduce_it(tmp_path, monkeypatch):
+def test_a_skipped_step_keeps_its_batch_and_weights_to_reproduce_it(tmp_path, monkeypatch,
+                                                                    plant_nan_gradients):
     """The step-569 batch of issue 30 could not be looked at afterwards: the skipped step now
     leaves ``skipped/stepN.pt`` (safe loading), from which the same forward pass is rebuilt
     (the replay script, benchmarks/studies/replay_skipped_step.py, is tested in
@@ -267,7 +246,7 @@ def test_a_skipped_step_keeps_its_batch_and_weights_to_reproduce_it(tmp_path, mo
         return real_step(cfg, ddp_model, model, optimizer, losses, batch, step, clip)
 
     monkeypatch.setattr(loop, "_train_step", recording)
-    _nan_gradients_on(monkeypatch, {2})
+    plant_nan_gradients({2})
     cfg = _tiny(tmp_path / "run")
     train(cfg, progress=False)
     files = sorted((tmp_path / "run" / "skipped").iterdir())
@@ -283,8 +262,6 @@ def test_a_skipped_step_keeps_its_batch_and_weights_to_reproduce_it(tmp_path, mo
 
 
 def test_a_file_that_is_not_a_skipped_step_is_one_line(tmp_path):
-    from strl_pyg.training import loop
-
     torch.save({"step": 3}, tmp_path / "x.pt")
     with pytest.raises(ValueError, match="Expected a skipped-step file"):
         load_skipped_step(tmp_path / "x.pt")
