@@ -500,6 +500,27 @@ def cmd_report(args: argparse.Namespace) -> int:
                     r, lo, hi, k = ae.paired_ratio(ea[n], eb[n], which)
                     cells.append(f"{r:.2f} [{lo:.2f}-{hi:.2f}]" if k else "-")
                 lines.append(f"| {a} vs {b} | {label} | " + " | ".join(cells) + " |")
+    multi = [(a, b) for a, b in COMPARISONS
+             if a in runs and b in runs and max(len(runs[a]), len(runs[b])) > 1]
+    if multi:
+        lines += ["", "## Paired comparisons over the seeds: mean of the seeds' medians, a / b "
+                  "[95 % bootstrap over pairs and seeds]", "",
+                  "Each resample draws the pairs (the same for both rows) and, for each row, "
+                  "its seeds with replacement: an interval that excludes 1 is a difference "
+                  "beyond the pairs' noise and the spread between training seeds "
+                  "(`strl_pyg.metrics.seeded_median_ratio_interval`).", "",
+                  "| a vs b (seeds) | error | " + " | ".join(names) + " |",
+                  "|---|---" + "|---" * len(names) + "|"]
+        for a, b in multi:
+            sa, sb = sorted(runs[a]), sorted(runs[b])
+            for which, label in ((0, "rot"), (1, "trans")):
+                cells = []
+                for n in names:
+                    r, lo, hi, k = ae.seeded_paired_ratio(
+                        [runs[a][s][n] for s in sa], [runs[b][s][n] for s in sb], which)
+                    cells.append(f"{r:.2f} [{lo:.2f}-{hi:.2f}]" if k else "-")
+                lines.append(f"| {a} vs {b} ({len(sa)} / {len(sb)}) | {label} | "
+                             + " | ".join(cells) + " |")
     notes = ev / "notes.md"  # what the runs say, written by hand: kept above the tables
     if notes.is_file():
         lines[1:1] = ["", notes.read_text().rstrip()]

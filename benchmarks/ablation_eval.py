@@ -195,6 +195,23 @@ def auc20(worst: np.ndarray) -> float:
     return float(pose_auc(worst, (20.0,))[0])
 
 
+def seeded_paired_ratio(a: list[list], b: list[list], which: int
+                        ) -> tuple[float, float, float, int]:
+    """:func:`paired_ratio` for two rows of several seeds each (``a[s]``: seed ``s``'s
+    per-pair errors): the mean of the seeds' medians, a / b, on the pairs where every run of
+    both gave a pose, with the bootstrap interval over pairs and seeds
+    (:func:`strl_pyg.metrics.seeded_median_ratio_interval`), and the number of such pairs."""
+    from strl_pyg.metrics.stats import seeded_median_ratio_interval
+
+    runs = list(a) + list(b)
+    keep = [i for i in range(len(runs[0])) if all(r[i] is not None for r in runs)]
+    if not keep:
+        return (np.nan, np.nan, np.nan, 0)
+    x = np.array([[e[i][which] for i in keep] for e in a])
+    y = np.array([[e[i][which] for i in keep] for e in b])
+    return (*seeded_median_ratio_interval(x, y), len(keep))
+
+
 def paired_ratio(a: list, b: list, which: int) -> tuple[float, float, float, int]:
     """median(a) / median(b) of rotation (0) or translation (1) errors on the pairs where
     both gave a pose, with its paired-bootstrap interval, and the number of such pairs."""

@@ -106,6 +106,10 @@ def test_report_and_curves_read_only_the_committed_results(tmp_path):
     assert "| baseline | 10.00 [" in text
     # full vs baseline: every pair's ratio is 1/4
     assert "| full vs baseline | rot | 0.25 [0.25-0.25]" in text
+    # over the seeds: full's seeds' medians 2.5 and 5 (mean 3.75) against baseline's 10; the
+    # seeds resampled give 0.25 (seed 0 twice) to 0.50 (seed 1 twice)
+    assert "## Paired comparisons over the seeds" in text
+    assert "| full vs baseline (2 / 1) | rot | 0.38 [0.25-0.50]" in text
     # the shipped checkpoint as a reference row, and full against it (every ratio 2)
     assert "| shipped `geometric` (reference) | 1.25 [" in text
     assert "| full vs shipped `geometric` | trans | 2.00 [2.00-2.00]" in text

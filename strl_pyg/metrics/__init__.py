@@ -28,6 +28,7 @@ _EXPORTS = {
     "pose_error_stats": "strl_pyg.metrics.stats",
     "coverage_interval": "strl_pyg.metrics.stats",
     "median_ratio_interval": "strl_pyg.metrics.stats",
+    "seeded_median_ratio_interval": "strl_pyg.metrics.stats",
     "auc_difference_interval": "strl_pyg.metrics.stats",
 }
 

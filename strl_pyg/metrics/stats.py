@@ -14,8 +14,10 @@ threshold.
 Small evaluation sets (30-50 pairs) make these figures noisy, so two intervals go with them:
 :func:`coverage_interval` (Wilson score interval of a fraction of pairs, e.g. the pairs inside
 their 2-sigma region) and :func:`median_ratio_interval` (paired bootstrap of the ratio of two
-methods' median errors over the same pairs), and :func:`auc_difference_interval` (the same
-for the difference of two methods' pose AUC).
+methods' median errors over the same pairs), :func:`seeded_median_ratio_interval` (the same
+ratio for two trained rows of several seeds each, the seeds resampled with the pairs, so the
+interval holds the seed-to-seed spread of training too), and :func:`auc_difference_interval`
+(the difference of two methods' pose AUC).
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ import numpy as np
 from strl_pyg.metrics.two_view import pose_auc
 
 __all__ = ["AUC_THRESHOLDS", "pose_error_stats", "coverage_interval", "median_ratio_interval",
-           "auc_difference_interval"]
+           "seeded_median_ratio_interval", "auc_difference_interval"]
 
 #: Thresholds (degrees) of the pose AUC in the training log and the evaluation tables.
 AUC_THRESHOLDS = (5.0, 10.0, 20.0)
@@ -154,6 +156,75 @@ def median_ratio_interval(a: Any, b: Any, level: float = 0.95, resamples: int = 
         hi = np.quantile(boot, (1 + level) / 2, method="higher")
     r = float(ratio(np.median(x), np.median(y)))
     return r, float(lo), float(hi)
+
+
+def seeded_median_ratio_interval(a: Any, b: Any, level: float = 0.95, resamples: int = 2000,
+                                 seed: int = 0) -> tuple[float, float, float]:
+    """Ratio of two trained rows' median errors over the same pairs, each row trained with
+    several seeds, and its two-level percentile bootstrap interval at ``level``.
+
+    The statistic is ``mean_s median_i a[s, i] / mean_s median_i b[s, i]``: the mean over a
+    row's seeds of its median error. Each resample draws the pairs with replacement (the same
+    indices for both rows and all their seeds: paired) and, independently for each row, its
+    seeds with replacement, so an interval that excludes 1 says the rows differ beyond both the
+    pairs' sampling noise and the spread between training seeds. With one seed per row it is
+    :func:`median_ratio_interval` (the same resampled pairs for the same ``seed``).
+
+    Args:
+        a, b: per-pair errors of the two rows, shape ``(seeds_a, n)`` and ``(seeds_b, n)``
+            (the seeds may differ in number, the pairs may not), finite and non-negative (drop
+            the pairs where any run failed first).
+        level, resamples, seed: as in :func:`median_ratio_interval`.
+
+    Returns:
+        ``(ratio, low, high)``; ``inf`` where the median of ``b`` is 0.
+    """
+    x, y = (_matrix(v, name) for v, name in ((a, "a"), (b, "b")))
+    if x.shape[1] != y.shape[1]:
+        raise ValueError(f"Expected a and b over the same pairs (got {x.shape[1]} and "
+                         f"{y.shape[1]} pairs)")
+    if x.shape[1] == 0:
+        raise ValueError("Expected at least one pair (got none)")
+    if not (np.isfinite(x).all() and np.isfinite(y).all()) or (x < 0).any() or (y < 0).any():
+        raise ValueError("Expected finite, non-negative errors in a and b (drop failed pairs)")
+    if not 0 < level < 1:
+        raise ValueError(f"Expected level in (0, 1) (got {level})")
+    if not (isinstance(resamples, (int, np.integer)) and resamples >= 1):
+        raise ValueError(f"Expected resamples >= 1 (got {resamples!r})")
+
+    def ratio(mx: np.ndarray, my: np.ndarray) -> np.ndarray:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(my > 0, mx / np.where(my > 0, my, 1.0), np.inf)
+
+    rng = np.random.default_rng(seed)
+    n = x.shape[1]
+    idx = rng.integers(0, n, size=(resamples, n))
+    # [resamples, seeds]: each seed's median over the resampled pairs
+    med_x = np.median(x[:, idx], axis=2).T
+    med_y = np.median(y[:, idx], axis=2).T
+    pick_x = rng.integers(0, x.shape[0], size=(resamples, x.shape[0]))
+    pick_y = rng.integers(0, y.shape[0], size=(resamples, y.shape[0]))
+    rows = np.arange(resamples)[:, None]
+    boot = ratio(med_x[rows, pick_x].mean(axis=1), med_y[rows, pick_y].mean(axis=1))
+    if np.isfinite(boot).all():
+        lo, hi = np.quantile(boot, [(1 - level) / 2, (1 + level) / 2])
+    else:  # no interpolation between an infinite ratio and another (inf - inf)
+        lo = np.quantile(boot, (1 - level) / 2, method="lower")
+        hi = np.quantile(boot, (1 + level) / 2, method="higher")
+    r = float(ratio(np.median(x, axis=1).mean(), np.median(y, axis=1).mean()))
+    return r, float(lo), float(hi)
+
+
+def _matrix(x: Any, name: str) -> np.ndarray:
+    try:
+        m = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"Expected {name} as numbers of shape (seeds, n) (got "
+                        f"{type(x).__name__})") from None
+    if m.ndim != 2 or m.shape[0] == 0:
+        raise ValueError(f"Expected {name} of shape (seeds, n) with at least one seed (got "
+                         f"shape {m.shape})")
+    return m
 
 
 def auc_difference_interval(worst_a: Any, worst_b: Any, threshold: float = 10.0,

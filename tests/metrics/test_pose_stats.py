@@ -147,6 +147,43 @@ def test_median_ratio_interval_brackets_the_ratio_and_is_paired():
         median_ratio_interval([1.0, math.nan], [1.0, 1.0])
 
 
+def test_seeded_median_ratio_interval_holds_the_spread_between_seeds():
+    from strl_pyg.metrics.stats import median_ratio_interval, seeded_median_ratio_interval
+
+    rng = np.random.default_rng(3)
+    b = rng.gamma(2.0, 1.0, size=(3, 120))
+    # three identical seeds, a 1.5x b: the ratio is exact whatever is resampled
+    same = np.repeat(b[:1], 3, axis=0)
+    r, lo, hi = seeded_median_ratio_interval(1.5 * same, same)
+    assert (r, lo, hi) == pytest.approx((1.5, 1.5, 1.5), rel=1e-12)
+    # seed s of a 1.5x seed s of b, the seeds different: 1.5 inside an interval that the
+    # independent draws of the two rows' seeds widen
+    r, lo, hi = seeded_median_ratio_interval(1.5 * b, b)
+    assert r == pytest.approx(1.5, rel=1e-12) and lo < 1.5 < hi
+    # one seed each: the paired bootstrap over pairs alone, the same resamples
+    noisy = b[0] * rng.uniform(0.8, 1.4, size=120)
+    assert seeded_median_ratio_interval(noisy[None], b[:1]) == pytest.approx(
+        median_ratio_interval(noisy, b[0]), rel=1e-12)
+    # seeds of a at 0.6x, 1.0x and 1.4x of one b: on average equal; seed 0 alone says 0.6
+    # with a degenerate interval, the seeds resampled give an interval around 1 this wide
+    spread = np.stack([0.6 * b[0], b[0], 1.4 * b[0]])
+    r, lo, hi = seeded_median_ratio_interval(spread, b[:1])
+    assert r == pytest.approx(1.0, rel=1e-12)
+    assert lo < 0.8 and hi > 1.2 and lo == pytest.approx(0.6, rel=0.05)
+    assert median_ratio_interval(spread[0], b[0])[1:] == pytest.approx((0.6, 0.6))
+    # the statistic: mean over the seeds of each seed's median
+    r, _, _ = seeded_median_ratio_interval([[1.0, 2.0, 3.0], [3.0, 4.0, 5.0]],
+                                           [[1.0, 1.0, 1.0]], resamples=10)
+    assert r == pytest.approx(3.0)
+    assert seeded_median_ratio_interval(spread, b) == seeded_median_ratio_interval(spread, b)
+    with pytest.raises(ValueError, match="same pairs"):
+        seeded_median_ratio_interval(b[:, :10], b[:, :11])
+    with pytest.raises(ValueError, match="finite"):
+        seeded_median_ratio_interval([[1.0, math.nan]], [[1.0, 1.0]])
+    with pytest.raises(ValueError, match=r"shape \(seeds, n\)"):
+        seeded_median_ratio_interval([1.0, 2.0], [[1.0, 2.0]])
+
+
 def test_auc_difference_interval_sees_a_real_gain_and_not_a_tie():
     from strl_pyg.metrics.stats import auc_difference_interval
     from strl_pyg.metrics.two_view import pose_auc
