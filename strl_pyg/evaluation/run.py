@@ -93,22 +93,20 @@ def resolve_methods(methods: Iterable[str] | None, model: Any) -> tuple[str, ...
             return tuple(m for m in names if m not in _network_methods())
         # what the model cannot run is left out, not scored "fail 60/60"
         return tuple(m for m in names if head or not REGISTRY[m].needs_geometric_head)
-    if isinstance(methods, str):
-        methods = [methods]
-    out = []
-    for item in methods:
-        for name in str(item).split(","):
-            name = name.strip()
-            if name not in registered_methods():
-                hint = (f": 0.2's '{name}' is '{LEGACY_METHOD_NAMES[name]}'"
-                        if name in LEGACY_METHOD_NAMES else "")
-                raise ValueError(f"Expected methods from {registered_methods()} (got "
-                                 f"{name!r}{hint})")
-            if name not in out:
-                out.append(name)
-    if not out:
-        raise ValueError(f"Expected methods from {registered_methods()} (got none)")
-    return tuple(out)
+    from strl_pyg.inference.registry import checked_method_names
+
+    items = [methods] if isinstance(methods, str) else list(methods)
+    names = [n.strip() for item in items for n in str(item).split(",") if n.strip()]
+    for name in names:
+        if name.lower() in LEGACY_METHOD_NAMES:
+            raise ValueError(f"Expected methods from {registered_methods()} (got {name!r}: "
+                             f"0.2's '{name}' is '{LEGACY_METHOD_NAMES[name.lower()]}')")
+    if len(names) == 1 and names[0].lower() in ("all", "recommended"):
+        raise ValueError(f"Expected method names from {registered_methods()} (got "
+                         f"{names[0]!r}: evaluate scores every available method when "
+                         "--methods is left out)")
+    # the registry's one parser: any case, a suggestion for a misspelt name
+    return tuple(dict.fromkeys(checked_method_names(tuple(names))))
 
 
 # ----------------------------------------------------------------------------- model

@@ -278,6 +278,23 @@ def test_old_method_names_are_refused_with_their_new_name():
         resolve_methods(["magic"], object())
 
 
+def test_evaluation_reads_method_names_like_the_estimator():
+    """``evaluate --methods`` had a parser of its own that refused 'OpenCV' (the estimator
+    and ``predict`` take any case) and suggested nothing for a misspelt name."""
+    from strl_pyg.evaluation import resolve_methods
+
+    assert resolve_methods("OpenCV, Regression", object()) == ("opencv", "regression")
+    assert resolve_methods(["opencv", "OPENCV,geometric"], object()) == ("opencv", "geometric")
+    with pytest.raises(ValueError, match="did you mean 'opencv'"):
+        resolve_methods("opencvv", object())
+    with pytest.raises(ValueError, match="0.2's 'STRL' is 'regression'"):
+        resolve_methods("STRL", object())
+    with pytest.raises(ValueError, match="evaluate scores every available method"):
+        resolve_methods("all", object())
+    with pytest.raises(ValueError, match="Expected methods from"):
+        resolve_methods(" , ", object())
+
+
 def test_command_line_takes_comma_separated_registry_names(tiny_checkpoint, capsys):
     rc = _script().main(["--checkpoint", str(tiny_checkpoint), "--num-pairs", "2",
                          "--kinds", "boxes", "--methods", "geometric,guided,opencv",
