@@ -527,9 +527,75 @@ def cmd_report(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.write_text("\n".join(lines) + "\n")
     print(f"wrote {out}")
-    plot_curves(_histories(ev), Path(args.figure))
+    plot_curves(_histories(ev), Path(args.figure), _recipe_title(args.recipe))
     print(f"wrote {args.figure}")
+    medians = medians_figure(Path(args.figure))
+    plot_medians(runs, {**{f"shipped {r}": e for r, e in refs.items()}, "PoseLib": poselib},
+                 names, medians, f"{title}: median errors on the evaluation sets")
+    print(f"wrote {medians}")
     return 0
+
+
+def _recipe_title(recipe: str) -> str:
+    if recipe == "real":
+        return ("Table 3 rows on real photographs (real_scenes train + generated, 1200 steps); "
+                "validation: the 4 held-out scenes")
+    return "Ablation rows on the shared budget (lines_small, front-end matches)"
+
+
+def medians_figure(curves: Path) -> Path:
+    """The medians figure beside the curves figure (``curves.png`` -> ``medians.png``)."""
+    stem = (curves.stem.replace("curves", "medians") if "curves" in curves.stem
+            else curves.stem + "_medians")
+    return curves.with_name(stem + curves.suffix)
+
+
+def plot_medians(runs: dict, refs: dict, names: list[str], path: Path, title: str) -> None:
+    """Per evaluation set, each row's median rotation and translation error: seed 0 with its
+    bootstrap interval over pairs, the other seeds as open markers; the reference rows
+    (shipped weights, PoseLib) as black / grey marks."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    import ablation_eval as ae
+
+    rows = [r for r in ROWS if r in runs]
+    fig, axes = plt.subplots(2, 1, figsize=(max(8, 1.2 * len(names)), 7.5), sharex=True)
+    width = 0.8 / max(1, len(rows) + len(refs))
+    colours = plt.get_cmap("tab10")
+    x = np.arange(len(names))
+    for which, ax in enumerate(axes):
+        for k, row in enumerate(rows):
+            seeds = sorted(runs[row])
+            pos = x + (k - (len(rows) + len(refs) - 1) / 2) * width
+            m = np.array([ae.median_interval(ae._rows(runs[row][seeds[0]][n])[which])
+                          for n in names])
+            ax.errorbar(pos, m[:, 0], yerr=[m[:, 0] - m[:, 1], m[:, 2] - m[:, 0]], fmt="o",
+                        color=colours(k), capsize=2, markersize=4,
+                        label=f"{row} (seed {seeds[0]}, 95 % interval)")
+            for s in seeds[1:]:
+                ax.plot(pos, [ae.median_interval(ae._rows(runs[row][s][n])[which])[0]
+                              for n in names], "o", mfc="none", color=colours(k), markersize=4,
+                        label=f"{row} (other seeds)" if s == seeds[1] else None)
+        for j, (ref, errs) in enumerate(refs.items()):
+            pos = x + (len(rows) + j - (len(rows) + len(refs) - 1) / 2) * width
+            ax.plot(pos, [ae.median_interval(ae._rows(errs[n])[which])[0] for n in names],
+                    "s" if ref == "PoseLib" else "D", color="black" if ref == "PoseLib"
+                    else "dimgrey", markersize=4, label=ref)
+        ax.set_yscale("log")
+        ax.set_ylabel(("rotation", "translation direction")[which] + " error (deg, median)")
+        ax.grid(alpha=0.3, which="both")
+    axes[0].legend(fontsize=7, ncol=2)
+    axes[1].set_xticks(x, names, rotation=20, ha="right")
+    axes[1].set_xlabel("evaluation set")
+    fig.suptitle(title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def _rel(path: Path) -> str:
@@ -582,12 +648,14 @@ def cmd_curves(args: argparse.Namespace) -> int:
                          f"{h.get('trivial_trans_err_deg', float('nan')):.2f} |")
     Path(args.out).write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out}")
-    plot_curves(hists, Path(args.figure))
+    plot_curves(hists, Path(args.figure), _recipe_title(args.recipe))
     print(f"wrote {args.figure}")
     return 0
 
 
-def plot_curves(hists: dict[str, list[dict]], path: Path) -> None:
+def plot_curves(hists: dict[str, list[dict]], path: Path,
+                title: str = "Ablation rows on the shared budget (lines_small, front-end "
+                             "matches)") -> None:
     """Validation rotation / translation errors of the key rows over the steps (seed 0 solid,
     other seeds faint in the same colour)."""
     import matplotlib
@@ -617,7 +685,7 @@ def plot_curves(hists: dict[str, list[dict]], path: Path) -> None:
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(title="row (seed 0; dashed: seeds 1-2)")
-    fig.suptitle("Ablation rows on the shared budget (lines_small, front-end matches)")
+    fig.suptitle(title)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)

@@ -114,6 +114,7 @@ def test_report_and_curves_read_only_the_committed_results(tmp_path):
     assert "| shipped `geometric` (reference) | 1.25 [" in text
     assert "| full vs shipped `geometric` | trans | 2.00 [2.00-2.00]" in text
     assert fig.stat().st_size > 0
+    assert (tmp_path / "c_medians.png").stat().st_size > 0  # the medians beside the curves
     out2 = tmp_path / "curves.md"
     assert ab.main(["--root", str(tmp_path / "gone"), "curves", "--results", str(res),
                     "--out", str(out2), "--figure", str(fig)]) == 0
