@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import struct
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -190,7 +191,7 @@ class _Reader:
         self.path, self.buf, self.pos = path, path.read_bytes(), 0
 
     def take(self, fmt: str):
-        size = struct.calcsize(fmt)
+        size = struct.calcsize("<" + fmt)  # packed, as COLMAP writes (no native alignment)
         if self.pos + size > len(self.buf):
             raise ValueError(f"Expected a complete COLMAP binary file at '{self.path}' (got "
                              f"{len(self.buf)} bytes, cut at byte {self.pos})")
@@ -236,7 +237,14 @@ def _read_colmap_binary(model_dir: Path):
 
 def read_colmap_model(model_dir: str | os.PathLike,
                       image_dir: str | os.PathLike | None = None) -> list[PosedImage]:
-    """The images of a COLMAP model (``.txt`` or ``.bin``, whichever is there), sorted by name.
+    """The images of a COLMAP model (``.txt`` or ``.bin``, whichever is there), in capture
+    order: sorted by name with the numbers in names compared as numbers (``2.jpg`` before
+    ``10.jpg``).
+
+    Each image's :attr:`PosedImage.points` holds the ids of the 3D points it sees; a model
+    without point tracks (every image's points line empty, as a model written from known
+    poses has) gives ``None`` there, so :func:`~strl_pyg.datasets.posed.select_pairs` has no
+    co-visibility to filter on, rather than an empty set that no pair would pass.
 
     Args:
         model_dir: Folder with ``cameras`` and ``images`` (e.g. ``sparse/0``).
@@ -256,15 +264,24 @@ def read_colmap_model(model_dir: str | os.PathLike,
     if image_dir is None:
         image_dir = next((d for d in (model_dir.parent.parent / "images", model_dir / "images")
                           if d.is_dir()), model_dir.parent.parent / "images")
+    tracks = any(ids for *_, ids in images)
     out = []
-    for name, q, t, cam, ids in sorted(images, key=lambda x: x[0]):
+    for name, q, t, cam, ids in sorted(images, key=lambda x: _natural_key(x[0])):
         if cam not in cams:
             raise ValueError(f"Expected camera {cam} of image '{name}' in the COLMAP model at "
                              f"'{model_dir}' (got cameras {sorted(cams)})")
         _, size, K, dist = cams[cam]
         T = _check_pose(_w2c_to_c2w(q, t), f"COLMAP image '{name}'")
-        out.append(PosedImage(str(Path(image_dir) / name), K, T, size, dist, frozenset(ids)))
+        out.append(PosedImage(str(Path(image_dir) / name), K, T, size, dist,
+                              frozenset(ids) if tracks else None))
     return out
+
+
+def _natural_key(name: str) -> tuple:
+    """Sort key of a file name with its digit runs compared as numbers: ``frame_2.jpg``
+    before ``frame_10.jpg`` (plain text order puts ``10`` first)."""
+    parts = re.split(r"(\d+)", name)
+    return tuple((0, int(p), "") if p.isdigit() else (1, 0, p) for p in parts)
 
 
 # -- NeRF / instant-ngp ----------------------------------------------------------------------

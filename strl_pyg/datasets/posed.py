@@ -32,6 +32,7 @@ of 3D points both images see (COLMAP), as glue-factory samples MegaDepth by over
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -63,8 +64,9 @@ class PosedPairOptions:
         min_rotation_deg, max_rotation_deg: Range of the relative rotation angle.
         max_axis_angle_deg: Largest angle between the two optical axes (views that face
             apart share little).
-        min_covisible: Smallest share of the 3D points either image sees that both see
-            (COLMAP models; ignored where the images carry no point ids).
+        min_covisible: Smallest share of co-visible 3D points: the points both images see
+            over the points of the image that sees fewer (COLMAP models with point tracks;
+            ignored where the images carry no point ids).
         min_baseline: Smallest baseline over the median baseline of the gap-1 pairs of the
             scene (units differ per reconstruction; 0: any).
     """
@@ -153,6 +155,8 @@ class PosedImagePairs(PairDataset):
         self.pair_options = pairs or PosedPairOptions()
         records = []
         self.scene_names = []
+        #: scene name -> (images, pairs kept by the pair options)
+        self.scene_counts: dict[str, tuple[int, int]] = {}
         for scene in scenes:
             if isinstance(scene, tuple):
                 name, images = scene
@@ -165,10 +169,27 @@ class PosedImagePairs(PairDataset):
                         f"Expected pinhole images in scene '{name}' (got distortion "
                         f"{im.distortion} for '{im.name}'): undistort them first, e.g. with "
                         "colmap image_undistorter")
-            for i, j in select_pairs(images, self.pair_options):
+            chosen = select_pairs(images, self.pair_options)
+            self.scene_counts[name] = (len(images), len(chosen))
+            if not chosen:
+                warnings.warn(f"Expected pairs from scene '{name}' (got none of its "
+                              f"{len(images)} images: {self._rules()})", stacklevel=2)
+            for i, j in chosen:
                 a, b = images[i], images[j]
                 T = np.linalg.inv(b.T_c2w) @ a.T_c2w
                 records.append(PairRecord(f"{name}/{i:04d}-{j:04d}", name, ImageSource(a.path),
                                           ImageSource(b.path), a.K, b.K, T))
         super().__init__(records, cache_dir=cache_dir, image_size=image_size,
                          transform=transform, kind="posed", **kwargs)
+
+    def _rules(self) -> str:
+        o = self.pair_options
+        return (f"pairs (i, i + k) for k in {list(o.gaps)}, relative rotation "
+                f"{o.min_rotation_deg:g}-{o.max_rotation_deg:g} deg, optical axes within "
+                f"{o.max_axis_angle_deg:g} deg, co-visible share >= {o.min_covisible:g}")
+
+    def no_pairs_reason(self) -> str:
+        """Why the scenes gave no pair: each scene's images and kept pairs, and the rules."""
+        scenes = ", ".join(f"{n}: {k} pairs of {m} images"
+                           for n, (m, k) in self.scene_counts.items())
+        return f"{scenes}; the pair options keep {self._rules()}"

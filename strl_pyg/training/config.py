@@ -71,7 +71,9 @@ class TrainConfig:
     # synthetic: a named mixture of scene configurations (strl_pyg.training.loop.SCENE_MIXES), which
     # replaces `scene` / `scene_kinds`; pairs are split evenly over its configurations
     scene_mix: str | None = None
-    matches: str = "ground_truth"  # synthetic: "ground_truth" or "frontend" (cached, workers)
+    # synthetic: "ground_truth" or "frontend" (cached, workers); posed: its generated share
+    # always uses the generator's matches ("ground_truth")
+    matches: str = "ground_truth"
     outlier_augment: float = 0.0  # up to this fraction of point matches shuffled into outliers
     train_pairs: int = 2048  # synthetic: pairs in the training set (seeds 0..N-1)
     val_pairs: int = 128  # synthetic: held-out pairs (seeds from 1_000_000)
@@ -85,6 +87,9 @@ class TrainConfig:
     posed_gaps: list[int] = field(default_factory=lambda: [1, 2, 3])  # posed: training pairs
     posed_max_rotation: float = 60.0  # posed: largest relative rotation of a pair (degrees)
     posed_min_points: int = 0  # posed: training pairs with fewer point matches are left out
+    # posed: smallest share of co-visible 3D points of a training pair (COLMAP models with
+    # point tracks; other formats carry none and ignore it)
+    posed_min_covisible: float = 0.1
     # posed: validation pairs (i, i + val_gap) for every val_stride-th i
     val_gap: int = 2
     val_stride: int = 4
@@ -258,6 +263,13 @@ class TrainConfig:
                 or self.posed_min_points < 0:
             raise ValueError(f"Expected posed_min_points as an integer >= 0 "
                              f"(got {self.posed_min_points!r})")
+        if self.dataset == "posed" and self.matches != "ground_truth":
+            raise ValueError("Expected matches 'ground_truth' with dataset 'posed' (the "
+                             "photographs are matched by the front end, the generated share "
+                             f"uses the generator's matches) (got {self.matches!r})")
+        if not 0 <= self.posed_min_covisible <= 1:
+            raise ValueError(f"Expected posed_min_covisible in [0, 1] "
+                             f"(got {self.posed_min_covisible!r})")
         if not 0 < self.posed_max_rotation <= 180:
             raise ValueError(f"Expected posed_max_rotation in (0, 180] degrees "
                              f"(got {self.posed_max_rotation!r})")
@@ -320,6 +332,30 @@ class TrainConfig:
         overrides.setdefault("image_channels", channels)
         return StrLPoseConfig.ablation(self.model, **overrides)
 
+    def ignored_fields(self) -> list[str]:
+        """The settings this run's dataset does not read (``config.json`` lists them under
+        ``"ignored"`` beside the ``"data"`` actually loaded, so a stored config does not
+        describe data the run never saw)."""
+        posed = ["train_scenes", "val_scenes", "posed_gaps", "posed_max_rotation",
+                 "posed_min_points", "posed_min_covisible", "val_gap", "val_stride",
+                 "synthetic_share", "synthetic_pairs"]
+        kitti = ["kitti_k", "train_sequences", "val_sequences"]
+        generator = ["scene", "scene_kinds", "scene_mix", "matches"]
+        if self.dataset == "posed":
+            out = ["train_pairs", "val_pairs", *kitti]
+            if self.synthetic_share == 0:
+                out += [*generator, "synthetic_pairs"]
+            return out
+        if self.dataset == "synthetic":
+            return [*posed, *kitti, "data_root", "limit"]
+        if self.dataset == "kitti":
+            return [*posed, *generator, "train_pairs", "val_pairs"]
+        return [*posed, *kitti, *generator, "train_pairs", "val_pairs"]
+
+    #: Keys of ``config.json`` that describe the run rather than configure it
+    #: (:meth:`from_dict` leaves them out).
+    DESCRIPTIVE_KEYS = ("ignored", "data")
+
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
         """The config of a stored dict; one without ``loss`` was written before the balanced
@@ -331,7 +367,8 @@ class TrainConfig:
             overrides = {"inputs": "paper", **(d.get("model_overrides") or {})}
             d = {**d, "loss": "paper", "model_overrides": overrides}
         if isinstance(d, dict):
-            d = {**STORED_BEFORE, **d}
+            d = {k: v for k, v in {**STORED_BEFORE, **d}.items()
+                 if k not in cls.DESCRIPTIVE_KEYS}
         return strict_from_dict(cls, d)
 
 
@@ -370,6 +407,10 @@ def _add_posed_arguments(ap: argparse.ArgumentParser, d: TrainConfig) -> None:
     ap.add_argument("--posed-min-points", type=int, default=d.posed_min_points, metavar="N",
                     help="posed: leave out training pairs with fewer than N cached point "
                          "matches (validation keeps every pair)")
+    ap.add_argument("--posed-min-covisible", type=float, default=d.posed_min_covisible,
+                    metavar="SHARE",
+                    help="posed: smallest share of co-visible 3D points of a training pair "
+                         "(COLMAP models with point tracks; 0: off)")
     ap.add_argument("--val-gap", type=int, default=d.val_gap,
                     help="posed: validation pairs (i, i + val_gap)")
     ap.add_argument("--val-stride", type=int, default=d.val_stride,

@@ -21,7 +21,7 @@ from strl_pyg.data.transforms import FixedSizeResample, RandomRoll, RandomSwap, 
 from strl_pyg.geometry import Pose
 from strl_pyg.training.config import TrainConfig
 
-__all__ = ["build_datasets", "check_sources", "check_graph_channels", "model_input_channels",
+__all__ = ["build_datasets", "describe_data", "check_sources", "check_graph_channels", "model_input_channels",
            "shuffle_point_matches", "StepBatchSampler", "unaugmented_poses", "collater",
            "fit_input_statistics", "ResampledPairs"]
 
@@ -219,6 +219,32 @@ def generated_parts(cfg: TrainConfig, scenes: list, total: int, base: int, keep:
             for j, (sc, n) in enumerate(zip(scenes, sizes, strict=True)) if n > 0]
 
 
+def describe_data(dataset: Any) -> dict[str, int]:
+    """Items of ``dataset`` per source, as ``config.json`` records them under ``"data"``: a
+    real dataset's subsets (scenes, sequences) by name, ``"generated"`` for generated pairs,
+    ``"generated (N distinct, cycled)"`` for a generated share cycled to its size."""
+    if isinstance(dataset, _InMemory):
+        return describe_data(dataset.base)
+    if isinstance(dataset, _Cycled):
+        inner = describe_data(dataset.base)
+        distinct = sum(inner.values())
+        return {f"{'+'.join(inner)} ({distinct} distinct, cycled)": len(dataset)}
+    if isinstance(dataset, ConcatDataset):
+        out: dict[str, int] = {}
+        for part in dataset.datasets:
+            for k, v in describe_data(part).items():
+                out[k] = out.get(k, 0) + v
+        return out
+    if hasattr(dataset, "record") and hasattr(dataset, "records"):  # a PairDataset
+        out = {}
+        for i in range(len(dataset)):
+            subset = dataset.record(i).subset
+            out[subset] = out.get(subset, 0) + 1
+        return out
+    name = "generated" if type(dataset).__name__ == "SyntheticPairs" else type(dataset).__name__
+    return {name: len(dataset)}
+
+
 def drop_match_scores(data: HeteroData) -> HeteroData:
     """The graph without the front end's match scores (``score`` of points and endpoints),
     which generated pairs do not have (the model does not read them)."""
@@ -247,13 +273,18 @@ def _posed_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
     train = PosedImagePairs([root / n for n in train_names], limit=cfg.limit, **mixed,
                             min_points=cfg.posed_min_points, pairs=
                             PosedPairOptions(gaps=tuple(cfg.posed_gaps),
-                                             max_rotation_deg=cfg.posed_max_rotation), **common)
+                                             max_rotation_deg=cfg.posed_max_rotation,
+                                             min_covisible=cfg.posed_min_covisible),
+                            **common)
     val = PosedImagePairs([root / n for n in val_names], pairs=PosedPairOptions(
         gaps=(cfg.val_gap,), stride=cfg.val_stride, max_rotation_deg=180.0,
         max_axis_angle_deg=180.0, min_covisible=0.0), **common)
     for ds in (train, val):
         ds.build_cache(num_workers=max(1, cfg.num_workers), progress=progress)
     for role, ds in (("training", train), ("validation", val)):
+        if ds.num_pairs == 0:
+            raise ValueError(f"Expected {role} pairs from the scenes (got none: "
+                             f"{ds.no_pairs_reason()})")
         if len(ds) == 0:
             least = f" with >= {ds.min_points} point matches" if ds.min_points else ""
             raise ValueError(f"Expected {role} pairs the front end can match{least} (got "

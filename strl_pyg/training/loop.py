@@ -53,6 +53,7 @@ from strl_pyg.training.data import (
     _InMemory,
     ResampledPairs,
     build_datasets,
+    describe_data,
     check_graph_channels,
     collater,
     fit_input_statistics,
@@ -135,7 +136,7 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
                                  progress=progress and rank == 0)
     loader, val_loader = _loaders(cfg, model_cfg, train_ds, val_ds, start_step, rank, world)
 
-    logger = _logger(cfg, out_dir, rank, start_step)
+    logger = _logger(cfg, out_dir, rank, start_step, train_ds, val_ds)
     result: dict[str, Any] = {"step": start_step, "checkpoint": str(ckpt_path)}
     step = start_step
     t_start, pairs_seen = time.perf_counter(), 0
@@ -335,17 +336,21 @@ def _datasets(cfg: TrainConfig, model: StrLPose, datasets: Sequence[Any] | None,
     return train_ds, val_ds
 
 
-def _logger(cfg: TrainConfig, out_dir: Path, rank: int, start_step: int) -> TrainLogger:
+def _logger(cfg: TrainConfig, out_dir: Path, rank: int, start_step: int, train_ds: Any,
+            val_ds: Any) -> TrainLogger:
     """The run's logger (rank 0 writes) and its ``config.json``: what was used ("tensorboard"
     is false when it was asked for but is not installed; "warmup_steps" is the warm-up's
-    length, also where the config left it to the default, None)."""
+    length, also where the config left it to the default, None), the settings the dataset
+    ignores (``"ignored"``) and the items per source it loaded (``"data"``)."""
     if rank == 0:
         out_dir.mkdir(parents=True, exist_ok=True)
     logger = TrainLogger(out_dir, rank == 0, cfg.tensorboard, start_step)
     if rank == 0:
         (out_dir / "config.json").write_text(
             json.dumps({**asdict(cfg), "tensorboard": logger.tensorboard,
-                        "warmup_steps": cfg.warmup}, indent=2))
+                        "warmup_steps": cfg.warmup, "ignored": cfg.ignored_fields(),
+                        "data": {"training": describe_data(train_ds),
+                                 "validation": describe_data(val_ds)}}, indent=2))
     return logger
 
 

@@ -87,19 +87,16 @@ def test_real_scenes_format_reads_back(tmp_path, cameras):
     assert ims[0].size == (H, W) and ims[0].path.endswith("im00.png")
 
 
-@pytest.mark.parametrize("binary", [False, True])
-def test_colmap_model_reads_back(tmp_path, cameras, binary):
-    """COLMAP stores world-to-camera quaternions and the pixel-corner principal point."""
-    Ts, K = cameras
-    names = _images(tmp_path / "images", len(Ts))
-    model = tmp_path / "sparse" / "0"
+def _write_colmap(root, Ts, K, names, points, binary=False):
+    """A PINHOLE COLMAP model of the cameras ``Ts`` in ``root/sparse/0`` (world-to-camera
+    quaternions, the pixel-corner principal point), ``points[k]``: image k's observations."""
+    model = root / "sparse" / "0"
     model.mkdir(parents=True)
     params = [K[0, 0], K[1, 1], K[0, 2] + 0.5, K[1, 2] + 0.5]  # PINHOLE, corner convention
     poses = []
     for T in Ts:
         Rw = T[:3, :3].T
         poses.append((_quat(Rw), -Rw @ T[:3, 3]))
-    points = [[(1.0, 2.0, 7), (3.0, 4.0, -1)], [(1.0, 2.0, 7)], [(5.0, 5.0, 9)], []]
     if binary:
         with open(model / "cameras.bin", "wb") as f:
             f.write(struct.pack("<Q", 1) + struct.pack("<iiQQ", 1, 1, W, H)
@@ -120,9 +117,44 @@ def test_colmap_model_reads_back(tmp_path, cameras, binary):
             lines.append(f"{k + 1} {q_t} 1 {name}")
             lines.append(" ".join(f"{x} {y} {pid}" for x, y, pid in pts))
         (model / "images.txt").write_text("\n".join(lines) + "\n")
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_colmap_model_reads_back(tmp_path, cameras, binary):
+    """COLMAP stores world-to-camera quaternions and the pixel-corner principal point."""
+    Ts, K = cameras
+    names = _images(tmp_path / "images", len(Ts))
+    points = [[(1.0, 2.0, 7), (3.0, 4.0, -1)], [(1.0, 2.0, 7)], [(5.0, 5.0, 9)], []]
+    _write_colmap(tmp_path, Ts, K, names, points, binary)
     ims = read_posed_folder(tmp_path)
     _assert_same(ims, Ts, K)
     assert ims[0].points == frozenset({7}) and ims[3].points == frozenset()
+    # the binary reader skipped 4 bytes of every name (a native-aligned record size): the
+    # images of a .bin model were not found
+    assert [im.path for im in ims] == [str(tmp_path / "images" / n) for n in names]
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_colmap_images_in_capture_order_and_a_model_without_tracks(tmp_path, cameras, binary):
+    """Images named 1.png ... 12.png came back as 1, 10, 11, 12, 2, ... (text order), so the
+    gap-1 pairs joined frames 9 apart; a model written from known poses (no point tracks)
+    gave every image an empty point set, and no pair passed the co-visibility filter."""
+    Ts, K = cameras
+    Ts = [Ts[k % 4] @ np.diag([1.0, 1.0, 1.0, 1.0]) for k in range(12)]
+    for k, T in enumerate(Ts):
+        T[:3, 3] = [0.05 * k, 0.0, 0.0]  # a slow pan: every neighbour overlaps
+        T[:3, :3] = _rot([0, 1, 0], 2 * k)
+    names = [f"{k + 1}.png" for k in range(12)]
+    (tmp_path / "images").mkdir()
+    for n in names:
+        cv2.imwrite(str(tmp_path / "images" / n), np.zeros((H, W), np.uint8))
+    _write_colmap(tmp_path, Ts, K, names, [[] for _ in names], binary)
+    ims = read_posed_folder(tmp_path)
+    assert [im.path.rsplit("/", 1)[1] for im in ims] == names
+    _assert_same(ims, Ts, K)
+    assert all(im.points is None for im in ims)  # no co-visibility to filter on
+    pairs = select_pairs(ims, PosedPairOptions(gaps=(1,)))
+    assert pairs == [(k, k + 1) for k in range(11)]
 
 
 def test_colmap_distortion_is_kept_and_refused_for_pairs(tmp_path, cameras):

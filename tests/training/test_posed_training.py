@@ -60,6 +60,14 @@ def test_posed_and_generated_pairs_train_together(posed_root, tmp_path):
     stored = json.loads((run / "config.json").read_text())
     assert stored["dataset"] == "posed" and stored["synthetic_share"] == 0.5
     assert stored["train_scenes"] == ["a", "b"] and stored["val_scenes"] == ["c"]
+    # what the run loaded, per source, and the settings it did not read: a posed run's
+    # config.json recorded train_pairs 2048 and the generator's scene kinds as if they applied
+    assert stored["data"] == {"training": {"a": 1, "b": 1, "generated": 2},
+                              "validation": {"c": 1}}
+    assert "train_pairs" in stored["ignored"] and "kitti_k" in stored["ignored"]
+    assert "scene_kinds" not in stored["ignored"]  # the generated share reads it
+    # the descriptive keys are left out (warmup_steps is stored resolved)
+    assert TrainConfig.from_dict(stored) == replace(cfg, warmup_steps=cfg.warmup)
     assert (run / "best_model.pt").is_file() and len(result["history"]) == 2
     assert all("pose_err_med" in h for h in result["history"])
 
@@ -81,6 +89,35 @@ def test_the_budget_stops_a_run_with_its_checkpoint(posed_root, tmp_path):
     assert (tmp_path / "run" / "last.pt").is_file() and len(result["history"]) == 1
     with pytest.raises(ValueError, match="Expected budget_minutes > 0"):
         replace(cfg, budget_minutes=0.0)
+
+
+def test_scenes_without_pairs_are_named_with_the_rules(posed_root, tmp_path):
+    """A scene whose pairs the options all drop (a COLMAP model without point tracks did)
+    was reported as 'pairs the front end can match (got none of 0)'."""
+    cfg = posed_config(posed_root, tmp_path, posed_max_rotation=1e-6)
+    with pytest.warns(UserWarning, match="Expected pairs from scene 'a'"), \
+            pytest.raises(ValueError, match=r"Expected training pairs from the scenes \(got "
+                                            r"none: a: 0 pairs of 2 images, b: 0 pairs of 2 "
+                                            r"images; the pair options keep pairs"):
+        build_datasets(cfg, progress=False)
+
+
+def test_posed_settings_on_the_command_line():
+    import argparse
+
+    from strl_pyg.training.commandline import config_from_args
+    from strl_pyg.training.config import add_train_arguments
+
+    ap = add_train_arguments(argparse.ArgumentParser())
+    args = ap.parse_args(["--dataset", "posed", "--data-root", "x", "--posed-min-covisible", "0"])
+    cfg = config_from_args(args, ap)
+    assert cfg.posed_min_covisible == 0.0
+    assert TrainConfig(dataset="posed", data_root="x").ignored_fields()[:2] == ["train_pairs", "val_pairs"]
+    assert "posed_gaps" in TrainConfig().ignored_fields()  # generated scenes: no photographs
+    with pytest.raises(ValueError, match="Expected posed_min_covisible in"):
+        TrainConfig(posed_min_covisible=1.5)
+    with pytest.raises(ValueError, match="Expected matches 'ground_truth' with dataset 'posed'"):
+        TrainConfig(dataset="posed", data_root="x", matches="frontend")
 
 
 def test_best_value_reads_the_history():
