@@ -1,4 +1,4 @@
-"""Train Str-L Pose on generated scenes, KITTI odometry or DeMoN.
+"""Train Str-L Pose on generated scenes, KITTI odometry, DeMoN or your own posed photographs.
 
 Examples:
     # a small CPU run on generated scenes (no downloads)
@@ -12,6 +12,11 @@ Examples:
     python examples/train.py --model baseline --out runs/baseline
     # KITTI odometry (official layout), 2 processes with DistributedDataParallel
     torchrun --nproc_per_node 2 examples/train.py --dataset kitti --data-root /data/kitti
+    # posed photographs (scene folders: real_scenes cameras.json, COLMAP, transforms.json or
+    # LLFF), mixed 1:1 with generated pairs, fine-tuning the shipped weights
+    python examples/train.py --dataset posed --data-root my_scenes --train-scenes a,b,c \\
+        --val-scenes d --synthetic-share 0.5 --init-from shipped:synthetic --lr 2e-4 \\
+        --budget-minutes 120 --out runs/mine
 
 All settings live in strl_pyg.training.config.TrainConfig; every run stores them in its
 checkpoint. The default model takes its patch channels from the data (generated scenes and
@@ -33,6 +38,10 @@ from strl_pyg.utils import OneLineArgumentParser
 from strl_pyg.training.config import add_train_arguments
 
 
+class _Help(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """The examples as written, and every flag's default."""
+
+
 def _run(args: argparse.Namespace, ap: argparse.ArgumentParser, argv: list[str]) -> int:
     check_train_files(args)  # before torch is imported
     from strl_pyg.training import run_from_args
@@ -41,8 +50,7 @@ def _run(args: argparse.Namespace, ap: argparse.ArgumentParser, argv: list[str])
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = OneLineArgumentParser(description=__doc__,
-                               formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = OneLineArgumentParser(description=__doc__, formatter_class=_Help)
     add_train_arguments(ap)
     # parsed under the guard: a bad flag or value is one error line, as in `strl-pose train`
     argv = sys.argv[1:] if argv is None else list(argv)

@@ -149,11 +149,77 @@ def read_intrinsics(text_or_path: str) -> np.ndarray:
         raise UsageError(str(err)) from err
 
 
+def is_scene_cameras(text_or_path: str) -> bool:
+    """Whether an intrinsics flag names a posed scene's cameras (a ``.json`` file: NeRF
+    ``transforms.json`` or real_scenes ``cameras.json``; or a folder: a COLMAP model or a scene
+    folder) rather than one K for every image."""
+    path = Path(text_or_path)
+    return path.is_dir() or (path.suffix.lower() == ".json" and path.is_file())
+
+
+def scene_intrinsics(source: str, image: str | os.PathLike) -> np.ndarray:
+    """The K of ``image`` (matched by file name) in a posed scene's cameras
+    (:func:`is_scene_cameras`; the formats of :mod:`strl_pyg.datasets.camera_files`, in their
+    documented conventions)."""
+    import json
+
+    from strl_pyg.datasets import camera_files as cf
+
+    path, name = Path(source), Path(image).name
+    listed = None
+    try:
+        if path.is_dir():
+            images = cf.read_posed_folder(path)
+        else:
+            try:
+                data = json.loads(path.read_text())
+            except (OSError, UnicodeDecodeError, ValueError) as err:
+                raise UsageError(f"Expected a JSON camera file at '{path}' (got "
+                                 f"{type(err).__name__}: {err})") from None
+            if isinstance(data, dict) and "frames" in data:
+                images = cf.read_nerf_transforms(path, names={name})
+                listed = [Path(str(fr.get("file_path", "?"))).name for fr in data["frames"]
+                          if isinstance(fr, dict)]
+            elif isinstance(data, dict) and "images" in data:
+                images = cf.read_real_scene(path.parent)
+            else:
+                raise UsageError(f"Expected a NeRF transforms.json ('frames') or a real_scenes "
+                                 f"cameras.json ('images') at '{path}' (got keys "
+                                 f"{sorted(data)[:8] if isinstance(data, dict) else type(data).__name__})")
+    except (OSError, ValueError) as err:  # the readers' one-line errors
+        raise UsageError(str(err)) from None
+    found = [im for im in images if Path(im.path).name == name]
+    if not found:
+        listed = listed if listed is not None else [Path(im.path).name for im in images]
+        seen = ", ".join(sorted(listed)[:5])
+        raise UsageError(f"Expected the image '{name}' among the cameras of '{path}' (got "
+                         f"{len(listed)} others: {seen}{', ...' if len(listed) > 5 else ''})")
+    im = found[0]
+    if im.distortion and any(abs(d) > 1e-9 for d in im.distortion):
+        raise UsageError(f"Expected a pinhole camera for '{name}' in '{path}' (got distortion "
+                         f"{im.distortion}): undistort the images first, e.g. with colmap "
+                         "image_undistorter")
+    return im.K
+
+
 def intrinsics_from_args(args) -> tuple[np.ndarray | None, np.ndarray | None]:
-    K0 = read_intrinsics(args.K0) if args.K0 else None
-    K1 = read_intrinsics(args.K1) if args.K1 else K0
+    """K0 and K1 of ``--K`` / ``--K0`` / ``--K1``: one K each, or a posed scene's cameras
+    (:func:`is_scene_cameras`) read for ``args.image0`` / ``args.image1`` by file name."""
+    images = (getattr(args, "image0", None), getattr(args, "image1", None))
+
+    def one(flag: str, value: str, k: int) -> np.ndarray:
+        if is_scene_cameras(value):
+            if images[k] is None:
+                raise UsageError(f"Expected images to look up in the cameras of {flag} "
+                                 f"'{value}' (got none)")
+            return scene_intrinsics(value, images[k])
+        return read_intrinsics(value)
+
     if args.K:
-        K0 = K1 = read_intrinsics(args.K)
+        return one("--K", args.K, 0), one("--K", args.K, 1)
+    K0 = one("--K0", args.K0, 0) if args.K0 else None
+    K1 = one("--K1", args.K1, 1) if args.K1 else (
+        one("--K0", args.K0, 1) if args.K0 and is_scene_cameras(args.K0) else K0)
     return K0, K1
 
 

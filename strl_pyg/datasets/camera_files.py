@@ -13,7 +13,7 @@ import json
 import os
 import re
 import struct
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -304,8 +304,11 @@ def _resolve_image(folder: Path, file_path: str) -> Path:
     return p
 
 
-def read_nerf_transforms(path: str | os.PathLike) -> list[PosedImage]:
-    """The frames of a NeRF / instant-ngp ``transforms.json``, in file order."""
+def read_nerf_transforms(path: str | os.PathLike,
+                         names: Collection[str] | None = None) -> list[PosedImage]:
+    """The frames of a NeRF / instant-ngp ``transforms.json``, in file order (with ``names``:
+    only the frames whose image file has one of these names, e.g. ``{"0001.jpg"}``; the
+    others' image sizes are not read)."""
     path = Path(path)
     data = _load_json(path, "a NeRF transforms.json")
     if not isinstance(data, dict) or not isinstance(data.get("frames"), list):
@@ -318,6 +321,8 @@ def read_nerf_transforms(path: str | os.PathLike) -> list[PosedImage]:
             raise ValueError(f"Expected file_path and transform_matrix in {where} "
                              f"(got {sorted(fr)})")
         file = _resolve_image(path.parent, fr["file_path"])
+        if names is not None and file.name not in names:
+            continue
         if "w" in cam and "h" in cam:
             size = (int(cam["h"]), int(cam["w"]))
         else:

@@ -462,7 +462,10 @@ def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     ap.add_argument("--kitti-k", type=int, default=d.kitti_k, help="frame gap of KITTI pairs")
     ap.add_argument("--train-sequences", default=None, help="KITTI sequences, comma-separated")
     ap.add_argument("--val-sequences", default=None, help="KITTI sequences, comma-separated")
-    ap.add_argument("--limit", type=int, default=None, help="keep only the first pairs")
+    ap.add_argument("--limit", type=int, default=None, metavar="N",
+                    help="real datasets, smoke runs: keep only the first N pairs in the "
+                         "order of the scenes or sequences (posed: of the training pairs; "
+                         "kitti, demon: of the training and of the validation pairs)")
     ap.add_argument("--lr", type=float, default=d.lr, help=f"Adam's rate, the cosine's peak "
                     f"(default {d.lr:g}; the paper's: {PAPER_RECIPE['lr']:g} constant)")
     ap.add_argument("--lr-schedule", choices=LR_SCHEDULES, default=d.lr_schedule,

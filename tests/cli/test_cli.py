@@ -517,3 +517,10 @@ def test_predict_on_a_match_file_runs_the_recommended_methods_only(tmp_path, hel
     assert list(lazy["methods"]) == [lazy["pose"]["method"]]
     assert len(full["methods"]) > 1
 
+
+
+def test_the_command_line_runs_as_a_module():
+    """``python -m strl_pyg.cli`` was 'No module named strl_pyg.cli.__main__'."""
+    proc = subprocess.run([sys.executable, "-m", "strl_pyg.cli", "predict", "--help"],
+                          capture_output=True, text=True, cwd=REPO, timeout=120)
+    assert proc.returncode == 0 and "usage: strl-pose predict" in proc.stdout

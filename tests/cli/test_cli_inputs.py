@@ -149,3 +149,38 @@ def test_match_file_without_k_prints_one_line_each(held_out_pair, tmp_path, caps
     assert "regression skipped: the model reads the images" in out + err
     assert "the network's coordinates are normalised" not in out + err
 
+
+
+def test_intrinsics_of_each_image_from_a_posed_scene(tmp_path):
+    """``--K transforms.json`` was parsed as a KITTI calib ('Expected a P0: row ... got keys
+    ['"cx"', ...]'); now each image's K is looked up by file name, in the package's pixel
+    convention (NeRF's cx / cy are pixel corners: -0.5 px)."""
+    import argparse
+    import json
+
+    import cv2
+
+    from strl_pyg.cli.readers import intrinsics_from_args
+
+    (tmp_path / "images").mkdir()
+    for n in ("0001.png", "0002.png"):
+        cv2.imwrite(str(tmp_path / "images" / n), np.zeros((40, 60), np.uint8))
+    pose = np.eye(4).tolist()
+    (tmp_path / "transforms.json").write_text(json.dumps({
+        "fl_x": 50.0, "fl_y": 52.0, "cx": 30.0, "cy": 20.0, "w": 60, "h": 40, "frames": [
+            {"file_path": "images/0001", "transform_matrix": pose},
+            {"file_path": "images/0002.png", "transform_matrix": pose, "fl_x": 70.0}]}))
+    args = argparse.Namespace(K=str(tmp_path / "transforms.json"), K0=None, K1=None,
+                              image0=str(tmp_path / "images" / "0001.png"),
+                              image1="elsewhere/0002.png")
+    K0, K1 = intrinsics_from_args(args)
+    np.testing.assert_allclose(K0, [[50, 0, 29.5], [0, 52, 19.5], [0, 0, 1]])
+    np.testing.assert_allclose(K1[0, 0], 70.0)  # the frame's own focal length
+    args.image1 = "0003.png"
+    with pytest.raises(UsageError, match=r"Expected the image '0003.png' among the cameras of "
+                                         r".*transforms.json' \(got 2 others: 0001, 0002.png"):
+        intrinsics_from_args(args)
+    (tmp_path / "other.json").write_text(json.dumps({"a": 1}))
+    args.K = str(tmp_path / "other.json")
+    with pytest.raises(UsageError, match="Expected a NeRF transforms.json"):
+        intrinsics_from_args(args)
