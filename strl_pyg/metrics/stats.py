@@ -134,28 +134,8 @@ def median_ratio_interval(a: Any, b: Any, level: float = 0.95, resamples: int = 
     x, y = _vector(a, "a"), _vector(b, "b")
     if x.shape != y.shape:
         raise ValueError(f"Expected a and b of one length (got {x.size} and {y.size})")
-    if x.size == 0:
-        raise ValueError("Expected at least one pair (got none)")
-    if not (np.isfinite(x).all() and np.isfinite(y).all()) or (x < 0).any() or (y < 0).any():
-        raise ValueError("Expected finite, non-negative errors in a and b (drop failed pairs)")
-    if not 0 < level < 1:
-        raise ValueError(f"Expected level in (0, 1) (got {level})")
-    if not (isinstance(resamples, (int, np.integer)) and resamples >= 1):
-        raise ValueError(f"Expected resamples >= 1 (got {resamples!r})")
-
-    def ratio(mx: np.ndarray, my: np.ndarray) -> np.ndarray:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(my > 0, mx / np.where(my > 0, my, 1.0), np.inf)
-
-    idx = np.random.default_rng(seed).integers(0, x.size, size=(resamples, x.size))
-    boot = ratio(np.median(x[idx], axis=1), np.median(y[idx], axis=1))
-    if np.isfinite(boot).all():
-        lo, hi = np.quantile(boot, [(1 - level) / 2, (1 + level) / 2])
-    else:  # no interpolation between an infinite ratio and another (inf - inf)
-        lo = np.quantile(boot, (1 - level) / 2, method="lower")
-        hi = np.quantile(boot, (1 + level) / 2, method="higher")
-    r = float(ratio(np.median(x), np.median(y)))
-    return r, float(lo), float(hi)
+    # one seed per row: the same resamples and checks as the seeds' version
+    return seeded_median_ratio_interval(x[None], y[None], level, resamples, seed)
 
 
 def seeded_median_ratio_interval(a: Any, b: Any, level: float = 0.95, resamples: int = 2000,

@@ -160,10 +160,13 @@ def test_seeded_median_ratio_interval_holds_the_spread_between_seeds():
     # independent draws of the two rows' seeds widen
     r, lo, hi = seeded_median_ratio_interval(1.5 * b, b)
     assert r == pytest.approx(1.5, rel=1e-12) and lo < 1.5 < hi
-    # one seed each: the paired bootstrap over pairs alone, the same resamples
+    # one seed each: the paired bootstrap over pairs alone (written out here)
     noisy = b[0] * rng.uniform(0.8, 1.4, size=120)
-    assert seeded_median_ratio_interval(noisy[None], b[:1]) == pytest.approx(
-        median_ratio_interval(noisy, b[0]), rel=1e-12)
+    idx = np.random.default_rng(0).integers(0, 120, size=(2000, 120))
+    boot = np.median(noisy[idx], axis=1) / np.median(b[0][idx], axis=1)
+    want = (np.median(noisy) / np.median(b[0]), *np.quantile(boot, [0.025, 0.975]))
+    assert seeded_median_ratio_interval(noisy[None], b[:1]) == pytest.approx(want, rel=1e-12)
+    assert median_ratio_interval(noisy, b[0]) == pytest.approx(want, rel=1e-12)
     # seeds of a at 0.6x, 1.0x and 1.4x of one b: on average equal; seed 0 alone says 0.6
     # with a degenerate interval, the seeds resampled give an interval around 1 this wide
     spread = np.stack([0.6 * b[0], b[0], 1.4 * b[0]])
