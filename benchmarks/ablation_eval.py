@@ -204,6 +204,9 @@ def seeded_paired_ratio(a: list[list], b: list[list], which: int
     from strl_pyg.metrics.stats import seeded_median_ratio_interval
 
     runs = list(a) + list(b)
+    if len({len(r) for r in runs}) != 1:
+        raise ValueError(f"Expected every run scored on the same pairs (got "
+                         f"{sorted({len(r) for r in runs})} pairs)")
     keep = [i for i in range(len(runs[0])) if all(r[i] is not None for r in runs)]
     if not keep:
         return (np.nan, np.nan, np.nan, 0)

@@ -157,54 +157,79 @@ def is_scene_cameras(text_or_path: str) -> bool:
     return path.is_dir() or (path.suffix.lower() == ".json" and path.is_file())
 
 
-def scene_intrinsics(source: str, image: str | os.PathLike) -> np.ndarray:
-    """The K of ``image`` (matched by file name) in a posed scene's cameras
-    (:func:`is_scene_cameras`; the formats of :mod:`strl_pyg.datasets.camera_files`, in their
-    documented conventions)."""
+def _scene_cameras(path: Path, name: str) -> tuple[list, list[str]]:
+    """The posed images of a cameras source (with ``name``: a NeRF file reads that frame
+    only) and the image names it lists."""
     import json
 
     from strl_pyg.datasets import camera_files as cf
 
-    path, name = Path(source), Path(image).name
-    listed = None
+    if path.is_dir():
+        images = cf.read_posed_folder(path)
+        return images, [Path(im.path).name for im in images]
     try:
-        if path.is_dir():
-            images = cf.read_posed_folder(path)
-        else:
-            try:
-                data = json.loads(path.read_text())
-            except (OSError, UnicodeDecodeError, ValueError) as err:
-                raise UsageError(f"Expected a JSON camera file at '{path}' (got "
-                                 f"{type(err).__name__}: {err})") from None
-            if isinstance(data, dict) and "frames" in data:
-                images = cf.read_nerf_transforms(path, names={name})
-                listed = [Path(str(fr.get("file_path", "?"))).name for fr in data["frames"]
-                          if isinstance(fr, dict)]
-            elif isinstance(data, dict) and "images" in data:
-                images = cf.read_real_scene(path.parent)
-            else:
-                raise UsageError(f"Expected a NeRF transforms.json ('frames') or a real_scenes "
-                                 f"cameras.json ('images') at '{path}' (got keys "
-                                 f"{sorted(data)[:8] if isinstance(data, dict) else type(data).__name__})")
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        raise UsageError(f"Expected a JSON camera file at '{path}' (got {type(err).__name__}: "
+                         f"{err})") from None
+    if isinstance(data, dict) and "frames" in data:
+        listed = [Path(str(fr.get("file_path", "?"))).name for fr in data["frames"]
+                  if isinstance(fr, dict)]
+        return cf.read_nerf_transforms(path, names={name}), listed
+    if isinstance(data, dict) and "images" in data and path.name == "cameras.json":
+        images = cf.read_real_scene(path.parent)
+        return images, [Path(im.path).name for im in images]
+    got = sorted(data)[:8] if isinstance(data, dict) else type(data).__name__
+    raise UsageError(f"Expected a NeRF transforms.json ('frames') or a real_scenes "
+                     f"cameras.json ('images') at '{path}' (got {got} in '{path.name}')")
+
+
+def scene_intrinsics(source: str, image: str | os.PathLike,
+                     size: tuple[int, int] | None = None) -> np.ndarray:
+    """The K of ``image`` in a posed scene's cameras (:func:`is_scene_cameras`; the formats
+    of :mod:`strl_pyg.datasets.camera_files`, in their documented conventions): the camera
+    whose image is this file, else the one camera whose image has this file name (two with
+    the name are refused). With ``size`` ``(H, W)`` of the image as read, a K stored for
+    another resolution of the same aspect is scaled to it (e.g. LLFF's ``images_4``)."""
+    path, image = Path(source), Path(image)
+    try:
+        images, listed = _scene_cameras(path, image.name)
     except (OSError, ValueError) as err:  # the readers' one-line errors
         raise UsageError(str(err)) from None
-    found = [im for im in images if Path(im.path).name == name]
+    same = [im for im in images if Path(im.path).resolve() == image.resolve()]
+    found = same or [im for im in images if Path(im.path).name == image.name]
     if not found:
-        listed = listed if listed is not None else [Path(im.path).name for im in images]
         seen = ", ".join(sorted(listed)[:5])
-        raise UsageError(f"Expected the image '{name}' among the cameras of '{path}' (got "
-                         f"{len(listed)} others: {seen}{', ...' if len(listed) > 5 else ''})")
+        raise UsageError(f"Expected the image '{image.name}' among the cameras of '{path}' "
+                         f"(got {len(listed)} others: {seen}"
+                         f"{', ...' if len(listed) > 5 else ''})")
+    if len(found) > 1:
+        raise UsageError(f"Expected one camera for '{image.name}' in '{path}' (got "
+                         f"{len(found)}: {', '.join(im.path for im in found[:3])}); give the "
+                         "image's path as the cameras list it")
     im = found[0]
     if im.distortion and any(abs(d) > 1e-9 for d in im.distortion):
-        raise UsageError(f"Expected a pinhole camera for '{name}' in '{path}' (got distortion "
-                         f"{im.distortion}): undistort the images first, e.g. with colmap "
-                         "image_undistorter")
-    return im.K
+        raise UsageError(f"Expected a pinhole camera for '{image.name}' in '{path}' (got "
+                         f"distortion {im.distortion}): undistort the images first, e.g. with "
+                         "colmap image_undistorter")
+    K = np.array(im.K, dtype=np.float64)
+    if size is not None and tuple(size) != tuple(im.size):
+        sy, sx = size[0] / im.size[0], size[1] / im.size[1]
+        if abs(sx - sy) > 0.01 * max(sx, sy):
+            raise UsageError(f"Expected '{image.name}' at the size its camera in '{path}' was "
+                             f"stored for, or a scaled copy ({im.size[0]}x{im.size[1]} px, H x W) "
+                             f"(got {size[0]}x{size[1]} px)")
+        # pixel centres: x' + 0.5 = s (x + 0.5)
+        K[0, 0], K[0, 2] = K[0, 0] * sx, (K[0, 2] + 0.5) * sx - 0.5
+        K[1, 1], K[1, 2] = K[1, 1] * sy, (K[1, 2] + 0.5) * sy - 0.5
+    return K
 
 
-def intrinsics_from_args(args) -> tuple[np.ndarray | None, np.ndarray | None]:
+def intrinsics_from_args(args, sizes: tuple | None = None
+                         ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """K0 and K1 of ``--K`` / ``--K0`` / ``--K1``: one K each, or a posed scene's cameras
-    (:func:`is_scene_cameras`) read for ``args.image0`` / ``args.image1`` by file name."""
+    (:func:`is_scene_cameras`) read for ``args.image0`` / ``args.image1``
+    (:func:`scene_intrinsics`, ``sizes``: the images' ``(H, W)`` as read)."""
     images = (getattr(args, "image0", None), getattr(args, "image1", None))
 
     def one(flag: str, value: str, k: int) -> np.ndarray:
@@ -212,7 +237,7 @@ def intrinsics_from_args(args) -> tuple[np.ndarray | None, np.ndarray | None]:
             if images[k] is None:
                 raise UsageError(f"Expected images to look up in the cameras of {flag} "
                                  f"'{value}' (got none)")
-            return scene_intrinsics(value, images[k])
+            return scene_intrinsics(value, images[k], None if sizes is None else sizes[k])
         return read_intrinsics(value)
 
     if args.K:
@@ -298,7 +323,7 @@ def check_input_file(path: str | os.PathLike, what: str) -> None:
 def read_pair(args) -> PairInputs:
     """Reads the pair's images and intrinsics and downscales them to ``--max-side``."""
     img0, img1 = read_image_file(args.image0), read_image_file(args.image1)
-    K0, K1 = intrinsics_from_args(args)
+    K0, K1 = intrinsics_from_args(args, (img0.shape[:2], img1.shape[:2]))
     max_side = getattr(args, "max_side", MAX_SIDE)
     small0, sK0, s0 = downscale_for_matching(img0, K0, max_side)
     small1, sK1, s1 = downscale_for_matching(img1, K1, max_side)

@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PosedImage", "read_real_scene", "read_colmap_model", "read_nerf_transforms",
-           "read_llff_poses", "read_posed_folder"]
+__all__ = ["PosedImage", "posed_format", "read_real_scene", "read_colmap_model",
+           "read_nerf_transforms", "read_llff_poses", "read_posed_folder"]
 
 _GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
 
@@ -280,8 +280,8 @@ def read_colmap_model(model_dir: str | os.PathLike,
 def _natural_key(name: str) -> tuple:
     """Sort key of a file name with its digit runs compared as numbers: ``frame_2.jpg``
     before ``frame_10.jpg`` (plain text order puts ``10`` first)."""
-    parts = re.split(r"(\d+)", name)
-    return tuple((0, int(p), "") if p.isdigit() else (1, 0, p) for p in parts)
+    parts = re.split(r"([0-9]+)", name)  # odd positions: the ASCII digit runs
+    return (tuple((0, int(p), "") if k % 2 else (1, 0, p) for k, p in enumerate(parts)), name)
 
 
 # -- NeRF / instant-ngp ----------------------------------------------------------------------
@@ -393,23 +393,42 @@ def read_llff_poses(path: str | os.PathLike,
     return out
 
 
-def read_posed_folder(folder: str | os.PathLike) -> list[PosedImage]:
-    """Reads whichever format a folder holds: ``cameras.json`` (real_scenes), a COLMAP model
-    (``sparse/0``, ``sparse`` or the folder itself), ``transforms.json`` or
-    ``poses_bounds.npy``."""
+def _colmap_dir(folder: Path) -> Path | None:
+    for sub in (folder / "sparse" / "0", folder / "sparse", folder):
+        if any((sub / f"cameras.{e}").is_file() for e in ("txt", "bin")):
+            return sub
+    return None
+
+
+def posed_format(folder: str | os.PathLike) -> str:
+    """Which camera format a scene folder holds: ``"real_scenes"`` (``cameras.json``),
+    ``"colmap"`` (``sparse/0``, ``sparse`` or the folder itself), ``"nerf"``
+    (``transforms.json``) or ``"llff"`` (``poses_bounds.npy``), looked for in that order."""
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f"Expected a folder of posed images at '{folder}' (got no such "
                                 "folder)")
     if (folder / "cameras.json").is_file():
-        return read_real_scene(folder)
-    for sub in (folder / "sparse" / "0", folder / "sparse", folder):
-        if any((sub / f"{n}.{e}").is_file() for n in ("cameras",) for e in ("txt", "bin")):
-            return read_colmap_model(sub, folder / "images")
+        return "real_scenes"
+    if _colmap_dir(folder) is not None:
+        return "colmap"
     if (folder / "transforms.json").is_file():
-        return read_nerf_transforms(folder / "transforms.json")
+        return "nerf"
     if (folder / "poses_bounds.npy").is_file():
-        return read_llff_poses(folder / "poses_bounds.npy")
+        return "llff"
     raise FileNotFoundError(
         f"Expected cameras.json, a COLMAP model (sparse/0), transforms.json or "
         f"poses_bounds.npy in '{folder}' (got {sorted(p.name for p in folder.iterdir())[:8]})")
+
+
+def read_posed_folder(folder: str | os.PathLike) -> list[PosedImage]:
+    """Reads whichever format a folder holds (:func:`posed_format`)."""
+    folder = Path(folder)
+    kind = posed_format(folder)
+    if kind == "real_scenes":
+        return read_real_scene(folder)
+    if kind == "colmap":
+        return read_colmap_model(_colmap_dir(folder), folder / "images")
+    if kind == "nerf":
+        return read_nerf_transforms(folder / "transforms.json")
+    return read_llff_poses(folder / "poses_bounds.npy")

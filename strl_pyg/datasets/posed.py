@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from strl_pyg.datasets.base import ImageSource, PairDataset, PairRecord
-from strl_pyg.datasets.camera_files import PosedImage, read_posed_folder
+from strl_pyg.datasets.camera_files import PosedImage, posed_format, read_posed_folder
 
 __all__ = ["PosedPairOptions", "REAL_SCENES_SPLIT", "select_pairs", "PosedImagePairs"]
 
@@ -157,11 +157,13 @@ class PosedImagePairs(PairDataset):
         self.scene_names = []
         #: scene name -> (images, pairs kept by the pair options)
         self.scene_counts: dict[str, tuple[int, int]] = {}
+        self._colmap = False
         for scene in scenes:
             if isinstance(scene, tuple):
                 name, images = scene
             else:
                 name, images = Path(scene).name, read_posed_folder(scene)
+                self._colmap = self._colmap or posed_format(scene) == "colmap"
             self.scene_names.append(name)
             for im in images:
                 if im.distortion and any(abs(d) > 1e-9 for d in im.distortion):
@@ -182,14 +184,26 @@ class PosedImagePairs(PairDataset):
         super().__init__(records, cache_dir=cache_dir, image_size=image_size,
                          transform=transform, kind="posed", **kwargs)
 
+    def _make_fingerprint(self) -> dict[str, Any]:
+        fp = super()._make_fingerprint()
+        if self._colmap:
+            # a pair's id holds the images' positions: COLMAP's order (numbers in names as
+            # numbers) must not meet entries cached under the text order
+            fp["colmap_order"] = "natural"
+        return fp
+
     def _rules(self) -> str:
         o = self.pair_options
-        return (f"pairs (i, i + k) for k in {list(o.gaps)}, relative rotation "
-                f"{o.min_rotation_deg:g}-{o.max_rotation_deg:g} deg, optical axes within "
-                f"{o.max_axis_angle_deg:g} deg, co-visible share >= {o.min_covisible:g}")
+        return (f"pairs (i, i + k) for k in {list(o.gaps)}, i in steps of {o.stride}, relative "
+                f"rotation {o.min_rotation_deg:g}-{o.max_rotation_deg:g} deg, optical axes "
+                f"within {o.max_axis_angle_deg:g} deg, co-visible share >= {o.min_covisible:g}"
+                f", baseline >= {o.min_baseline:g} x the median step")
 
     def no_pairs_reason(self) -> str:
         """Why the scenes gave no pair: each scene's images and kept pairs, and the rules."""
         scenes = ", ".join(f"{n}: {k} pairs of {m} images"
                            for n, (m, k) in self.scene_counts.items())
+        kept = sum(k for _, k in self.scene_counts.values())
+        if kept:  # the scenes gave pairs: the limit cut them
+            return f"{scenes}; limit={len(self.records)} keeps {len(self.records)} of them"
         return f"{scenes}; the pair options keep {self._rules()}"

@@ -105,8 +105,13 @@ def resolve_methods(methods: Iterable[str] | None, model: Any) -> tuple[str, ...
         raise ValueError(f"Expected method names from {registered_methods()} (got "
                          f"{names[0]!r}: evaluate scores every available method when "
                          "--methods is left out)")
-    # the registry's one parser: any case, a suggestion for a misspelt name
-    return tuple(dict.fromkeys(checked_method_names(tuple(names))))
+    # the registry's one parser: any case, a suggestion for a misspelt name (its words
+    # 'all' and 'recommended' are not evaluate's)
+    try:
+        return tuple(dict.fromkeys(checked_method_names(tuple(names))))
+    except ValueError as err:
+        text = str(err).replace(", 'all' or 'recommended'", "")
+        raise ValueError(text) from None
 
 
 # ----------------------------------------------------------------------------- model

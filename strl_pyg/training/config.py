@@ -341,13 +341,16 @@ class TrainConfig:
                  "synthetic_share", "synthetic_pairs"]
         kitti = ["kitti_k", "train_sequences", "val_sequences"]
         generator = ["scene", "scene_kinds", "scene_mix", "matches"]
+        # a named scene mix replaces the scene settings
+        per_scene = ["scene", "scene_kinds"] if self.scene_mix is not None else []
         if self.dataset == "posed":
-            out = ["train_pairs", "val_pairs", *kitti]
+            # the generated share always uses the generator's matches
+            out = ["train_pairs", "val_pairs", *kitti, "matches"]
             if self.synthetic_share == 0:
-                out += [*generator, "synthetic_pairs"]
-            return out
+                return [*out, "scene", "scene_kinds", "scene_mix", "synthetic_pairs"]
+            return [*out, *per_scene]
         if self.dataset == "synthetic":
-            return [*posed, *kitti, "data_root", "limit"]
+            return [*posed, *kitti, "data_root", "limit", *per_scene]
         if self.dataset == "kitti":
             return [*posed, *generator, "train_pairs", "val_pairs"]
         return [*posed, *kitti, *generator, "train_pairs", "val_pairs"]
@@ -369,6 +372,8 @@ class TrainConfig:
         if isinstance(d, dict):
             d = {k: v for k, v in {**STORED_BEFORE, **d}.items()
                  if k not in cls.DESCRIPTIVE_KEYS}
+            if d.get("dataset") == "posed":  # stored before it was refused: it had no effect
+                d["matches"] = "ground_truth"
         return strict_from_dict(cls, d)
 
 

@@ -279,12 +279,13 @@ def _posed_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
     val = PosedImagePairs([root / n for n in val_names], pairs=PosedPairOptions(
         gaps=(cfg.val_gap,), stride=cfg.val_stride, max_rotation_deg=180.0,
         max_axis_angle_deg=180.0, min_covisible=0.0), **common)
-    for ds in (train, val):
-        ds.build_cache(num_workers=max(1, cfg.num_workers), progress=progress)
-    for role, ds in (("training", train), ("validation", val)):
+    for role, ds in (("training", train), ("validation", val)):  # before any matching
         if ds.num_pairs == 0:
             raise ValueError(f"Expected {role} pairs from the scenes (got none: "
                              f"{ds.no_pairs_reason()})")
+    for ds in (train, val):
+        ds.build_cache(num_workers=max(1, cfg.num_workers), progress=progress)
+    for role, ds in (("training", train), ("validation", val)):
         if len(ds) == 0:
             least = f" with >= {ds.min_points} point matches" if ds.min_points else ""
             raise ValueError(f"Expected {role} pairs the front end can match{least} (got "

@@ -160,7 +160,7 @@ def test_intrinsics_of_each_image_from_a_posed_scene(tmp_path):
 
     import cv2
 
-    from strl_pyg.cli.readers import intrinsics_from_args
+    from strl_pyg.cli.readers import intrinsics_from_args, scene_intrinsics
 
     (tmp_path / "images").mkdir()
     for n in ("0001.png", "0002.png"):
@@ -184,3 +184,25 @@ def test_intrinsics_of_each_image_from_a_posed_scene(tmp_path):
     args.K = str(tmp_path / "other.json")
     with pytest.raises(UsageError, match="Expected a NeRF transforms.json"):
         intrinsics_from_args(args)
+    # a list of images in a file not named cameras.json: not read as the folder's cameras.json
+    (tmp_path / "mine.json").write_text(json.dumps({"images": []}))
+    args.K = str(tmp_path / "mine.json")
+    with pytest.raises(UsageError, match=r"Expected a NeRF .* \(got \['images'\] in 'mine.json'"):
+        intrinsics_from_args(args)
+    # an image read at half the stored size: K scaled to it (pixel centres)
+    args.K, args.image1 = str(tmp_path / "transforms.json"), str(tmp_path / "images" / "0002.png")
+    K0, _ = intrinsics_from_args(args, sizes=((20, 30), (40, 60)))
+    np.testing.assert_allclose(K0, [[25, 0, 14.5], [0, 26, 9.5], [0, 0, 1]])  # (c + .5) s - .5
+    with pytest.raises(UsageError, match=r"\(40x60 px, H x W\) \(got 40x30 px\)"):
+        intrinsics_from_args(args, sizes=((40, 30), (40, 60)))
+    # two cameras with one file name: the image's own path decides, a bare name is refused
+    frames = [{"file_path": f"{cam}/0001.png", "transform_matrix": pose, "fl_x": f}
+              for cam, f in (("cam0", 40.0), ("cam1", 80.0))]
+    for cam in ("cam0", "cam1"):
+        (tmp_path / cam).mkdir()
+        cv2.imwrite(str(tmp_path / cam / "0001.png"), np.zeros((40, 60), np.uint8))
+    (tmp_path / "transforms.json").write_text(json.dumps({"w": 60, "h": 40, "frames": frames}))
+    args.image0, args.image1 = str(tmp_path / "cam1" / "0001.png"), "0001.png"
+    assert scene_intrinsics(args.K, args.image0)[0, 0] == 80.0
+    with pytest.raises(UsageError, match="Expected one camera for '0001.png'"):
+        scene_intrinsics(args.K, args.image1)

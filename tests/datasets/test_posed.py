@@ -155,6 +155,10 @@ def test_colmap_images_in_capture_order_and_a_model_without_tracks(tmp_path, cam
     assert all(im.points is None for im in ims)  # no co-visibility to filter on
     pairs = select_pairs(ims, PosedPairOptions(gaps=(1,)))
     assert pairs == [(k, k + 1) for k in range(11)]
+    # a pair's id holds positions: a COLMAP scene's cache is apart from text-order entries
+    ds = PosedImagePairs([tmp_path], cache_dir=tmp_path / "cache", pairs=PosedPairOptions(
+        gaps=(1,)))
+    assert ds._make_fingerprint()["colmap_order"] == "natural"
 
 
 def test_colmap_distortion_is_kept_and_refused_for_pairs(tmp_path, cameras):

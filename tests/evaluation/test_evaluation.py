@@ -291,6 +291,8 @@ def test_evaluation_reads_method_names_like_the_estimator():
         resolve_methods("STRL", object())
     with pytest.raises(ValueError, match="evaluate scores every available method"):
         resolve_methods("all", object())
+    with pytest.raises(ValueError, match=r"Expected methods from \(.*\) \(got"):
+        resolve_methods("all,opencv", object())  # not "..., 'all' or 'recommended'"
     with pytest.raises(ValueError, match="Expected methods from"):
         resolve_methods(" , ", object())
 

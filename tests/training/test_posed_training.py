@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import replace
+from dataclasses import asdict, replace
 
 import cv2
 import numpy as np
@@ -112,8 +112,24 @@ def test_posed_settings_on_the_command_line():
     args = ap.parse_args(["--dataset", "posed", "--data-root", "x", "--posed-min-covisible", "0"])
     cfg = config_from_args(args, ap)
     assert cfg.posed_min_covisible == 0.0
-    assert TrainConfig(dataset="posed", data_root="x").ignored_fields()[:2] == ["train_pairs", "val_pairs"]
-    assert "posed_gaps" in TrainConfig().ignored_fields()  # generated scenes: no photographs
+    # what each dataset reads (strl_pyg.training.data): the rest is listed as ignored
+    posed = TrainConfig(dataset="posed", data_root="x")
+    assert {"train_pairs", "val_pairs", "matches", "scene_kinds", "kitti_k"} \
+        <= set(posed.ignored_fields())
+    mixed = replace(posed, synthetic_share=0.5)
+    assert "matches" in mixed.ignored_fields()  # the generated share: generator's matches
+    assert not {"scene", "scene_kinds", "synthetic_pairs"} & set(mixed.ignored_fields())
+    assert {"scene", "scene_kinds"} <= set(replace(mixed, scene_mix="lines_small").ignored_fields())
+    generated = TrainConfig()
+    assert {"posed_gaps", "data_root", "limit"} <= set(generated.ignored_fields())
+    assert not {"scene", "scene_kinds", "matches", "train_pairs"} & set(generated.ignored_fields())
+    assert {"scene", "scene_kinds"} <= set(TrainConfig(scene_mix="lines_small").ignored_fields())
+    kitti = TrainConfig(dataset="kitti", data_root="x")
+    assert "kitti_k" not in kitti.ignored_fields() and "matches" in kitti.ignored_fields()
+    assert "kitti_k" in TrainConfig(dataset="demon", data_root="x").ignored_fields()
+    # a posed run stored with --matches frontend (then accepted and ignored) still resumes
+    stored = {**asdict(posed), "matches": "frontend"}
+    assert TrainConfig.from_dict(stored).matches == "ground_truth"
     with pytest.raises(ValueError, match="Expected posed_min_covisible in"):
         TrainConfig(posed_min_covisible=1.5)
     with pytest.raises(ValueError, match="Expected matches 'ground_truth' with dataset 'posed'"):
