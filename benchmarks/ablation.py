@@ -294,16 +294,25 @@ class _Scorer:
 
     def score_reference(self, name: str) -> bool:
         """Scores the shipped checkpoint ``name`` (not trained on this study's budget: the
-        figure the study's ``full`` rows must beat before their weights would be shipped)."""
+        figure the study's ``full`` rows must beat before their weights would be shipped), or
+        the weights of a ``.pt`` file (reference row named by the file's stem)."""
         from strl_pyg.model.strl_pose import StrLPose
 
-        path = self.out / "reference" / f"{name}.json"
+        file = Path(name)
+        if file.suffix == ".pt":
+            if not file.is_file():
+                raise SystemExit(f"error: expected a checkpoint file at '{file}' (got none)")
+            path = self.out / "reference" / f"{file.stem}.json"
+            load, what = (lambda: StrLPose.load(file)), f"'{file}'"
+        else:
+            if name not in StrLPose.PRETRAINED:
+                raise SystemExit(f"error: expected a shipped checkpoint in "
+                                 f"{sorted(StrLPose.PRETRAINED)} or a .pt file (got {name!r})")
+            path = self.out / "reference" / f"{name}.json"
+            load, what = (lambda: StrLPose.from_pretrained(name)), f"shipped '{name}'"
         if path.exists():
             return False
-        if name not in StrLPose.PRETRAINED:
-            raise SystemExit(f"error: expected a shipped checkpoint in "
-                             f"{sorted(StrLPose.PRETRAINED)} (got {name!r})")
-        self._save(path, lambda: StrLPose.from_pretrained(name), f"shipped '{name}'")
+        self._save(path, load, what)
         return True
 
 
@@ -467,7 +476,7 @@ def cmd_report(args: argparse.Namespace) -> int:
             lines.append(f"| {row} | " + " | ".join(
                 _cell([e[n] for e in seeds], which) for n in names) + " |")
         for ref, errs in refs.items():
-            lines.append(f"| shipped `{ref}` (reference) | " + " | ".join(
+            lines.append(f"| {_ref_label(ref)} (reference) | " + " | ".join(
                 _cell([errs[n]], which) for n in names) + " |")
         lines.append("| PoseLib | " + " | ".join(_cell([poselib[n]], which) for n in names)
                      + " |")
@@ -480,7 +489,7 @@ def cmd_report(args: argparse.Namespace) -> int:
                 f"{100 * ae.auc20(ae._rows(runs[row][min(runs[row])][n])[2]):.1f}"
                 for n in names) + " |")
     for ref, errs in refs.items():
-        lines.append(f"| shipped `{ref}` (reference) | " + " | ".join(
+        lines.append(f"| {_ref_label(ref)} (reference) | " + " | ".join(
             f"{100 * ae.auc20(ae._rows(errs[n])[2]):.1f}" for n in names) + " |")
     lines.append("| PoseLib | " + " | ".join(
         f"{100 * ae.auc20(ae._rows(poselib[n])[2]):.1f}" for n in names) + " |")
@@ -490,7 +499,7 @@ def cmd_report(args: argparse.Namespace) -> int:
               "|---|---" + "|---" * len(names) + "|"]
     pairs = [(a, b, runs.get(a, {}).get(0), runs.get(b, {}).get(0))
              for a, b in COMPARISONS]
-    pairs += [("full", f"shipped `{ref}`", runs.get("full", {}).get(0), errs)
+    pairs += [("full", _ref_label(ref), runs.get("full", {}).get(0), errs)
               for ref, errs in refs.items()]
     for a, b, ea, eb in pairs:
         if ea is not None and eb is not None:
@@ -530,10 +539,19 @@ def cmd_report(args: argparse.Namespace) -> int:
     plot_curves(_histories(ev), Path(args.figure), _recipe_title(args.recipe))
     print(f"wrote {args.figure}")
     medians = medians_figure(Path(args.figure))
-    plot_medians(runs, {**{f"shipped {r}": e for r, e in refs.items()}, "PoseLib": poselib},
+    plot_medians(runs, {**{_ref_label(r).replace("`", ""): e for r, e in refs.items()},
+                        "PoseLib": poselib},
                  names, medians, f"{title}: median errors on the evaluation sets")
     print(f"wrote {medians}")
     return 0
+
+
+def _ref_label(ref: str) -> str:
+    """A reference row's name: ``shipped `geometric``` for a shipped checkpoint, the file's
+    stem for other weights."""
+    from strl_pyg.model.strl_pose import StrLPose
+
+    return f"shipped `{ref}`" if ref in StrLPose.PRETRAINED else f"`{ref}.pt`"
 
 
 def _recipe_title(recipe: str) -> str:
@@ -744,7 +762,8 @@ def main(argv: list[str] | None = None) -> int:
     e.add_argument("--reference", nargs="?", const="geometric", default=None,
                    metavar="NAME",
                    help="also score a shipped checkpoint (StrLPose.PRETRAINED name, default "
-                        "'geometric') as a reference row, once (reference/<NAME>.json)")
+                        "'geometric') or a .pt file as a reference row, once "
+                        "(reference/<NAME or stem>.json)")
     r = sub.add_parser("report", help="write the results table and the curves plot")
     r.add_argument("--results", default=None, help="the scored runs (default: RESULTS)")
     r.add_argument("--out", default=None,

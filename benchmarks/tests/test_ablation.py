@@ -95,6 +95,7 @@ def test_report_and_curves_read_only_the_committed_results(tmp_path):
     (res / "runs" / "baseline-s0.json").write_text(json.dumps(errs(4.0)))
     (res / "reference").mkdir()
     (res / "reference" / "geometric.json").write_text(json.dumps(errs(0.5)))
+    (res / "reference" / "my_weights.json").write_text(json.dumps(errs(0.25)))
     hist = [{"step": 250 * k, "rot_err_deg": 9.0 - k, "trans_err_deg": 80.0 - k} for k in (1, 2)]
     (res / "history" / "full-s0.json").write_text(json.dumps({"step": 500, "history": hist}))
     out, fig = tmp_path / "t3.md", tmp_path / "c.png"
@@ -113,6 +114,9 @@ def test_report_and_curves_read_only_the_committed_results(tmp_path):
     # the shipped checkpoint as a reference row, and full against it (every ratio 2)
     assert "| shipped `geometric` (reference) | 1.25 [" in text
     assert "| full vs shipped `geometric` | trans | 2.00 [2.00-2.00]" in text
+    # weights given as a .pt file: named by the file, not called shipped
+    assert "| `my_weights.pt` (reference) | 0.62 [" in text
+    assert "| full vs `my_weights.pt` | rot | 4.00 [4.00-4.00]" in text
     assert fig.stat().st_size > 0
     assert (tmp_path / "c_medians.png").stat().st_size > 0  # the medians beside the curves
     out2 = tmp_path / "curves.md"
