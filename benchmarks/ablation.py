@@ -124,7 +124,8 @@ PLAN_BALANCED = ([(r, 0) for r in ("baseline", "LP", "V", "full", "L")]
 #: dino slices (``bench_real_scenes.pair_sets``). Seed 0 of the three rows first.
 PLAN_REAL = [(r, s) for s in (0, 1, 2) for r in ("baseline", "LP", "full")]
 #: The real recipe's budget: steps of batch 16 per run (on one core of the 2-core development
-#: CPU: baseline 11 minutes, LP about 35).
+#: CPU with a second run on the other: baseline 12 minutes, LP 36-43, full about 80, its
+#: complete-graph attention over 768 nodes a pair being most of a step).
 REAL_STEPS = 1200
 #: The real_scenes folder (``$STRL_REAL_SCENES``, default ``../shared/data/real_scenes``).
 REAL_SCENES = os.environ.get("STRL_REAL_SCENES", str(
