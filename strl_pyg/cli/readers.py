@@ -208,10 +208,12 @@ def scene_intrinsics(source: str, image: str | os.PathLike,
                          f"{len(found)}: {', '.join(im.path for im in found[:3])}); give the "
                          "image's path as the cameras list it")
     im = found[0]
-    if im.distortion and any(abs(d) > 1e-9 for d in im.distortion):
-        raise UsageError(f"Expected a pinhole camera for '{image.name}' in '{path}' (got "
-                         f"distortion {im.distortion}): undistort the images first, e.g. with "
-                         "colmap image_undistorter")
+    from strl_pyg.datasets.camera_files import check_pinhole
+
+    try:
+        check_pinhole(im, f"'{path}'")
+    except ValueError as err:
+        raise UsageError(str(err)) from None
     K = np.array(im.K, dtype=np.float64)
     if size is not None and tuple(size) != tuple(im.size):
         sy, sx = size[0] / im.size[0], size[1] / im.size[1]

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PosedImage", "posed_format", "read_real_scene", "read_colmap_model",
+__all__ = ["PosedImage", "posed_format", "check_pinhole", "read_real_scene", "read_colmap_model",
            "read_nerf_transforms", "read_llff_poses", "read_posed_folder"]
 
 _GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -391,6 +391,14 @@ def read_llff_poses(path: str | os.PathLike,
         where = f"'{path}' row {n}"
         out.append(PosedImage(str(file), _check_K(K, where), _check_pose(T, where), size))
     return out
+
+
+def check_pinhole(image: PosedImage, where: str) -> None:
+    """A ``ValueError`` for a camera with lens distortion: the package's geometry is pinhole."""
+    if image.distortion and any(abs(d) > 1e-9 for d in image.distortion):
+        raise ValueError(f"Expected pinhole images in {where} (got distortion "
+                         f"{image.distortion} for '{image.name}'): undistort them first, e.g. "
+                         "with colmap image_undistorter")
 
 
 def _colmap_dir(folder: Path) -> Path | None:

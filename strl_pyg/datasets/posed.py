@@ -41,7 +41,12 @@ from typing import Any
 import numpy as np
 
 from strl_pyg.datasets.base import ImageSource, PairDataset, PairRecord
-from strl_pyg.datasets.camera_files import PosedImage, posed_format, read_posed_folder
+from strl_pyg.datasets.camera_files import (
+    PosedImage,
+    check_pinhole,
+    posed_format,
+    read_posed_folder,
+)
 
 __all__ = ["PosedPairOptions", "REAL_SCENES_SPLIT", "select_pairs", "PosedImagePairs"]
 
@@ -166,11 +171,7 @@ class PosedImagePairs(PairDataset):
                 self._colmap = self._colmap or posed_format(scene) == "colmap"
             self.scene_names.append(name)
             for im in images:
-                if im.distortion and any(abs(d) > 1e-9 for d in im.distortion):
-                    raise ValueError(
-                        f"Expected pinhole images in scene '{name}' (got distortion "
-                        f"{im.distortion} for '{im.name}'): undistort them first, e.g. with "
-                        "colmap image_undistorter")
+                check_pinhole(im, f"scene '{name}'")
             chosen = select_pairs(images, self.pair_options)
             self.scene_counts[name] = (len(images), len(chosen))
             if not chosen:
