@@ -157,9 +157,38 @@ def is_scene_cameras(text_or_path: str) -> bool:
     return path.is_dir() or (path.suffix.lower() == ".json" and path.is_file())
 
 
+def _source_state(path: Path) -> tuple:
+    """What identifies a cameras source's content within one process: the file's (or the
+    folder's files') path, size and modification time."""
+    def one(p: Path) -> tuple:
+        st = p.stat()
+        return str(p.resolve()), st.st_size, st.st_mtime_ns
+
+    if not path.is_dir():
+        return (one(path),)
+    files = [p for sub in (path, path / "sparse" / "0", path / "sparse")
+             if sub.is_dir() for p in sorted(sub.iterdir()) if p.is_file()]
+    return (one(path),) + tuple(one(p) for p in files)
+
+
+#: Cameras read from a source, by :func:`_source_state` (and the frame name, for a NeRF
+#: file): ``predict --pairs`` looks up two images a pair in one scene's cameras.
+_CAMERAS_READ: dict[tuple, tuple[list, list[str]]] = {}
+
+
 def _scene_cameras(path: Path, name: str) -> tuple[list, list[str]]:
     """The posed images of a cameras source (with ``name``: a NeRF file reads that frame
-    only) and the image names it lists."""
+    only) and the image names it lists, read once per source (and frame) and process."""
+    key = (_source_state(path), None if path.is_dir() or path.name == "cameras.json" else name)
+    if key not in _CAMERAS_READ:
+        if len(_CAMERAS_READ) >= 64:
+            _CAMERAS_READ.clear()
+        _CAMERAS_READ[key] = _read_scene_cameras(path, name)
+    return _CAMERAS_READ[key]
+
+
+def _read_scene_cameras(path: Path, name: str) -> tuple[list, list[str]]:
+    """:func:`_scene_cameras` without the memo."""
     import json
 
     from strl_pyg.datasets import camera_files as cf

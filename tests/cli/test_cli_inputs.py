@@ -206,3 +206,38 @@ def test_intrinsics_of_each_image_from_a_posed_scene(tmp_path):
     assert scene_intrinsics(args.K, args.image0)[0, 0] == 80.0
     with pytest.raises(UsageError, match="Expected one camera for '0001.png'"):
         scene_intrinsics(args.K, args.image1)
+
+
+def test_scene_cameras_read_once_per_source(tmp_path, monkeypatch):
+    """``predict --pairs`` with ``--K SCENE`` looked up two images a pair and re-read the
+    scene's cameras for each; now a source is read once while it is unchanged, and read
+    again when it changes."""
+    import json
+
+    import cv2
+
+    from strl_pyg.cli import readers
+    from strl_pyg.datasets import camera_files
+
+    (tmp_path / "images").mkdir()
+    for n in ("a.png", "b.png"):
+        cv2.imwrite(str(tmp_path / "images" / n), np.zeros((40, 60), np.uint8))
+
+    def write(f):
+        (tmp_path / "cameras.json").write_text(json.dumps({"images": [
+            {"file": f"images/{n}", "K": [[f, 0, 29.5], [0, f, 19.5], [0, 0, 1]],
+             "T_cam_to_world": np.eye(4).tolist(), "width": 60, "height": 40}
+            for n in ("a.png", "b.png")]}))
+
+    reads = []
+    real = camera_files.read_posed_folder
+    monkeypatch.setattr(camera_files, "read_posed_folder",
+                        lambda path: reads.append(path) or real(path))
+    write(50.0)
+    for _ in range(3):
+        for n in ("a.png", "b.png"):
+            assert readers.scene_intrinsics(str(tmp_path), tmp_path / "images" / n)[0, 0] == 50.0
+    assert len(reads) == 1
+    write(125.0)  # another size: the source changed
+    assert readers.scene_intrinsics(str(tmp_path), tmp_path / "images" / "a.png")[0, 0] == 125.0
+    assert len(reads) == 2
