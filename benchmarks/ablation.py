@@ -41,7 +41,7 @@ run resumed to more steps equals a longer run), width 64, 3 layers, 4 heads (the
 size), validation on 100 held-out pairs every 250 steps.
 
 **Table 3 on real photographs** (``--recipe real``, :data:`PLAN_REAL`, :data:`REAL_ARGS`):
-baseline, LP and full with 3 seeds each, trained on the real_scenes training scenes (the
+baseline, LP and full with 3 seeds each (then L and V with one), trained on the real_scenes training scenes (the
 fixed split) mixed 1:1 with generated pairs, the balanced loss and flow inputs at this
 protocol's constant 3e-4, :data:`REAL_STEPS` steps of batch 16, and scored on the 4 validation
 scenes and the KITTI 06, DeMoN and dino slices (``bench_real_scenes.pair_sets``); results in
@@ -121,8 +121,11 @@ PLAN_BALANCED = ([(r, 0) for r in ("baseline", "LP", "V", "full", "L")]
 #: Table 3 on real photographs (recipe ``real``): baseline, LP and full, 3 seeds each, on the
 #: real_scenes training scenes mixed 1:1 with generated pairs (the package's posed-photograph
 #: training, ``--dataset posed``), scored on the 4 validation scenes and the KITTI 06, DeMoN and
-#: dino slices (``bench_real_scenes.pair_sets``). Seed 0 of the three rows first.
-PLAN_REAL = [(r, s) for s in (0, 1, 2) for r in ("baseline", "LP", "full")]
+#: dino slices (``bench_real_scenes.pair_sets``). Seed 0 of the three rows first; then L and V
+#: with one seed where the budget allows (LP against L: the lines' own message passing; V
+#: against baseline: the visual graph).
+PLAN_REAL = ([(r, s) for s in (0, 1, 2) for r in ("baseline", "LP", "full")]
+             + [("L", 0), ("V", 0)])
 #: The real recipe's budget: steps of batch 16 per run (on one core of the 2-core development
 #: CPU with a second run on the other: baseline 12 minutes, LP 36-43, full about 80, its
 #: complete-graph attention over 768 nodes a pair being most of a step).
