@@ -94,6 +94,9 @@ def main(argv=None) -> int:
                          "(scenes the model was not trained on)")
     ap.add_argument("--own", action="store_true",
                     help="the network's own covariance (no swap / data check); no --out")
+    ap.add_argument("--report", default=None,
+                    help="also write the printed figures to this markdown file (appended, "
+                         "with the command)")
     args = ap.parse_args(argv)
     if args.own and args.out:
         ap.error("--own measures the network's own covariance; the estimator's is calibrated")
@@ -116,19 +119,24 @@ def main(argv=None) -> int:
         return 2
     d2, scenes = mahalanobis(model, pairs, own=args.own)
     scale = fit(d2)
-    print(banner())
     what = "the network's own covariance" if args.own else "the estimator's covariance"
-    print(f"\nregression scale (pooled, {len(d2)} pairs, {what}): {scale:.4g}\n")
-    print("| scene | pairs | 2-sigma coverage, scale fitted on the other scenes | "
-          "coverage at the pooled scale |\n|---|---|---|---|")
+    lines = [banner(), "", "Command: `python benchmarks/calibrate_regression.py "
+             f"{' '.join(sys.argv[1:] if argv is None else argv)}`", "",
+             f"regression scale (pooled, {len(d2)} pairs, {what}): {scale:.4g}", "",
+             "| scene | pairs | 2-sigma coverage, scale fitted on the other scenes | "
+             "coverage at the pooled scale |", "|---|---|---|---|"]
     for s in dict.fromkeys(scenes):
         own = np.array([x == s for x in scenes])
         other = fit(d2[~own])
         hit = int((d2[own] / other < bp.CHI2_5[2]).sum())
         lo, hi = coverage_interval(hit, int(own.sum()))
         pooled = float((d2[own] / scale < bp.CHI2_5[2]).mean())
-        print(f"| {s} | {int(own.sum())} | {hit / own.sum():.0%} [{lo:.0%}, {hi:.0%}] "
-              f"(scale {other:.3g}) | {pooled:.0%} |")
+        lines.append(f"| {s} | {int(own.sum())} | {hit / own.sum():.0%} [{lo:.0%}, {hi:.0%}] "
+                     f"(scale {other:.3g}) | {pooled:.0%} |")
+    print("\n".join(lines))
+    if args.report:
+        with open(args.report, "a") as f:
+            f.write(f"## `{Path(args.model).name}`, {what}\n\n" + "\n".join(lines) + "\n\n")
     if args.out:
         _, shipped = StrLPose.pretrained_header("geometric")
         calibration = {k: v for k, v in shipped["calibration"].items()

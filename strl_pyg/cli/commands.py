@@ -211,8 +211,8 @@ def _add_pair_args(p: argparse.ArgumentParser, optional_images: bool = False) ->
     p.add_argument("--K", help="intrinsics of both images: 'fx,fy,cx,cy', 9 numbers or a file "
                                "(3x3, 3x4, KITTI calib.txt, COLMAP cameras.txt, Strecha "
                                ".camera); or a posed scene's cameras, each image's K found "
-                               "by its file name (transforms.json, real_scenes cameras.json, "
-                               "a COLMAP model folder)")
+                               "by its path, else its file name (transforms.json, "
+                               "real_scenes cameras.json, a COLMAP / LLFF scene folder)")
     p.add_argument("--K0", help="intrinsics of image 0 (same formats)")
     p.add_argument("--K1", help="intrinsics of image 1 (default: --K0)")
     p.add_argument("--detector", choices=("sift", "orb"), default="sift")
