@@ -127,7 +127,7 @@ PLAN_BALANCED = ([(r, 0) for r in ("baseline", "LP", "V", "full", "L")]
 PLAN_REAL = ([(r, s) for s in (0, 1, 2) for r in ("baseline", "LP", "full")]
              + [("L", 0), ("V", 0)])
 #: The real recipe's budget: steps of batch 16 per run (on one core of the 2-core development
-#: CPU with a second run on the other: baseline 12 minutes, LP 36-43, full about 80, its
+#: CPU with a second run on the other: baseline 9-12 minutes, LP 25-43, full 65-75, its
 #: complete-graph attention over 768 nodes a pair being most of a step).
 REAL_STEPS = 1200
 #: The real_scenes folder (``$STRL_REAL_SCENES``, default ``../shared/data/real_scenes``).
