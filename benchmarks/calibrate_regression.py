@@ -19,6 +19,7 @@ COLMAP, NeRF, LLFF), scenes the model was not trained on::
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from pathlib import Path
 
@@ -121,7 +122,7 @@ def main(argv=None) -> int:
     scale = fit(d2)
     what = "the network's own covariance" if args.own else "the estimator's covariance"
     lines = [banner(), "", "Command: `python benchmarks/calibrate_regression.py "
-             f"{' '.join(sys.argv[1:] if argv is None else argv)}`", "",
+             f"{shlex.join(sys.argv[1:] if argv is None else argv)}`", "",
              f"regression scale (pooled, {len(d2)} pairs, {what}): {scale:.4g}", "",
              "| scene | pairs | 2-sigma coverage, scale fitted on the other scenes | "
              "coverage at the pooled scale |", "|---|---|---|---|"]

@@ -207,7 +207,7 @@ def test_table3_on_real_photographs_trains_posed_pairs_with_its_own_plan(tmp_pat
     assert sorted(ab.PLAN[:9]) == sorted((r, s) for r in ("baseline", "LP", "full")
                                          for s in range(3))
     assert ab.PLAN[:3] == [("baseline", 0), ("LP", 0), ("full", 0)]
-    assert ab.PLAN[9:] == [("L", 0), ("V", 0)]  # one seed each, after the three rows
+    assert ab.PLAN[9:] == [("L", 0), ("V", 0), ("L", 1), ("L", 2)]  # after the three rows
     assert ab.STEPS == ab.REAL_STEPS and ab.RESULTS == BENCH / "results_ablation" / "real_photographs"
     ap = add_train_arguments(argparse.ArgumentParser())
     cfg = config_from_args(ap.parse_args([*ab.TRAIN_ARGS, "--model", "LP"]), ap)
