@@ -158,44 +158,51 @@ def is_scene_cameras(text_or_path: str) -> bool:
 
 
 def _source_state(path: Path) -> tuple:
-    """What identifies a cameras source's content within one process: the file's (or the
-    folder's files') path, size and modification time."""
+    """What identifies a cameras source's content within one process: the file's path, inode,
+    size and change times; for a folder, those of each entry of it and of its ``sparse`` /
+    ``sparse/0`` model (a subfolder such as ``images`` by its own times, which change with
+    its listing)."""
     def one(p: Path) -> tuple:
         st = p.stat()
-        return str(p.resolve()), st.st_size, st.st_mtime_ns
+        return str(p.resolve()), st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns
 
     if not path.is_dir():
         return (one(path),)
-    files = [p for sub in (path, path / "sparse" / "0", path / "sparse")
-             if sub.is_dir() for p in sorted(sub.iterdir()) if p.is_file()]
-    return (one(path),) + tuple(one(p) for p in files)
+    entries = [p for sub in (path, path / "sparse", path / "sparse" / "0") if sub.is_dir()
+               for p in sorted(sub.iterdir())]
+    return (one(path),) + tuple(one(p) for p in entries)
 
 
-#: Cameras read from a source, by :func:`_source_state` (and the frame name, for a NeRF
-#: file): ``predict --pairs`` looks up two images a pair in one scene's cameras.
+#: Cameras read from a source, by :func:`_source_state` and, for a NeRF file (read one frame
+#: at a time), the frame's name: ``predict --pairs`` looks up two images a pair in one
+#: scene's cameras.
 _CAMERAS_READ: dict[tuple, tuple[list, list[str]]] = {}
 
 
 def _scene_cameras(path: Path, name: str) -> tuple[list, list[str]]:
     """The posed images of a cameras source (with ``name``: a NeRF file reads that frame
-    only) and the image names it lists, read once per source (and frame) and process."""
-    key = (_source_state(path), None if path.is_dir() or path.name == "cameras.json" else name)
-    if key not in _CAMERAS_READ:
-        if len(_CAMERAS_READ) >= 64:
-            _CAMERAS_READ.clear()
-        _CAMERAS_READ[key] = _read_scene_cameras(path, name)
-    return _CAMERAS_READ[key]
+    only) and the image names it lists, read once per source (and NeRF frame) and process."""
+    state = _source_state(path)
+    for key in ((state, None), (state, name)):
+        if key in _CAMERAS_READ:
+            return _CAMERAS_READ[key]
+    images, listed, per_frame = _read_scene_cameras(path, name)
+    if len(_CAMERAS_READ) >= 64:
+        _CAMERAS_READ.clear()
+    _CAMERAS_READ[(state, name if per_frame else None)] = images, listed
+    return images, listed
 
 
-def _read_scene_cameras(path: Path, name: str) -> tuple[list, list[str]]:
-    """:func:`_scene_cameras` without the memo."""
+def _read_scene_cameras(path: Path, name: str) -> tuple[list, list[str], bool]:
+    """:func:`_scene_cameras` without the memo; and whether only the frame ``name`` was read
+    (a NeRF file)."""
     import json
 
     from strl_pyg.datasets import camera_files as cf
 
     if path.is_dir():
         images = cf.read_posed_folder(path)
-        return images, [Path(im.path).name for im in images]
+        return images, [Path(im.path).name for im in images], False
     try:
         data = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, ValueError) as err:
@@ -204,10 +211,10 @@ def _read_scene_cameras(path: Path, name: str) -> tuple[list, list[str]]:
     if isinstance(data, dict) and "frames" in data:
         listed = [Path(str(fr.get("file_path", "?"))).name for fr in data["frames"]
                   if isinstance(fr, dict)]
-        return cf.read_nerf_transforms(path, names={name}), listed
+        return cf.read_nerf_transforms(path, names={name}), listed, True
     if isinstance(data, dict) and "images" in data and path.name == "cameras.json":
         images = cf.read_real_scene(path.parent)
-        return images, [Path(im.path).name for im in images]
+        return images, [Path(im.path).name for im in images], False
     got = sorted(data)[:8] if isinstance(data, dict) else type(data).__name__
     raise UsageError(f"Expected a NeRF transforms.json ('frames') or a real_scenes "
                      f"cameras.json ('images') at '{path}' (got {got} in '{path.name}')")

@@ -210,9 +210,10 @@ def test_intrinsics_of_each_image_from_a_posed_scene(tmp_path):
 
 def test_scene_cameras_read_once_per_source(tmp_path, monkeypatch):
     """``predict --pairs`` with ``--K SCENE`` looked up two images a pair and re-read the
-    scene's cameras for each; now a source is read once while it is unchanged, and read
-    again when it changes."""
+    scene's cameras for each; now a source is read once while it is unchanged, each image
+    still gets its own camera, and a changed source is read again."""
     import json
+    import os
 
     import cv2
 
@@ -223,21 +224,44 @@ def test_scene_cameras_read_once_per_source(tmp_path, monkeypatch):
     for n in ("a.png", "b.png"):
         cv2.imwrite(str(tmp_path / "images" / n), np.zeros((40, 60), np.uint8))
 
-    def write(f):
+    def write(f):  # image a's focal length f, b's f + 10
         (tmp_path / "cameras.json").write_text(json.dumps({"images": [
-            {"file": f"images/{n}", "K": [[f, 0, 29.5], [0, f, 19.5], [0, 0, 1]],
+            {"file": f"images/{n}", "K": [[f + d, 0, 29.5], [0, f + d, 19.5], [0, 0, 1]],
              "T_cam_to_world": np.eye(4).tolist(), "width": 60, "height": 40}
-            for n in ("a.png", "b.png")]}))
+            for n, d in (("a.png", 0.0), ("b.png", 10.0))]}))
 
     reads = []
     real = camera_files.read_posed_folder
     monkeypatch.setattr(camera_files, "read_posed_folder",
                         lambda path: reads.append(path) or real(path))
+
+    def fx(n):
+        return readers.scene_intrinsics(str(tmp_path), tmp_path / "images" / n)[0, 0]
+
     write(50.0)
     for _ in range(3):
-        for n in ("a.png", "b.png"):
-            assert readers.scene_intrinsics(str(tmp_path), tmp_path / "images" / n)[0, 0] == 50.0
+        assert (fx("a.png"), fx("b.png")) == (50.0, 60.0)
     assert len(reads) == 1
-    write(125.0)  # another size: the source changed
-    assert readers.scene_intrinsics(str(tmp_path), tmp_path / "images" / "a.png")[0, 0] == 125.0
+    write(70.0)  # the same size, a new modification time: the source changed
+    st = (tmp_path / "cameras.json").stat()
+    os.utime(tmp_path / "cameras.json", ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+    assert (fx("a.png"), fx("b.png")) == (70.0, 80.0)
     assert len(reads) == 2
+
+
+def test_nerf_cameras_named_cameras_json_read_frame_by_frame(tmp_path):
+    """A NeRF file is read one frame at a time: the memo keeps each frame apart, whatever the
+    file's name (a NeRF ``cameras.json`` gave the second image 'not among the cameras')."""
+    import json
+
+    from strl_pyg.cli.readers import scene_intrinsics
+
+    pose = np.eye(4).tolist()
+    (tmp_path / "cameras.json").write_text(json.dumps({
+        "fl_x": 50.0, "fl_y": 50.0, "cx": 30.0, "cy": 20.0, "w": 60, "h": 40, "frames": [
+            {"file_path": "images/a.png", "transform_matrix": pose},
+            {"file_path": "images/b.png", "transform_matrix": pose, "fl_x": 90.0}]}))
+    source = str(tmp_path / "cameras.json")
+    assert scene_intrinsics(source, "a.png")[0, 0] == 50.0
+    assert scene_intrinsics(source, "b.png")[0, 0] == 90.0
+    assert scene_intrinsics(source, "a.png")[0, 0] == 50.0
