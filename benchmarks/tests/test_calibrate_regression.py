@@ -35,3 +35,23 @@ def test_posed_pairs_read_any_scene_folder_with_its_poses(tmp_path):
     again = cr.posed_pairs(tmp_path / "data", ["street"], tmp_path / "cache", gap=1, stride=1)
     np.testing.assert_array_equal(again[0][1].points0, m.points0)  # read back from the cache
     assert cr.posed_pairs(tmp_path / "data", ["street"], tmp_path / "cache", gap=2) == []
+
+
+def test_report_writes_the_printed_coverage_with_its_command(tmp_path, monkeypatch):
+    """``--report FILE`` appends the figures it prints, headed by the checkpoint and the
+    command; a scene whose errors are far from the others' gets 0 % when left out."""
+    from strl_pyg.model.strl_pose import StrLPose
+
+    monkeypatch.setattr(StrLPose, "load", staticmethod(lambda path: object()))
+    monkeypatch.setattr(cr.btv, "real_val_pairs",
+                        lambda cache, gap, stride: [("a/0-2", None, None)])
+    d2 = np.array([1.0, 1.0, 1.0, 100.0, 100.0, 100.0])  # scene b: 100x scene a's errors
+    monkeypatch.setattr(cr, "mahalanobis", lambda model, pairs, own=False: (d2, list("aaabbb")))
+    report = tmp_path / "calibration.md"
+    for own in ([], ["--own"]):
+        assert cr.main(["--model", "m.pt", "--report", str(report), *own]) == 0
+    text = report.read_text()
+    assert text.count("## `m.pt`, ") == 2 and "the network's own covariance" in text
+    command = f"python benchmarks/calibrate_regression.py --model m.pt --report {report}"
+    assert f"Command: `{command}`" in text
+    assert "| a | 3 | 100% [" in text and "| b | 3 | 0% [" in text
