@@ -41,12 +41,13 @@ run resumed to more steps equals a longer run), width 64, 3 layers, 4 heads (the
 size), validation on 100 held-out pairs every 250 steps.
 
 **Table 3 on real photographs** (``--recipe real``, :data:`PLAN_REAL`, :data:`REAL_ARGS`):
-baseline, LP and full with 3 seeds each (then L and V with one), trained on the real_scenes training scenes (the
-fixed split) mixed 1:1 with generated pairs, the balanced loss and flow inputs at this
-protocol's constant 3e-4, :data:`REAL_STEPS` steps of batch 16, and scored on the 4 validation
-scenes and the KITTI 06, DeMoN and dino slices (``bench_real_scenes.pair_sets``); results in
-``results_ablation/real_photographs/``. The posed matches are cached once in
-``<root>/cache`` (point it at an existing match cache with a symlink)::
+baseline, LP and full with 3 seeds each, then L with 3 and V with one, trained on the
+real_scenes training scenes (the fixed split) mixed 1:1 with generated pairs, the balanced
+loss and flow inputs at this protocol's constant 3e-4, :data:`REAL_STEPS` steps of batch 16,
+and scored on the 4 validation scenes and the KITTI 06, DeMoN and dino slices
+(``bench_real_scenes.pair_sets``); results in ``results_ablation/real_photographs/``. The
+posed matches are cached once in ``<root>/cache`` (point it at an existing match cache with a
+symlink)::
 
     nice -n 10 python benchmarks/ablation.py --recipe real train --eval
     python benchmarks/ablation.py --recipe real report
@@ -123,7 +124,7 @@ PLAN_BALANCED = ([(r, 0) for r in ("baseline", "LP", "V", "full", "L")]
 #: training, ``--dataset posed``), scored on the 4 validation scenes and the KITTI 06, DeMoN and
 #: dino slices (``bench_real_scenes.pair_sets``). Seed 0 of the three rows first; then L and V
 #: with one seed (LP against L: the lines' own message passing; V against baseline: the visual
-#: graph), and L's seeds 1 and 2 (its one seed was ahead of LP and baseline).
+#: graph), then L's seeds 1 and 2 (so that L, like the rows it is compared with, has 3).
 PLAN_REAL = ([(r, s) for s in (0, 1, 2) for r in ("baseline", "LP", "full")]
              + [("L", 0), ("V", 0), ("L", 1), ("L", 2)])
 #: The real recipe's budget: steps of batch 16 per run (on one core of the 2-core development
