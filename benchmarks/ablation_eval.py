@@ -92,7 +92,7 @@ def all_sets(cache: Path, quick: bool = False) -> dict[str, list]:
     sets = {"point_poor": point_poor_pairs(cache, 4 if quick else POINT_POOR_PAIRS)}
     for name in GENERATED_SETS:
         sets[name] = bp.generated_pairs(name, n_gen, cache)
-    few = FrontendConfig(max_keypoints=FEW_KEYPOINTS)
+    few = FrontendConfig.preset("legacy", max_keypoints=FEW_KEYPOINTS)
     for suffix, cfg in (("", None), (f"_kp{FEW_KEYPOINTS}", few)):
         sets[f"kitti06{suffix}"] = bp.kitti_pairs(1, cache, config=cfg)
         sets[f"demon{suffix}"] = bp.demon_pairs(cache, config=cfg)

@@ -237,7 +237,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     cache = _root() / "eval_cache"
     n = 3 if args.quick else None
-    few = FrontendConfig(max_keypoints=20)
+    few = FrontendConfig.preset("legacy", max_keypoints=20)
     sets = {
         "few_points": few_point_pairs(cache, n),
         "point_poor": point_poor_pairs(cache, 3 if args.quick else POINT_POOR_PAIRS),

@@ -300,7 +300,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"({LM.VanishingPointChecked.angle_deg}, {LM.VanishingPointChecked.support_slack}); the evaluation uses "
                   "the fit: set the fitted constants in the package")
         LM.VanishingPointChecked.angle_deg, LM.VanishingPointChecked.support_slack = ang, slack
-    few = FrontendConfig(max_keypoints=ae.FEW_KEYPOINTS)
+    few = FrontendConfig.preset("legacy", max_keypoints=ae.FEW_KEYPOINTS)
     load = {"point_poor": lambda: ae.point_poor_pairs(cache, args.point_poor),
             "kitti06_kp40": lambda: bp.kitti_pairs(1, cache, config=few),
             "demon_kp40": lambda: bp.demon_pairs(cache, config=few),

@@ -36,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cache", default=str(Path.home() / ".cache" / "strl-pyg" / "eval_cache"))
     args = ap.parse_args(argv)
-    cache, few = Path(args.cache), FrontendConfig(max_keypoints=ae.FEW_KEYPOINTS)
+    cache, few = Path(args.cache), FrontendConfig.preset("legacy", max_keypoints=ae.FEW_KEYPOINTS)
     print(banner())
     for name, pairs in (("kitti06_kp40", bp.kitti_pairs(1, cache, config=few)),
                         ("dino_kp40", bp.dino_pairs(cache, config=few))):

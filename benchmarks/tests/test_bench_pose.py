@@ -59,7 +59,8 @@ def test_another_distribution_or_front_end_is_not_served_stale_matches(tmp_path)
     assert other_scene.calls == 1 and m.num_points == 20
     other_frontend = _Maker(_matches(25))
     m = bench_pose._cached(tmp_path, "gen_x_7", other_frontend,
-                           FrontendConfig(max_keypoints=512), scene=eval_distribution("driving"))
+                           FrontendConfig.preset("legacy", max_keypoints=512),
+                           scene=eval_distribution("driving"))
     assert other_frontend.calls == 1 and m.num_points == 25
     # the first entry is still there for its own fingerprint
     same = _Maker(_matches(40))

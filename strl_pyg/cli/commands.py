@@ -44,10 +44,12 @@ from strl_pyg.cli.predict import (
 from strl_pyg.utils import OneLineArgumentParser
 from strl_pyg.cli.readers import (
     DEMO_SEED,
+    MATCHER_PRESETS,
     MAX_SIDE,
     check_input_file,
     load_model,
     bootstrap_count,
+    frontend_config,
     non_negative_int,
     read_pair,
 )
@@ -117,10 +119,10 @@ def cmd_demo(args) -> int:
 
 
 def _match(inputs, args):
-    from strl_pyg.frontend import FrontendConfig, match_images
+    from strl_pyg.frontend import match_images
 
     img0, img1, K0, K1 = inputs
-    return match_images(img0, img1, K0=K0, K1=K1, config=FrontendConfig(detector=args.detector))
+    return match_images(img0, img1, K0=K0, K1=K1, config=frontend_config(args))
 
 
 def cmd_match(args) -> int:
@@ -216,6 +218,10 @@ def _add_pair_args(p: argparse.ArgumentParser, optional_images: bool = False) ->
     p.add_argument("--K0", help="intrinsics of image 0 (same formats)")
     p.add_argument("--K1", help="intrinsics of image 1 (default: --K0)")
     p.add_argument("--detector", choices=("sift", "orb"), default="sift")
+    p.add_argument("--matcher", choices=MATCHER_PRESETS, default=None,
+                   help="front-end preset: 'fast', 'thorough' (more, smaller features: "
+                        "wide pairs), 'adaptive' (fast, thorough where the first pass has "
+                        "few inliers) or 'legacy' (default: the FrontendConfig defaults)")
     p.add_argument("--max-side", type=non_negative_int, default=MAX_SIDE, metavar="PX",
                    help=f"downscale images whose longer side exceeds PX for matching, K scaled "
                         f"alike (default {MAX_SIDE}; 0: full resolution)")
@@ -280,9 +286,30 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+#: Options whose value may begin with '-' (a negative number leads an intrinsics list).
+_SIGNED_VALUE_OPTIONS = ("--K", "--K0", "--K1")
+
+
+def _join_signed_values(argv: list[str]) -> list[str]:
+    """``--K -293,...`` as ``--K=-293,...``: argparse reads a value that begins with '-'
+    and is not a plain number as an option ('expected one argument')."""
+    out, i = [], 0
+    while i < len(argv):
+        a = argv[i]
+        if a in _SIGNED_VALUE_OPTIONS and i + 1 < len(argv) and \
+                len(argv[i + 1]) > 1 and argv[i + 1][0] == "-" and argv[i + 1][1] in "0123456789.":
+            out.append(f"{a}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(a)
+        i += 1
+    return out
+
+
 def _dispatch(argv: list[str]) -> int:
     if argv[:1] == ["evaluate"]:
         return cmd_evaluate(argv[1:])
+    argv = _join_signed_values(argv)
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "train":

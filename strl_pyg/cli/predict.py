@@ -13,7 +13,13 @@ from typing import Any
 
 import numpy as np
 
-from strl_pyg.cli.readers import check_input_file, intrinsics_from_args, load_model, read_pair
+from strl_pyg.cli.readers import (
+    check_input_file,
+    frontend_config,
+    intrinsics_from_args,
+    load_model,
+    read_pair,
+)
 from strl_pyg.utils import UsageError
 
 __all__ = ["predict_pair", "cmd_predict", "EXIT_CODES", "STATUS_EXIT", "read_pairs_file",
@@ -212,17 +218,15 @@ def read_pairs_file(path: str, image_dir: str) -> list[tuple[str, str]]:
 def _predict_pairs(args, methods: str) -> int:
     """``predict --pairs``: every pair of the file with one estimator, one JSON line each on
     stdout (``{"image0", "image1", ...the record}`` or ``{"image0", "image1", "error"}``); a
-    bad pair is its error line and the rest go on. Exit 0 when every pair gave a record, 1
-    when some gave an error."""
+    bad pair is its error line and the rest go on. Exit 0 when every pair gave a record with
+    a pose, 1 when some gave an error or no pose (``"degenerate"`` / ``"failed"``)."""
     from copy import copy
 
     from tqdm.auto import tqdm
 
-    from strl_pyg.frontend import FrontendConfig
-
     pairs = read_pairs_file(args.pairs, args.image_dir)
     names = _method_names(methods)
-    estimator, errors = None, 0
+    estimator, errors, no_pose = None, 0, 0
     for a, b in tqdm(pairs, desc="pairs", file=sys.stderr):
         one = copy(args)
         one.image0, one.image1 = a, b
@@ -231,31 +235,34 @@ def _predict_pairs(args, methods: str) -> int:
             estimator = estimator or _predict_estimator(args, names)
             img0, img1, K0, K1 = inputs
             est = estimator.estimate_images(img0, img1, K0, K1,
-                                            FrontendConfig(detector=args.detector))
+                                            frontend_config(args))
             if inputs.downscaled:
                 _intrinsics_in_original_frame(est, inputs)
             record = {"image0": a, "image1": b, **est.to_dict()}
+            no_pose += STATUS_EXIT[est.status] == 1
         except (UsageError, OSError, ValueError, TypeError, KeyError) as err:  # as run_guarded
             errors += 1
             record = {"image0": a, "image1": b, "error": str(err)}
         print(json.dumps(record), flush=True)
-    return 1 if errors else 0
+    return 1 if errors or no_pose else 0
 
 
-def _draw_estimate(path: str, est) -> None:
+def _draw_estimate(path: str, est, file=None) -> None:
     """``predict --png``: the matches coloured by the recommended pose's support (inliers
     within its support band and in front of both cameras)."""
     from strl_pyg.viz.matches import save_matches_png
 
     m = est.matches
     if m is None or not m.has_images:
-        print("note: --png needs the images (a match file without them draws nothing)")
+        print("note: --png needs the images (a match file without them draws nothing)",
+              file=file)
         return
     mask = est.inliers_of_matches()
     what = (f"green: {int(mask.sum())} of {m.num_points} point matches support the "
             f"recommended pose ({est.pose.method}, {est.status})" if mask is not None
             else f"recommended pose: {est.status}; no inlier mask (every match drawn grey)")
-    print(f"drawing -> {save_matches_png(path, m, point_inliers=mask, title=what, legend=True)}")
+    print(f"drawing -> {save_matches_png(path, m, point_inliers=mask, title=what, legend=True)}",
+          file=file)
 
 
 def cmd_predict(args) -> int:
@@ -273,6 +280,12 @@ def cmd_predict(args) -> int:
         methods = methods.lower()
     _check_methods(methods)  # before the images and the model are read
     if args.pairs:
+        if args.image0 or args.image1:
+            raise UsageError(f"Expected either two images or --pairs (got both: "
+                             f"{args.image0} and --pairs {args.pairs})")
+        if args.png:
+            raise UsageError(f"Expected --png with one pair (got --pairs {args.pairs}: run "
+                             "the pair alone to draw it)")
         return _predict_pairs(args, methods)
     # one estimator for both inputs: "recommended" (estimator.RECOMMENDED) walks the
     # recommended order (the images matched once), "all" runs every installed method; torch
@@ -292,11 +305,9 @@ def cmd_predict(args) -> int:
                              f"{'one image' if args.image0 else 'neither'})")
         inputs = read_pair(args)  # fail on bad files before any heavy work
         estimator = _predict_estimator(args, names)
-        from strl_pyg.frontend import FrontendConfig
-
         img0, img1, K0, K1 = inputs
         est = estimator.estimate_images(img0, img1, K0, K1,
-                                        FrontendConfig(detector=args.detector))
+                                        frontend_config(args))
         if inputs.downscaled:
             _intrinsics_in_original_frame(est, inputs)
     kind = estimator.model_config.translation  # without building the shipped network
@@ -304,6 +315,8 @@ def cmd_predict(args) -> int:
     if args.json:
         print(json.dumps({**est.to_dict(), "translation_kind": kind,
                           "intrinsics": K0 is not None}))
+        if args.png:  # stdout is the JSON record: the drawing's line goes to stderr
+            _draw_estimate(args.png, est, file=sys.stderr)
         return code
     print(f"matches: {est.num_points} points, {est.num_lines} lines")
     _print_estimate(est)

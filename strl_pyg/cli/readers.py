@@ -24,6 +24,9 @@ __all__ = ["MAX_SIDE", "read_image_file", "read_intrinsics", "downscale_for_matc
 #: A 6000x4000 pair at full resolution took 5.6 GB and 48 s in `strl-pose match`; 0.5 GB and
 #: 2.4 s at 1600 (2 CPU cores).
 MAX_SIDE = 1600
+#: ``--matcher``'s choices: the names of :data:`strl_pyg.frontend.config.PRESETS`, spelled
+#: here so that building the parser imports neither OpenCV nor torch (a test holds them equal)
+MATCHER_PRESETS = ("fast", "thorough", "adaptive", "legacy")
 
 
 def read_image_file(path: str | os.PathLike) -> np.ndarray:
@@ -412,3 +415,14 @@ def load_model(path: str | os.PathLike | None):
         raise UsageError(f"Expected a model checkpoint at '{path}' (got no such file); train one "
                          "with 'strl-pose train' or pass --checkpoint")
     return StrLPose.load(path).eval()
+
+
+def frontend_config(args):
+    """The :class:`~strl_pyg.frontend.FrontendConfig` of ``--matcher`` and ``--detector``:
+    the named preset, or the defaults where no ``--matcher`` is given."""
+    from strl_pyg.frontend.config import FrontendConfig
+
+    preset = getattr(args, "matcher", None)
+    if preset:
+        return FrontendConfig.preset(preset, detector=args.detector)
+    return FrontendConfig(detector=args.detector)

@@ -65,7 +65,9 @@ def check_K(value: Any, name: str) -> np.ndarray | None:
         return None
     K = as_array(value, name)
     if K.shape != (3, 3):
-        raise ValueError(f"Expected '{name}' of shape (3, 3) (got {tuple(K.shape)})")
+        hint = (": four numbers (fx, fy, cx, cy) make K = [[fx, 0, cx], [0, fy, cy], "
+                "[0, 0, 1]]" if K.shape == (4,) else "")
+        raise ValueError(f"Expected '{name}' of shape (3, 3) (got {tuple(K.shape)}){hint}")
     check_finite(K, name)
     if not np.allclose(K[2], [0.0, 0.0, 1.0], atol=1e-6):
         raise ValueError(f"Expected the last row of '{name}' to be [0, 0, 1] (got {K[2].tolist()})")

@@ -5,7 +5,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["FrontendConfig", "NoMatchesError", "LINE_MATCHERS"]
+__all__ = ["FrontendConfig", "NoMatchesError", "LINE_MATCHERS", "PRESETS"]
+
+#: Fields added after caches of matches existed, with the value that reproduces the matches
+#: made before them: a cache key names such a field only where it differs from this value.
+_BEFORE_KEYED = {"contrast_threshold": 0.04, "rootsift": False, "upsample_below": 0,
+                 "thorough_below": 0}
 
 #: The line matchers of :class:`FrontendConfig` ``line_matcher``.
 LINE_MATCHERS = ("epipolar", "descriptor")
@@ -24,9 +29,9 @@ class FrontendConfig:
         detector: ``"sift"`` (default) or ``"orb"`` (faster, fewer and less precise matches).
         max_keypoints: keypoints detected per image (strongest first). (default: 2048)
         ratio: Lowe's ratio test threshold on nearest / second nearest descriptor distance.
-            (default: 0.8)
+            (default: 0.85)
         mutual: keep only mutual nearest neighbours. (default: True)
-        max_points: cap on returned point matches, lowest ratio first. (default: 1024)
+        max_points: cap on returned point matches, lowest ratio first. (default: 2048)
         filter_points: keep only the point matches consistent with the fitted ``F``
             (default: False, the learned model sees the outliers).
         ransac_threshold: epipolar threshold (px) of the ``F`` fit. (default: 1.0)
@@ -67,13 +72,30 @@ class FrontendConfig:
             points, worse where an F from 8-30 points exists. (default: ``"epipolar"``)
         line_descriptor_ratio: Lowe's ratio test of the descriptor matcher (nearest / second
             nearest descriptor distance). (default: 0.85)
+        contrast_threshold: OpenCV SIFT's ``contrastThreshold``; lower keeps weaker blobs
+            (0.02 is about COLMAP's peak threshold). (default: 0.04)
+        rootsift: RootSIFT descriptors (L1-normalised, square-rooted; COLMAP's L1_ROOT),
+            which match better than plain SIFT under the same ratio test. (default: True)
+        upsample_below: detect keypoints on the image upsampled 2x where its longer side is
+            at most this many pixels (small photographs hold more, smaller features than
+            OpenCV finds at their size); 0 never. (default: 0)
+        thorough_below: adaptive second pass: where the first pass leaves fewer than this
+            many fundamental-matrix inliers, the points are matched again with the
+            ``thorough`` preset's point settings and that result is used
+            (``info["second_pass"]``); 0 never. (default: 200)
+
+    The defaults are the ``adaptive`` preset. Presets (:meth:`preset`, :data:`PRESETS`,
+    ``strl-pose predict --matcher``): ``fast``, ``thorough`` (more, smaller features: 2x
+    upsampling of images up to 1024 px), ``adaptive`` (``fast``, then ``thorough`` where the
+    first pass is short of inliers) and ``legacy`` (the settings before the presets).
+    Measured on real pairs in ``benchmarks/results_frontend/README.md``.
     """
 
     detector: str = "sift"
     max_keypoints: int = 2048
-    ratio: float = 0.8
+    ratio: float = 0.85
     mutual: bool = True
-    max_points: int = 1024
+    max_points: int = 2048
     filter_points: bool = False
     ransac_threshold: float = 1.0
     ransac_confidence: float = 0.999
@@ -97,6 +119,20 @@ class FrontendConfig:
     concurrent: bool = True
     line_matcher: str = "epipolar"
     line_descriptor_ratio: float = 0.85
+    contrast_threshold: float = 0.04
+    rootsift: bool = True
+    upsample_below: int = 0
+    thorough_below: int = 200
+
+    @classmethod
+    def preset(cls, name: str, **overrides) -> "FrontendConfig":
+        """A named set of point settings (:data:`PRESETS`), other fields as given.
+
+        ``FrontendConfig.preset("thorough", lines=False)``; the names are those of
+        ``strl-pose predict --matcher``."""
+        if name not in PRESETS:
+            raise ValueError(f"Expected a front-end preset in {tuple(PRESETS)} (got {name!r})")
+        return cls(**{**PRESETS[name], **overrides})
 
     def result_fields(self) -> dict:
         """The fields that decide the matches (every field but ``concurrent``): what caches of
@@ -109,6 +145,9 @@ class FrontendConfig:
         out = {k: v for k, v in asdict(self).items() if k != "concurrent"}
         if out["line_matcher"] == "epipolar":
             for k in ("line_matcher", "line_descriptor_ratio"):
+                del out[k]
+        for k, before in _BEFORE_KEYED.items():  # settings that did not exist: in the key
+            if out[k] == before:  # only where they change the result
                 del out[k]
         return out
 
@@ -134,3 +173,22 @@ class FrontendConfig:
         if not 0.0 < self.lsd_scale <= 1.0:
             raise ValueError(f"Expected lsd_scale in (0, 1] (got {self.lsd_scale})")
 
+
+
+#: The front end's named presets (:meth:`FrontendConfig.preset`), as fields over the defaults.
+#: ``legacy`` reproduces the matches of the versions before the presets.
+PRESETS: dict[str, dict] = {
+    "fast": {"max_keypoints": 2048, "contrast_threshold": 0.04, "rootsift": True,
+             "upsample_below": 0, "ratio": 0.85, "mutual": True, "max_points": 2048,
+             "thorough_below": 0},
+    "thorough": {"max_keypoints": 8000, "contrast_threshold": 0.02, "rootsift": True,
+                 "upsample_below": 1024, "ratio": 0.85, "mutual": True, "max_points": 4096,
+                 "thorough_below": 0},
+    "legacy": {"max_keypoints": 2048, "contrast_threshold": 0.04, "rootsift": False,
+               "upsample_below": 0, "ratio": 0.8, "mutual": True, "max_points": 1024,
+               "thorough_below": 0},
+}
+#: The default: ``fast``, then ``thorough`` where the first pass's fundamental matrix has
+#: fewer than 200 inliers (chosen in ``benchmarks/results_frontend/README.md``).
+PRESETS["adaptive"] = {**PRESETS["fast"], "thorough_below": 200}
+PRESETS = {k: PRESETS[k] for k in ("fast", "thorough", "adaptive", "legacy")}

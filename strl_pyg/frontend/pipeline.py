@@ -69,17 +69,18 @@ def match_images(
     gray0 = check_frontend_image(image0, "image0")
     gray1 = check_frontend_image(image1, "image1")
     t_start = time.perf_counter()
-    p0, p1, p_scores, stats = match_points(gray0, gray1, cfg)
-    timings = dict(stats.pop("timings_ms"))
-    # SIFT keeps one keypoint per dominant orientation at a location: two such keypoints that
-    # match two such keypoints are one correspondence listed twice (~10 % of KITTI's matches)
-    keep = first_unique_rows(np.concatenate([p0, p1], axis=1))
-    stats["point_repeats_removed"] = int(len(p0) - len(keep))
-    p0, p1, p_scores = p0[keep], p1[keep], p_scores[keep]
-
-    t = time.perf_counter()
-    F, inl = fit_fundamental(p0, p1, cfg)
-    timings["geometry"] = 1e3 * (time.perf_counter() - t)
+    p0, p1, p_scores, F, inl, stats, timings = _points(gray0, gray1, cfg)
+    if cfg.thorough_below > 0 and int(inl.sum()) < cfg.thorough_below:
+        # too few inliers for an easy pair: the thorough settings, once (the second pass
+        # replaces the first, whose keypoints are a subset of its own)
+        first = int(inl.sum())
+        p0, p1, p_scores, F, inl, stats, more = _points(gray0, gray1, thorough_points(cfg))
+        timings = {k: timings.get(k, 0.0) + more.get(k, 0.0) for k in {*timings, *more}}
+        stats["second_pass"] = {"first_pass_inliers": first,
+                                "reason": f"fewer than thorough_below={cfg.thorough_below} "
+                                          "fundamental-matrix inliers"}
+    else:
+        stats["second_pass"] = None
     if cfg.filter_points and F is not None:
         p0, p1, p_scores, inl = p0[inl], p1[inl], p_scores[inl], inl[inl]
 
@@ -113,6 +114,36 @@ def match_images(
         p0, p1, lines0=l0, lines1=l1, point_scores=p_scores, line_scores=l_scores,
         K0=K0, K1=K1, image0=gray0, image1=gray1, info=info,
     )
+
+
+def thorough_points(cfg: FrontendConfig) -> FrontendConfig:
+    """The adaptive second pass's configuration: ``cfg`` with the ``thorough`` preset's
+    detection (at least its keypoints, at most its contrast threshold, upsampling at least as
+    far); the matching settings and caps stay the caller's."""
+    from strl_pyg.frontend.config import PRESETS
+
+    t = PRESETS["thorough"]
+    return replace(cfg, thorough_below=0,
+                   max_keypoints=max(int(cfg.max_keypoints), t["max_keypoints"]),
+                   contrast_threshold=min(float(cfg.contrast_threshold),
+                                          t["contrast_threshold"]),
+                   upsample_below=max(int(cfg.upsample_below), t["upsample_below"]))
+
+
+def _points(gray0: np.ndarray, gray1: np.ndarray, cfg: FrontendConfig):
+    """Point matches without repeats, their fundamental matrix and inliers, counts and
+    timings: ``(p0, p1, scores, F, inliers, stats, timings_ms)``."""
+    p0, p1, p_scores, stats = match_points(gray0, gray1, cfg)
+    timings = dict(stats.pop("timings_ms"))
+    # SIFT keeps one keypoint per dominant orientation at a location: two such keypoints that
+    # match two such keypoints are one correspondence listed twice (~10 % of KITTI's matches)
+    keep = first_unique_rows(np.concatenate([p0, p1], axis=1))
+    stats["point_repeats_removed"] = int(len(p0) - len(keep))
+    p0, p1, p_scores = p0[keep], p1[keep], p_scores[keep]
+    t = time.perf_counter()
+    F, inl = fit_fundamental(p0, p1, cfg)
+    timings["geometry"] = 1e3 * (time.perf_counter() - t)
+    return p0, p1, p_scores, F, inl, stats, timings
 
 
 def _lines(gray0: np.ndarray, gray1: np.ndarray, F: np.ndarray | None, guide0: np.ndarray,

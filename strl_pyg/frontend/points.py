@@ -12,7 +12,7 @@ from strl_pyg.frontend.config import FrontendConfig
 from strl_pyg.utils.products import matmul
 from strl_pyg.utils.threads import shared_pool
 
-__all__ = ["match_points", "fit_fundamental", "on_both"]
+__all__ = ["match_points", "fit_fundamental", "on_both", "detect_points", "root_sift"]
 
 
 def on_both(fn, a, b, concurrent: bool = True):
@@ -26,8 +26,41 @@ def on_both(fn, a, b, concurrent: bool = True):
 
 def _detector(cfg: FrontendConfig):
     if cfg.detector == "sift":
-        return cv2.SIFT_create(nfeatures=int(cfg.max_keypoints)), cv2.NORM_L2
+        return (cv2.SIFT_create(nfeatures=int(cfg.max_keypoints),
+                                contrastThreshold=float(cfg.contrast_threshold)), cv2.NORM_L2)
     return cv2.ORB_create(nfeatures=int(cfg.max_keypoints)), cv2.NORM_HAMMING
+
+
+def root_sift(desc: np.ndarray) -> np.ndarray:
+    """RootSIFT (Arandjelovic & Zisserman 2012: the square root of the L1-normalised
+    descriptor, whose L2 distance is the Hellinger kernel of the originals), quantised as
+    COLMAP stores it: ``round(512 * v)`` clipped to 255. Integer-valued like OpenCV's SIFT
+    descriptors, so the matcher's products stay exact (:func:`_top2_l2`)."""
+    d = np.asarray(desc, dtype=np.float64)
+    d = np.sqrt(d / np.maximum(d.sum(axis=1, keepdims=True), 1e-12))
+    return np.minimum(np.round(512.0 * d), 255.0).astype(np.float32)
+
+
+def upsample_factor(shape: tuple, cfg: FrontendConfig) -> int:
+    """2 where the image's longer side is at most ``cfg.upsample_below`` (detection then runs
+    on the image upsampled 2x: smaller features, as COLMAP's ``first_octave=-1`` finds them
+    on small photographs), else 1."""
+    return 2 if max(shape[:2]) <= int(cfg.upsample_below) else 1
+
+
+def detect_points(gray: np.ndarray, cfg: FrontendConfig):
+    """Keypoints ``[K, 2]`` (pixels of ``gray``, OpenCV's convention), descriptors ``[K, D]``
+    (RootSIFT where ``cfg.rootsift`` and SIFT) or ``None`` where nothing was found."""
+    s = upsample_factor(gray.shape, cfg)
+    img = gray if s == 1 else cv2.resize(gray, (gray.shape[1] * s, gray.shape[0] * s),
+                                          interpolation=cv2.INTER_LINEAR)
+    kp, desc = _detector(cfg)[0].detectAndCompute(img, None)
+    xy = np.array([k.pt for k in kp], dtype=np.float64).reshape(-1, 2)
+    if s != 1:  # pixel centres: x in the image is (x_up + 0.5) / s - 0.5
+        xy = (xy + 0.5) / s - 0.5
+    if desc is not None and cfg.detector == "sift" and cfg.rootsift:
+        desc = root_sift(desc)
+    return xy, desc
 
 
 def _knn2(d_query: np.ndarray, d_train: np.ndarray, norm: int):
@@ -115,8 +148,8 @@ def match_points(
     t0 = time.perf_counter()
     norm = _detector(cfg)[1]
     # one detector per image: an OpenCV feature object is not shared between threads
-    (kp0, d0), (kp1, d1) = on_both(lambda g: _detector(cfg)[0].detectAndCompute(g, None),
-                                   gray0, gray1, cfg.concurrent)
+    (kp0, d0), (kp1, d1) = on_both(lambda g: detect_points(g, cfg), gray0, gray1,
+                                   cfg.concurrent)
     t1 = time.perf_counter()
     stats = {"keypoints0": len(kp0), "keypoints1": len(kp1)}
     empty = np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
@@ -136,8 +169,7 @@ def match_points(
     idx1 = nn01[idx0]
     order = np.lexsort((idx0, ratio01[idx0]))[: int(cfg.max_points)]  # ties: by index
     idx0, idx1 = idx0[order], idx1[order]
-    p0 = np.array([kp0[i].pt for i in idx0], dtype=np.float64).reshape(-1, 2)
-    p1 = np.array([kp1[i].pt for i in idx1], dtype=np.float64).reshape(-1, 2)
+    p0, p1 = kp0[idx0].reshape(-1, 2), kp1[idx1].reshape(-1, 2)
     t2 = time.perf_counter()
     stats["timings_ms"] = {"points_detect": 1e3 * (t1 - t0), "points_match": 1e3 * (t2 - t1)}
     return p0, p1, 1.0 - ratio01[idx0], stats

@@ -399,6 +399,7 @@ class PoseEstimator:
         are matched once: the points first, the line segments added to them (without
         detecting the points again) only when a method that reads lines is about to run and
         ``frontend_config.lines`` is on."""
+        from strl_pyg.data.checks import check_K
         from strl_pyg.frontend import FrontendConfig, NoMatchesError, match_images
         from strl_pyg.frontend.pipeline import add_lines
 
@@ -408,7 +409,8 @@ class PoseEstimator:
             raise TypeError(f"Expected a FrontendConfig (got {type(cfg).__name__})")
         if K0 is None and K1 is not None:
             raise ValueError("Expected K0 with K1 (got K1 only)")
-        K1 = K0 if K1 is None else K1
+        K0 = check_K(K0, "K0")  # before any use: the no-match path reads them too
+        K1 = K0 if K1 is None else check_K(K1, "K1")
         recommended = names == RECOMMENDED
         if recommended:  # the first method's matches first (points only unless it reads lines)
             order = self._installed_order()

@@ -40,7 +40,7 @@ ABLATION_NAMES = ("baseline", "L", "LP", "R", "V", "LP+R", "LP+V", "V+W", "full"
 
 #: Validation metrics that can keep ``best_model.pt`` (``TrainConfig.best_metric``; lower is
 #: better).
-BEST_METRICS = ("pose_err_med", "rot_err_med", "trans_err_med", "loss")
+BEST_METRICS = ("pose_err_med", "rot_err_med", "trans_err_med", "loss", "inlier_rank_err")
 
 #: Learning-rate schedules (``TrainConfig.lr_schedule``, ``--lr-schedule``).
 LR_SCHEDULES = ("constant", "cosine")
@@ -152,12 +152,17 @@ class TrainConfig:
     # training (inf: none); resume with a larger budget or --steps to go on
     budget_minutes: float = math.inf
     # the validation metric whose best value keeps best_model.pt (lower is better):
-    # "pose_err_med" (median of max(rotation, translation) error), "rot_err_med", "loss"
+    # "pose_err_med" (median of max(rotation, translation) error), "rot_err_med", "loss",
+    # "inlier_rank_err" (1 - median per-pair ROC-AUC of the geometric head's inlier logits)
     best_metric: str = "pose_err_med"
     in_memory: bool = True  # keep generated / loaded graphs in memory after first access
     # Geometric head (model_overrides={"geometric": True}): strl_pyg.training.loss.GeometricLoss
     geo_threshold_px: float = 2.0  # inlier label threshold on the true Sampson distance
     geo_cls_weight: float = 1.0  # weight of the inlier classification loss
+    # weight of the pose loss in the total (the geometric head's is added at its own weights);
+    # < 1 lets the classification term lead on the shared layers (its gradient there is
+    # 10^2-10^4 times smaller than the pose loss's at 1)
+    pose_weight: float = 1.0
     geo_ess_weight: float = 0.5  # weight of the essential (epipolar) loss ...
     geo_ess_start: int = 200  # ... from this step on (the classifier learns first)
 
@@ -202,6 +207,8 @@ class TrainConfig:
                                  f"(got {self.scene_mix!r})")
         if not self.angle_weight >= 0:
             raise ValueError(f"Expected angle_weight >= 0 (got {self.angle_weight!r})")
+        if not self.pose_weight >= 0:
+            raise ValueError(f"Expected pose_weight >= 0 (got {self.pose_weight!r})")
         if not 0.0 <= self.beta <= 1.0:
             raise ValueError(f"Expected beta in [0, 1] (got {self.beta!r})")
         if self.grad_clip is not None and not self.grad_clip > 0:
@@ -462,6 +469,9 @@ def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
                     help="up to this fraction of point matches shuffled into outliers")
     ap.add_argument("--geo-ess-start", type=int, default=d.geo_ess_start,
                     help="geometric head (--set geometric=true): step the epipolar loss starts")
+    ap.add_argument("--pose-weight", type=float, default=d.pose_weight,
+                    help="weight of the pose loss in the total (default 1; with the geometric "
+                         "head, < 1 lets its inlier classification lead)")
     ap.add_argument("--train-pairs", type=int, default=d.train_pairs)
     ap.add_argument("--val-pairs", type=int, default=d.val_pairs)
     ap.add_argument("--kitti-k", type=int, default=d.kitti_k, help="frame gap of KITTI pairs")

@@ -176,8 +176,8 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True,
         if step % cfg.val_every == 0 or step == cfg.steps or over_budget:
             metrics = {}
             if rank == 0:
-                metrics = {**evaluate_model(model, val_loader, loss_fn, mean_pose(
-                    torch.cat(trivial_buf)[:4096], model_cfg.translation), device),
+                metrics = {**evaluate_model(model, val_loader, loss_fn, mean_pose(torch.cat(
+                    trivial_buf)[:4096], model_cfg.translation), device, geo_loss=geo_fn),
                     "pairs_per_s": pairs_seen / (time.perf_counter() - t_start)}
                 logger.log(step, "val", metrics)
                 history.append({"step": step, **metrics})
@@ -423,6 +423,9 @@ def _train_step(cfg: TrainConfig, ddp_model: torch.nn.Module, model: StrLPose,
     T_gt = batch[keys_.T_0TO1]
     out = ddp_model(batch)
     logs = loss_fn(out, T_gt)
+    if cfg.pose_weight != 1.0:
+        logs["pose_loss"] = logs["loss"].detach()
+        logs["loss"] = cfg.pose_weight * logs["loss"]
     if geo_fn is not None:
         geo_fn.ess_weight = cfg.geo_ess_weight if step >= cfg.geo_ess_start else 0.0
         geo_logs = geo_fn(out, T_gt)

@@ -3,6 +3,8 @@ of a model over a loader (the summary keys are those of the training log and his
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import torch
 from torch import Tensor
@@ -68,13 +70,16 @@ def pose_error_median(rot: Tensor, trans: Tensor) -> float:
 @torch.no_grad()
 def evaluate_model(model: torch.nn.Module, loader, loss_fn: PoseLoss | None = None,
                    trivial: tuple[Tensor, Tensor] | None = None, device: str = "cpu",
-                   progress: bool = False) -> dict[str, float]:
+                   progress: bool = False, geo_loss: Any = None) -> dict[str, float]:
     """Mean / median rotation and translation-direction errors (degrees), the median of the
     larger of the two (``pose_err_med``) and pose AUC at 5/10/20 degrees of ``model`` over
     ``loader``; with ``trivial`` (a mean pose), the same
-    metrics of that constant predictor, prefixed ``trivial_``."""
+    metrics of that constant predictor, prefixed ``trivial_``. With the geometric head, its
+    decomposed pose's errors (``geo_``) and its inlier ranking (``inlier_auc_med``, the
+    median per-pair ROC-AUC, labels by ``geo_loss.threshold_px`` (default 2 px), and
+    ``inlier_rank_err`` = 1 - that)."""
     model.eval()
-    rots, transs, t_rots, t_transs, losses = [], [], [], [], []
+    rots, transs, t_rots, t_transs, losses, ranks = [], [], [], [], [], []
     g_rots, g_transs = [], []
     for batch in tqdm(loader, desc="validate", disable=not progress, leave=False):
         batch = batch.to(device)
@@ -87,6 +92,7 @@ def evaluate_model(model: torch.nn.Module, loader, loss_fn: PoseLoss | None = No
         transs.append(t.cpu())
         if getattr(out, "geometric", None) is not None:
             geo = out.geometric
+            ranks.extend(inlier_ranking_auc(geo, T_gt, getattr(geo_loss, "threshold_px", 2.0)))
             r, t = relative_pose_error(Pose(geo.R, geo.t), T_gt.double())
             bad = geo.status.cpu() != 0
             g_rots.append(torch.where(bad, torch.full_like(r.cpu(), 180.0), r.cpu()))
@@ -107,4 +113,44 @@ def evaluate_model(model: torch.nn.Module, loader, loss_fn: PoseLoss | None = No
         res.update(_summary(torch.cat(t_rots), torch.cat(t_transs), "trivial_"))
     if g_rots:
         res.update(_summary(torch.cat(g_rots), torch.cat(g_transs), "geo_"))
+    ranks = [a for a in ranks if np.isfinite(a)]
+    if ranks:  # the inlier head's ranking: 1 - the median per-pair ROC-AUC (lower is better)
+        res["inlier_auc_med"] = float(np.median(ranks))
+        res["inlier_rank_err"] = 1.0 - res["inlier_auc_med"]
     return res
+
+
+def _average_ranks(s: np.ndarray) -> np.ndarray:
+    """1-based ranks of ``s``, ties sharing their average rank."""
+    order = np.argsort(s, kind="mergesort")
+    _, first, counts = np.unique(s[order], return_index=True, return_counts=True)
+    ranks = np.empty(len(s))
+    ranks[order] = np.repeat(first + (counts + 1) / 2.0, counts)
+    return ranks
+
+
+def inlier_ranking_auc(geo: Any, T_gt: Tensor, threshold_px: float = 2.0) -> list[float]:
+    """Per pair, the ROC-AUC of the geometric head's inlier logits against the true labels
+    (Sampson distance under ``T_gt`` below ``threshold_px``, as its loss labels them); NaN
+    for a pair with only inliers or only outliers."""
+    from strl_pyg.geometry import essential_from_pose
+    from strl_pyg.geometry.essential import sampson_sq
+
+    pose = Pose.from_matrix(T_gt.double())
+    t = pose.t / pose.t.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    b = geo.batch
+    E = essential_from_pose(pose.R.to(geo.coords), t.to(geo.coords))
+    d = sampson_sq(E[b], geo.coords[:, None, :2], geo.coords[:, None, 2:])[:, 0].sqrt()
+    label = (d < threshold_px / geo.focal[b]).cpu().numpy()
+    score = geo.logits.detach().double().cpu().numpy()
+    bn = b.cpu().numpy()
+    out = []
+    for k in range(int(E.shape[0])):
+        y, s = label[bn == k], score[bn == k]
+        npos, nneg = int(y.sum()), int((~y).sum())
+        if npos == 0 or nneg == 0:
+            out.append(float("nan"))
+            continue
+        r = _average_ranks(s)
+        out.append(float((r[y].sum() - npos * (npos + 1) / 2) / (npos * nneg)))
+    return out

@@ -12,7 +12,8 @@ from strl_pyg.frontend import FrontendConfig, NoMatchesError, match_images, matc
 from strl_pyg.geometry import epipolar_residuals
 from strl_pyg.synthetic import SceneConfig, evaluate_matches, generate_pair
 
-# Thresholds, measured first (benchmarks/results_frontend.md, 18 generated pairs at 192x640):
+# Thresholds, measured first (benchmarks/results_frontend/generated.md, 18 generated pairs at
+# 192x640):
 # point inlier ratio (Sampson < 2 px under the true pose) 0.957-1.000 per pair, line precision
 # (both endpoints within 4 px of their plane-homography transfer) 0.793-1.000 per pair, mean
 # 0.91. The bounds below leave a margin for other OpenCV builds, not for regressions.

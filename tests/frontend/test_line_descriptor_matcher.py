@@ -110,11 +110,17 @@ def test_config_line_matcher_and_cache_key():
     import hashlib
     import json
 
+    def sha(cfg):
+        text = json.dumps(cfg.result_fields(), sort_keys=True, default=repr)
+        return hashlib.sha1(text.encode()).hexdigest()[:12]
+
+    # earlier caches keep their keys: the legacy preset's fields (the defaults before the
+    # presets) hash as before line_matcher existed (a new field must not enter that key
+    # unnoticed); the present defaults make other matches, so their key differs
+    legacy = FrontendConfig.preset("legacy")
+    assert sha(legacy) == DEFAULT_FIELDS_SHA
+    assert sha(FrontendConfig()) != DEFAULT_FIELDS_SHA
     fields = FrontendConfig().result_fields()
-    # earlier caches keep their keys: the default's fields hash as before line_matcher existed
-    # (a new field must not enter the default key unnoticed)
-    text = json.dumps(fields, sort_keys=True, default=repr)
-    assert hashlib.sha1(text.encode()).hexdigest()[:12] == DEFAULT_FIELDS_SHA
     assert "line_matcher" not in fields and "line_descriptor_ratio" not in fields
     assert FrontendConfig(line_matcher="descriptor").result_fields()["line_matcher"] == \
         "descriptor"
@@ -126,7 +132,7 @@ def test_match_images_descriptor_matcher_below_eight_points():
     from strl_pyg.frontend import match_images
 
     pair = generate_pair(5)
-    few = dict(max_keypoints=12)
+    few = dict(max_keypoints=12, thorough_below=0)  # a point-poor front end
     epi = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K,
                        config=FrontendConfig(**few))
     desc = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K,

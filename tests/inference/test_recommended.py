@@ -67,7 +67,7 @@ def test_few_points_put_the_line_solver_first_with_the_same_pose(model):
     from strl_pyg.inference import POINT_POOR_MAX_POINTS
 
     p = generate_pair(2, SceneConfig(kind="street", image_size=(240, 320)))
-    cfg = FrontendConfig(max_keypoints=40)
+    cfg = FrontendConfig.preset("legacy", max_keypoints=40)
     calls = []
     real = pipeline.match_images
 
@@ -224,7 +224,7 @@ def test_the_recommended_path_checks_a_point_poor_pair_once(model, monkeypatch):
 
     problems = _counting(monkeypatch, pair_run, "intrinsics_problems")
     est = estimate_recommended(model, p.image0, p.image1, p.K, p.K,
-                               FrontendConfig(max_keypoints=40))
+                               FrontendConfig.preset("legacy", max_keypoints=40))
     assert est.methods["vp"].status == "failed" and est.num_lines > 0
     assert est.pose.method == estimator.classical_method() and est.status == "ok"
     assert len(dedup) == 1 and len(problems) == 1, (len(dedup), len(problems))

@@ -1,0 +1,73 @@
+"""The inlier head's validation metric (per-pair ROC-AUC of its logits against the true
+labels) and the pose loss's weight, from the command line to the config."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import torch
+
+from strl_pyg.training import TrainConfig
+from strl_pyg.training.config import BEST_METRICS
+from strl_pyg.training.validation import _average_ranks, inlier_ranking_auc
+
+
+def test_average_ranks_share_ties():
+    np.testing.assert_array_equal(_average_ranks(np.array([3.0, 1.0, 3.0, 2.0])),
+                                  [3.5, 1.0, 3.5, 2.0])
+
+
+def _pairs(flip: bool):
+    """Two pairs under a sideways translation: inliers move along x only (y equal), outliers
+    jump in y; logits +1 for inliers (or -1 with ``flip``)."""
+    rng = np.random.default_rng(0)
+    coords, batch, logits = [], [], []
+    for b in range(2):
+        x0 = rng.uniform(-0.5, 0.5, (30, 2))
+        x1 = x0.copy()
+        x1[:, 0] += 0.1
+        out = np.arange(30) % 3 == 0
+        x1[out, 1] += rng.uniform(0.05, 0.2, out.sum())
+        coords.append(np.c_[x0, x1])
+        batch += [b] * 30
+        logits.append(np.where(out, -1.0, 1.0) * (-1 if flip else 1))
+    geo = SimpleNamespace(coords=torch.tensor(np.concatenate(coords)),
+                          batch=torch.tensor(batch), focal=torch.tensor([500.0, 500.0],
+                                                                        dtype=torch.float64),
+                          logits=torch.tensor(np.concatenate(logits)))
+    T = torch.eye(4, dtype=torch.float64).repeat(2, 1, 1)
+    T[:, 0, 3] = 1.0
+    return geo, T
+
+
+def test_inlier_ranking_auc_known_answers():
+    geo, T = _pairs(flip=False)
+    assert inlier_ranking_auc(geo, T) == [1.0, 1.0]
+    geo, T = _pairs(flip=True)
+    assert inlier_ranking_auc(geo, T) == [0.0, 0.0]
+    geo.logits = torch.zeros_like(geo.logits)  # no ranking at all: chance
+    assert inlier_ranking_auc(geo, T) == [0.5, 0.5]
+
+
+def test_pose_weight_and_the_ranking_metric_are_settings():
+    assert "inlier_rank_err" in BEST_METRICS
+    cfg = TrainConfig(pose_weight=0.01, best_metric="inlier_rank_err")
+    from dataclasses import asdict
+
+    assert TrainConfig.from_dict(asdict(cfg)).pose_weight == 0.01
+    with pytest.raises(ValueError, match=r"Expected pose_weight >= 0 \(got -1"):
+        TrainConfig(pose_weight=-1.0)
+
+
+def test_pose_weight_flag(tmp_path):
+    import argparse
+
+    from strl_pyg.training.commandline import config_from_args
+    from strl_pyg.training.config import add_train_arguments
+
+    ap = argparse.ArgumentParser()
+    add_train_arguments(ap)
+    args = ap.parse_args(["--pose-weight", "0.05", "--out", str(tmp_path / "r")])
+    assert config_from_args(args, ap).pose_weight == 0.05
