@@ -10,7 +10,7 @@ quantile, Wilson interval), and the paired ratio of the medians against the firs
 (bootstrap interval over pairs). PoseLib's medians are on the same matches.
 
     python benchmarks/bench_real_scenes.py --models shipped:geometric,runs/real/best_model.pt \\
-        --out benchmarks/results_real_scenes.md
+        --out benchmarks/results_real_scenes/README.md
 """
 
 from __future__ import annotations

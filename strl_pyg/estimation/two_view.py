@@ -14,6 +14,9 @@ COLMAP's "panoramic" case implies:
   the essential matrix (:data:`ROTATION_RATIO`): no parallax, so no translation direction; the
   rotation is still well defined (:attr:`TwoViewGeometry.rotation`).
 * ``"degenerate"``: fewer than :data:`MIN_INLIERS` matches fit any model.
+* ``"multiple"``: set by the estimator, not here, where a second rigid motion explains a large
+  share of the matches beside the pose's (COLMAP's MULTIPLE: a turntable's static room and its
+  turning object; :func:`strl_pyg.inference.evidence.apply_multiple_motions`).
 
 All counts are of distinct correspondences within ``threshold_px`` (symmetric transfer for
 the homography and the rotation, Sampson for the essential matrix, all in pixels at the mean
@@ -32,7 +35,7 @@ import numpy as np
 __all__ = ["CONFIGURATIONS", "H_RATIO", "ROTATION_RATIO", "MIN_INLIERS", "TwoViewGeometry",
            "classify_two_view", "rotation_only", "planar_candidates"]
 
-CONFIGURATIONS = ("general", "planar", "rotation", "degenerate")
+CONFIGURATIONS = ("general", "planar", "rotation", "degenerate", "multiple")
 #: A homography with at least this share of the essential matrix's inliers makes a pair
 #: planar (COLMAP's ``max_H_inlier_ratio``).
 H_RATIO = 0.8
@@ -78,6 +81,10 @@ class TwoViewGeometry:
     #: ``K1^T F K0`` and the inliers of that F (``None``, 0: not checked)
     focal_sv_ratio: float | None = None
     focal_inliers: int = 0
+    #: a second rigid motion among the recommended pose's outliers
+    #: (:func:`strl_pyg.inference.evidence.apply_multiple_motions`): its inliers (0: none
+    #: found or not looked for)
+    second_motion_inliers: int = 0
 
     @property
     def h_ratio(self) -> float:
@@ -95,7 +102,8 @@ class TwoViewGeometry:
                 "rotation_ratio": round(self.rotation_ratio, 4),
                 "residual_px": None if self.residual_px is None else round(self.residual_px, 3),
                 "focal_sv_ratio": None if self.focal_sv_ratio is None
-                else round(self.focal_sv_ratio, 4), "focal_inliers": self.focal_inliers}
+                else round(self.focal_sv_ratio, 4), "focal_inliers": self.focal_inliers,
+                "second_motion_inliers": self.second_motion_inliers}
 
 
 def _bearings(x: np.ndarray) -> np.ndarray:

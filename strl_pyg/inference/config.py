@@ -51,6 +51,7 @@ class EstimatorConfig:
     raise_errors: bool = False
     swap_check: bool = True
     data_check: bool = True
+    focal_sensitivity: bool = True
 
     @property
     def support(self) -> tuple[float, int, float]:
@@ -88,7 +89,7 @@ class EstimatorConfig:
                 raise ValueError(f"Expected resample 'model', None or (points, lines) >= 0 "
                                  f"(got {r!r})")
             object.__setattr__(self, "resample", (int(r[0]), int(r[1])))
-        for name in ("raise_errors", "swap_check", "data_check"):
+        for name in ("raise_errors", "swap_check", "data_check", "focal_sensitivity"):
             value = getattr(self, name)
             if not isinstance(value, (bool, np.bool_)):
                 raise ValueError(f"Expected {name} as a bool (got {value!r})")

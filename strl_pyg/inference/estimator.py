@@ -48,7 +48,8 @@ from strl_pyg.inference.checks import BAD_INTRINSICS, input_warnings
 from strl_pyg.inference.config import CheckpointSettings, EstimatorConfig
 from strl_pyg.inference.evidence import (
     apply_configuration,
-    focal_problem,
+    apply_multiple_motions,
+    focal_sensitivity,
     learned_pose_evidence,
     pair_geometry,
 )
@@ -151,6 +152,10 @@ class PoseEstimator:
             pose of the same matches (PoseLib's, else OpenCV's; one solve per pair, shared
             with that method) (:func:`~strl_pyg.estimation.uncertainty.data_covariance`; default
             ``True``; needs intrinsics and 8 distinct point matches).
+        focal_sensitivity: the recommended pose is solved again with both focal lengths
+            scaled by sqrt(2) each way; where the matches do not verify the focal length, the
+            spread is added to its covariance (:func:`~strl_pyg.inference.evidence.
+            focal_sensitivity`; default ``True``; two more solves per pair).
     """
 
     def __init__(self, model: Any = None, methods: Any = None, *,
@@ -257,12 +262,9 @@ class PoseEstimator:
         geometry, memo = None, {}
         if degenerate is None and not problems and checked.has_intrinsics:
             # the configuration and the focal check, from the same checked matches
-            with normalisation_scope(memo):
+            with normalisation_scope(memo):  # the configuration (and, for information
+                # only, the implied essential matrix's singular values: evidence module)
                 geometry = pair_geometry(checked, self.config.threshold_px, self.config.seed)
-            focal = focal_problem(geometry)
-            if focal is not None:
-                problems = [*problems, focal]
-                warnings.append(focal)
         ctx = MethodContext(self.config, load_model=lambda: self.model, settings=self.settings)
         return PairRun(checked, warnings, rows, degenerate, problems, ctx, memo, geometry)
 
@@ -292,7 +294,13 @@ class PoseEstimator:
         pair_rules(results, pair.matches, pair.rows, pair.problems)
         estimate = self._recommend(results, list(pair.warnings), pair.matches, pair.geometry)
         with normalisation_scope(pair.memo):
-            estimate = apply_configuration(estimate, pair.geometry, pair.matches)
+            estimate = apply_multiple_motions(estimate, pair.geometry, pair.matches,
+                                              self.config.threshold_px, self.config.seed)
+            if self.config.focal_sensitivity:
+                estimate.pose = focal_sensitivity(estimate.pose, pair.matches,
+                                                  self.config.threshold_px, self.config.seed)
+            estimate = apply_configuration(estimate, estimate.geometry or pair.geometry,
+                                           pair.matches)
         estimate.point_rows = pair.rows
         if fundamental and not pair.matches.has_intrinsics:
             with normalisation_scope(pair.memo):
