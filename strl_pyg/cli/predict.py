@@ -247,9 +247,13 @@ def _predict_pairs(args, methods: str) -> int:
     return 1 if errors or no_pose else 0
 
 
-def _draw_estimate(path: str, est, file=None) -> None:
+def _draw_estimate(path: str, est, file=None, images=None) -> None:
     """``predict --png``: the matches coloured by the recommended pose's support (inliers
-    within its support band and in front of both cameras)."""
+    within its support band and in front of both cameras), on the images as read (colour
+    where they are; ``images``) when they have the matches' sizes; an ``"unreliable"`` pose
+    shows the support of the pose it refused, and the first reason."""
+    from dataclasses import replace
+
     from strl_pyg.viz.matches import save_matches_png
 
     m = est.matches
@@ -257,10 +261,15 @@ def _draw_estimate(path: str, est, file=None) -> None:
         print("note: --png needs the images (a match file without them draws nothing)",
               file=file)
         return
+    if images is not None and tuple(np.shape(images[0])[:2]) == tuple(m.image_size0) \
+            and tuple(np.shape(images[1])[:2]) == tuple(m.image_size1):
+        m = replace(m, image0=images[0], image1=images[1])
     mask = est.inliers_of_matches()
     what = (f"green: {int(mask.sum())} of {m.num_points} point matches support the "
             f"recommended pose ({est.pose.method}, {est.status})" if mask is not None
             else f"recommended pose: {est.status}; no inlier mask (every match drawn grey)")
+    if est.status == "unreliable" and est.pose.info.get("unreliable"):
+        what += f"; unreliable: {est.pose.info['unreliable'][0]}"
     print(f"drawing -> {save_matches_png(path, m, point_inliers=mask, title=what, legend=True)}",
           file=file)
 
@@ -296,7 +305,7 @@ def cmd_predict(args) -> int:
             raise UsageError(f"Expected either two images or --matches (got both: "
                              f"{args.image0} and --matches {args.matches})")
         matches = _read_match_file(args)
-        K0 = matches.K0
+        K0, images = matches.K0, None
         estimator = _predict_estimator(args, names)
         est = estimator.estimate(matches)
     else:
@@ -306,6 +315,7 @@ def cmd_predict(args) -> int:
         inputs = read_pair(args)  # fail on bad files before any heavy work
         estimator = _predict_estimator(args, names)
         img0, img1, K0, K1 = inputs
+        images = (img0, img1)
         est = estimator.estimate_images(img0, img1, K0, K1,
                                         frontend_config(args))
         if inputs.downscaled:
@@ -316,12 +326,12 @@ def cmd_predict(args) -> int:
         print(json.dumps({**est.to_dict(), "translation_kind": kind,
                           "intrinsics": K0 is not None}))
         if args.png:  # stdout is the JSON record: the drawing's line goes to stderr
-            _draw_estimate(args.png, est, file=sys.stderr)
+            _draw_estimate(args.png, est, file=sys.stderr, images=images)
         return code
     print(f"matches: {est.num_points} points, {est.num_lines} lines")
     _print_estimate(est)
     if args.png:
-        _draw_estimate(args.png, est)
+        _draw_estimate(args.png, est, images=images)
     if args.checkpoint and methods == "recommended":
         from strl_pyg.inference import METHODS
 

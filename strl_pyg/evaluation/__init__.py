@@ -16,6 +16,7 @@ _EXPORTS = {
     "synthetic_eval_pairs": "strl_pyg.evaluation.pairs",
     "demon_eval_pairs": "strl_pyg.evaluation.pairs",
     "kitti_eval_pairs": "strl_pyg.evaluation.pairs",
+    "posed_eval_pairs": "strl_pyg.evaluation.pairs",
     "LEGACY_METHOD_NAMES": "strl_pyg.evaluation.run",
     "available_methods": "strl_pyg.evaluation.run",
     "resolve_methods": "strl_pyg.evaluation.run",

@@ -21,7 +21,8 @@ from tqdm.auto import tqdm
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.synthetic.config import LINE_SCENE_KINDS
 
-__all__ = ["EvalPair", "synthetic_eval_pairs", "demon_eval_pairs", "kitti_eval_pairs"]
+__all__ = ["EvalPair", "synthetic_eval_pairs", "demon_eval_pairs", "kitti_eval_pairs",
+           "posed_eval_pairs"]
 
 
 @dataclass
@@ -141,3 +142,32 @@ def kitti_eval_pairs(root: str | os.PathLike, cache_dir: str | os.PathLike,
     ds = KITTIOdometry(root, cache_dir=cache_dir, sequences=list(sequences),
                        frame_gap=frame_gap, limit=limit, **kwargs)
     return _dataset_pairs(ds, num_workers, progress, frames=True)
+
+
+def posed_eval_pairs(root: str | os.PathLike, cache_dir: str | os.PathLike,
+                     scenes: Sequence[str] | None = None, frame_gap: int = 2, stride: int = 4,
+                     limit: int | None = None, num_workers: int = 0, progress: bool = False,
+                     **kwargs: Any) -> list[EvalPair]:
+    """Posed-photograph pairs ``(i, i + frame_gap)`` for every ``stride``-th ``i`` of the
+    scene folders ``scenes`` under ``root`` (any format of :mod:`strl_pyg.datasets.posed`;
+    default: the real_scenes split's validation scenes where ``root`` holds them, else every
+    scene folder), front-end matches cached in ``cache_dir``; ``kwargs`` go to
+    :class:`~strl_pyg.datasets.posed.PosedImagePairs`."""
+    from strl_pyg.datasets.posed import REAL_SCENES_SPLIT, PosedImagePairs, PosedPairOptions
+
+    root = Path(root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"Expected a folder of posed scenes at '{root}' (got none)")
+    on_disk = sorted(p.name for p in root.iterdir() if p.is_dir())
+    if not scenes:
+        val = list(REAL_SCENES_SPLIT["val"])
+        scenes = val if set(val) <= set(on_disk) else on_disk
+    missing = [s for s in scenes if s not in on_disk]
+    if missing or not scenes:
+        raise FileNotFoundError(f"Expected scene folders under '{root}' (got "
+                                f"{', '.join(missing) or 'none'} not there; on disk: "
+                                f"{', '.join(on_disk[:12]) or 'nothing'})")
+    ds = PosedImagePairs([root / s for s in scenes], cache_dir=cache_dir, limit=limit,
+                         pairs=PosedPairOptions(gaps=(int(frame_gap),), stride=int(stride)),
+                         **kwargs)
+    return _dataset_pairs(ds, num_workers, progress)

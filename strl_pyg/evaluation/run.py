@@ -39,6 +39,7 @@ from strl_pyg.evaluation.pairs import (
     EvalPair,
     demon_eval_pairs,
     kitti_eval_pairs,
+    posed_eval_pairs,
     synthetic_eval_pairs,
 )
 from strl_pyg.evaluation.report import EvalReport, PairResult, pair_result
@@ -217,11 +218,19 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
 
     p.add_argument("--checkpoint", default=str(default_checkpoint()),
                    help="StrLPose checkpoint (StrLPose.save); default: the shipped weights")
-    p.add_argument("--dataset", choices=("synthetic", "demon", "kitti"), default="synthetic")
-    p.add_argument("--data-root", help="DeMoN DeepSfM root or KITTI odometry root")
+    p.add_argument("--dataset", choices=("synthetic", "demon", "kitti", "posed"),
+                   default="synthetic")
+    p.add_argument("--data-root", help="DeMoN DeepSfM root, KITTI odometry root or a folder "
+                                       "of posed scenes (COLMAP, NeRF, LLFF, real_scenes)")
+    p.add_argument("--scenes", default=None,
+                   help="posed: scene folders under --data-root, comma-separated (default: "
+                        "the real_scenes validation scenes where there, else every folder)")
+    p.add_argument("--stride", type=_POSITIVE_INT, default=4,
+                   help="posed: pairs (i, i + --frame-gap) for every this many i")
     p.add_argument("--sequences", nargs="+", default=["09", "10"],
                    help="KITTI test sequences, space- or comma-separated (as --train-sequences)")
-    p.add_argument("--frame-gap", type=_POSITIVE_INT, default=1, help="KITTI pair (i, i + gap)")
+    p.add_argument("--frame-gap", type=_POSITIVE_INT, default=None,
+                   help="KITTI / posed pair (i, i + gap) (default: 1 for KITTI, 2 for posed)")
     p.add_argument("--split", default="test", help="DeMoN split folder")
     p.add_argument("--limit", type=_POSITIVE_INT, default=None,
                    help="real data: first N pairs only")
@@ -321,10 +330,17 @@ def _run(argv: list[str] | None, prog: str | None) -> int:
             pairs = demon_eval_pairs(args.data_root, args.cache_dir, split=args.split,
                                      limit=args.limit, num_workers=args.workers,
                                      progress=progress, on_missing="skip")
+        elif args.dataset == "posed":
+            pairs = posed_eval_pairs(args.data_root, args.cache_dir,
+                                     [s.strip() for s in (args.scenes or "").split(",")
+                                      if s.strip()], args.frame_gap or 2, args.stride,
+                                     limit=args.limit, num_workers=args.workers,
+                                     progress=progress)
         else:
             pairs = kitti_eval_pairs(args.data_root, args.cache_dir, args.sequences,
-                                     args.frame_gap, limit=args.limit, num_workers=args.workers,
-                                     progress=progress, on_missing="skip")
+                                     args.frame_gap or 1, limit=args.limit,
+                                     num_workers=args.workers, progress=progress,
+                                     on_missing="skip")
     except (FileNotFoundError, ValueError) as err:
         raise UsageError(one_line(err)) from None
     if not pairs:

@@ -146,11 +146,12 @@ def _with_header(canvas: np.ndarray, title: str | None, legend: bool, points: tu
     """``canvas`` below a white band with the title and the legend."""
     scale = max(0.45, canvas.shape[1] / 1600)
     row = int(28 * scale / 0.6)
-    rows = [(title, (20, 20, 20))] if title else []
+    width = canvas.shape[1] - 20
+    rows = [(t, (20, 20, 20)) for t in _wrap(title, width, scale)] if title else []
     if legend:
         drawn = (f"points (circles): {points[0]} of {points[1]} drawn; lines (segments): "
                  f"{lines[0]} of {lines[1]} drawn")
-        rows.append((drawn, (60, 60, 60)))
+        rows += [(t, (60, 60, 60)) for t in _wrap(drawn, width, scale)]
     band = np.full((row * (len(rows) + (1 if legend else 0)) + row // 2, canvas.shape[1], 3),
                    255, np.uint8)
     y = row
@@ -168,6 +169,19 @@ def _with_header(canvas: np.ndarray, title: str | None, legend: bool, points: tu
                         (20, 20, 20), 1, cv2.LINE_AA)
             x += int(row * 0.6 * len(text)) + row
     return np.concatenate([band, canvas], axis=0)
+
+
+def _wrap(text: str, width: int, scale: float) -> list[str]:
+    """``text`` in lines no wider than ``width`` pixels at ``scale`` (breaking at spaces; a
+    single word wider than that stands alone), so a small image's header is not cut off."""
+    out, line = [], ""
+    for word in text.split(" "):
+        cand = f"{line} {word}" if line else word
+        if line and cv2.getTextSize(cand, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0][0] > width:
+            out.append(line)
+            cand = word
+        line = cand
+    return out + ([line] if line else [])
 
 
 def save_matches_png(

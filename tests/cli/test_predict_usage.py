@@ -92,3 +92,27 @@ def test_estimate_images_with_four_numbers_as_K_is_one_line(held_out_pair):
                                          r"four numbers \(fx, fy, cx, cy\)"):
         PoseEstimator().estimate_images(held_out_pair.image0, held_out_pair.image1,
                                         K0=(500.0, 500.0, 320.0, 240.0))
+
+
+def test_the_picture_is_in_colour_and_its_header_fits(tmp_path, held_out_pair, capsys):
+    """Before: colour photographs were drawn grey and a small image's header was cut off
+    ("(poselib, unr")."""
+    from strl_pyg.viz.matches import _wrap
+
+    for i, img in enumerate((held_out_pair.image0, held_out_pair.image1)):
+        grey = img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+        tint = np.stack([grey, (grey * 0.6).astype(np.uint8), (grey * 0.3).astype(np.uint8)], 2)
+        cv2.imwrite(str(tmp_path / f"{i}.png"), tint)  # BGR on disk: a blue-ish image
+    K = held_out_pair.K
+    assert cli_main(["predict", str(tmp_path / "0.png"), str(tmp_path / "1.png"), "--K",
+                     f"{K[0, 0]},{K[1, 1]},{K[0, 2]},{K[1, 2]}", "--png",
+                     str(tmp_path / "p.png")]) == 0
+    drawn = cv2.imread(str(tmp_path / "p.png"))
+    body = drawn[-held_out_pair.image0.shape[0]:]  # below the header band
+    b, g, r = (body[..., k].astype(int) for k in range(3))
+    assert np.median(b - r) > 20  # the photograph's colour, not grey
+    lines = _wrap("green: 512 of 600 point matches support the recommended pose (poselib, "
+                  "unreliable); unreliable: a long reason " * 2, 300, 0.45)
+    assert len(lines) > 2
+    assert all(cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, 0.45, 1)[0][0] <= 300
+               for t in lines if " " in t)

@@ -317,3 +317,21 @@ def test_sequences_take_commas_as_train_sequences_do(tiny_checkpoint):
             ["--checkpoint", str(tiny_checkpoint), "--sequences", *given])
         run._checked(args)
         assert args.sequences == ["06", "07"], given
+
+
+def test_evaluate_on_posed_photographs(shared_data, tiny_checkpoint, tmp_path, capsys):
+    """Before: `strl-pose evaluate --dataset posed` was refused ('invalid choice')."""
+    from strl_pyg import cli
+
+    root = shared_data / "real_scenes"
+    if not (root / "office_drink" / "cameras.json").is_file():
+        pytest.skip("real_scenes not present")
+    common = ["evaluate", "--checkpoint", str(tiny_checkpoint), "--dataset", "posed",
+              "--data-root", str(root), "--cache-dir", str(tmp_path / "cache"),
+              "--no-progress", "--methods", "poselib"]
+    assert cli.main([*common, "--scenes", "office_drink", "--stride", "30"]) == 0
+    out = capsys.readouterr().out
+    assert "dataset: posed, pairs: 3" in out and "| office_drink | poselib | 3 |" in out
+    assert cli.main([*common, "--scenes", "no_such_scene"]) == 2
+    err = capsys.readouterr().err
+    assert "no_such_scene not there" in err and err.count("\n") == 1
