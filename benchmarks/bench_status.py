@@ -137,6 +137,14 @@ def run(args) -> int:
 
 
 # ----------------------------------------------------------------------------- report
+def rules_of(r: dict) -> list[str]:
+    """The rules that refused the pair's pose; a pair with no pose at all (``failed``,
+    ``degenerate``: every method failed, e.g. its bootstrap found other poses) is "no pose"."""
+    if r["status"] in ("failed", "degenerate"):
+        return [f"no pose ({r['status']})"]
+    return r["rules"]
+
+
 def confident_wrong(r: dict) -> bool:
     if r["status"] != "ok" or r["rec"] <= WRONG_DEG or r.get("sigma") is None:
         return False
@@ -184,10 +192,10 @@ def report(args) -> int:
                   "there is none, by PoseLib's on the same matches).", "",
               "| rule | variant | refused right (<= 5 deg) | refused wrong (> 5 deg) |",
               "|---|---|---|---|"]
-    rules = sorted({x for r in rows for x in r["rules"]})
+    rules = sorted({x for r in rows for x in rules_of(r)})
     for rule in rules:
         for v in VARIANTS:
-            fired = [r for r in rows if r["variant"] == v and rule in r["rules"]]
+            fired = [r for r in rows if r["variant"] == v and rule in rules_of(r)]
             if not fired:
                 continue
             err = [r["refused"] if r["refused"] is not None else r["poselib"] for r in fired]
