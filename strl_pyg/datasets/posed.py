@@ -95,7 +95,9 @@ class PosedPairOptions:
 
 
 def _rotation_deg(R: np.ndarray) -> float:
-    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
+    from strl_pyg.geometry.pose import rotation_angle_deg
+
+    return float(rotation_angle_deg(np.asarray(R, dtype=np.float64)))
 
 
 def select_pairs(images: Sequence[PosedImage], options: PosedPairOptions | None = None

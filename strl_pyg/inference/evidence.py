@@ -322,6 +322,7 @@ def apply_configuration(estimate: PoseEstimate, geo: TwoViewGeometry | None,
 
 
 def _rot_deg(A: np.ndarray, B: np.ndarray) -> float:
-    c = (np.trace(A @ B.T) - 1.0) / 2.0
-    return math.degrees(math.acos(max(-1.0, min(1.0, float(c)))))
+    from strl_pyg.geometry.pose import rotation_angle_deg
+
+    return float(rotation_angle_deg(np.asarray(A, dtype=np.float64) @ np.asarray(B).T))
 

@@ -210,8 +210,8 @@ def _swap_disagreement(model: torch.nn.Module, matches: PairMatches, ctx: Method
     if not (bool(torch.isfinite(qb).all()) and bool(torch.isfinite(tb).all())
             and float(tb.norm()) > 1e-12):
         return None
-    b = Pose.from_quaternion(qb, tb)
-    R_inv, t_inv = b.R.T, -(b.R.T @ b.t)
+    inv = Pose.from_quaternion(qb, tb).inv()
+    R_inv, t_inv = inv.R, inv.t
     cos_r = ((torch.trace(pose.R.T @ R_inv) - 1) / 2).clamp(-1, 1)
     cos_t = (pose.t @ t_inv / (pose.t.norm() * t_inv.norm())).clamp(-1, 1)
     return float(torch.arccos(cos_r)), float(torch.arccos(cos_t))

@@ -1,7 +1,7 @@
 """The Str-L Pose network: :class:`StrLPose` (:mod:`.strl_pose`: layers wired into the
 paper's dual graph), its file I/O (:mod:`.checkpoint`: save / load, pretrained weights), its
-configuration and ablation rows (:mod:`.config`), its input features (:mod:`.inputs`) and
-older checkpoints' keys (:mod:`.legacy`).
+configuration and ablation rows (:mod:`.config`), the gathering of its input features
+(:mod:`.gather`) and older checkpoints' keys (:mod:`.legacy`).
 """
 
 from __future__ import annotations
