@@ -40,7 +40,10 @@ class LineEndpointConv(MessagePassing):
           node features :math:`(|\mathcal{V}|, C)` or
           :math:`((|\mathcal{V_s}|, C_s), (|\mathcal{V_t}|, C_t))`,
           edge indices :math:`(2, |\mathcal{E}|)`,
-          line features of the source nodes :math:`(|\mathcal{V}_s|, C_L)`
+          line features of the source nodes :math:`(|\mathcal{V}_s|, C_L)`, or the
+          ``(source, target)`` pair of them that :func:`~torch_geometric.nn.to_hetero` and
+          :class:`~torch_geometric.nn.HeteroConv` pass for an edge type whose source and
+          target node types differ (the source's are read)
         - **output:** node features :math:`(|\mathcal{V}_t|, C_t)`
     """
 
@@ -70,7 +73,12 @@ class LineEndpointConv(MessagePassing):
         reset_mlp(self.mlp)
 
     def forward(self, x: Tensor | tuple[Tensor, Tensor], edge_index: Tensor,
-                line_feat: Tensor) -> Tensor:
+                line_feat: Tensor | tuple[Tensor | None, Tensor | None]) -> Tensor:
+        if isinstance(line_feat, (tuple, list)):  # PyG's hetero machinery: (src, dst)
+            line_feat = line_feat[0]
+            if line_feat is None:
+                raise ValueError("Expected line features of the source node type (got None "
+                                 "in the (source, target) pair)")
         x_src, x_dst = as_pair(x)
         src_channels, dst_channels = as_pair(self.channels)
         for what, t, c in (("source", x_src, src_channels), ("target", x_dst, dst_channels),

@@ -72,3 +72,25 @@ def test_widths_are_checked_at_construction_and_call():
         conv(torch.randn(2, 7), ei, torch.randn(2, 4))
     with pytest.raises(ValueError, match=r"Expected line features of shape \[N, 4\]"):
         conv(torch.randn(2, 8), ei, torch.randn(2, 5))
+
+
+def test_hetero_conv_on_an_edge_type_between_two_node_types():
+    """Before: HeteroConv / to_hetero pass node-level arguments of an edge type whose source
+    and target types differ as a (source, target) pair: "'tuple' object has no attribute
+    'dim'". The source's line features are read; the result equals the bipartite call."""
+    import torch
+    from torch_geometric.nn import HeteroConv
+
+    from strl_pyg.nn import LineEndpointConv
+
+    torch.manual_seed(0)
+    x = {"endpoint": torch.randn(6, 8), "point": torch.randn(4, 8)}
+    line = {"endpoint": torch.randn(6, 5), "point": torch.randn(4, 5)}
+    ei = torch.tensor([[0, 1, 2, 5], [0, 0, 3, 2]])
+    conv = LineEndpointConv(8, 5)
+    hetero = HeteroConv({("endpoint", "to", "point"): conv})
+    out = hetero(x, {("endpoint", "to", "point"): ei}, line_feat_dict=line)
+    ref = conv((x["endpoint"], x["point"]), ei, line["endpoint"])
+    torch.testing.assert_close(out["point"], ref)
+    with pytest.raises(ValueError, match="Expected line features of the source node type"):
+        conv((x["endpoint"], x["point"]), ei, (None, line["point"]))
