@@ -291,7 +291,8 @@ class PairGraph(HeteroData):
 
     def validate(self, raise_on_error: bool = True) -> bool:
         """:meth:`HeteroData.validate`, plus: each complete edge type carries exactly one of
-        ``dense`` (a bool per graph) and ``edge_index``."""
+        ``dense`` (a bool per graph) and explicit edges (``edge_index``, or the ``adj_t`` /
+        ``adj`` that :class:`torch_geometric.transforms.ToSparseTensor` makes of it)."""
         status = super().validate(raise_on_error)
         n = _num_graphs(self)
         marked = [et for et in self.edge_types if keys_.DENSE in self[et]]
@@ -299,12 +300,15 @@ class PairGraph(HeteroData):
             if et not in self.edge_types:
                 continue
             store = self[et]
-            has_dense, has_ei = keys_.DENSE in store, keys_.EDGE_INDEX in store
+            # explicit edges: an edge index, or the sparse adjacency PyG's ToSparseTensor
+            # makes of one ('adj_t', or 'adj' with its layout options)
+            has_dense = keys_.DENSE in store
+            has_ei = any(k in store for k in (keys_.EDGE_INDEX, "adj_t", "adj"))
             problem = None
             if has_dense == has_ei:
                 got = "both" if has_dense else "neither"
                 problem = (f"Expected edge type {et} to carry either '{keys_.DENSE}' or "
-                           f"'{keys_.EDGE_INDEX}' (got {got})")
+                           f"'{keys_.EDGE_INDEX}' / a sparse adjacency 'adj_t' (got {got})")
             elif has_dense:
                 d = store[keys_.DENSE]
                 if not isinstance(d, Tensor) or d.dtype != torch.bool or d.shape != (n,):
