@@ -86,6 +86,7 @@ class TrainConfig:
     val_scenes: list[str] | None = None
     posed_gaps: list[int] = field(default_factory=lambda: [1, 2, 3])  # posed: training pairs
     posed_max_rotation: float = 60.0  # posed: largest relative rotation of a pair (degrees)
+    posed_stride: int = 1  # posed: training pairs (i, i + k) for every this many i, all scenes
     posed_min_points: int = 0  # posed: training pairs with fewer point matches are left out
     # posed: smallest share of co-visible 3D points of a training pair (COLMAP models with
     # point tracks; other formats carry none and ignore it)
@@ -277,6 +278,9 @@ class TrainConfig:
         if not 0 <= self.posed_min_covisible <= 1:
             raise ValueError(f"Expected posed_min_covisible in [0, 1] "
                              f"(got {self.posed_min_covisible!r})")
+        if not (isinstance(self.posed_stride, int) and self.posed_stride >= 1):
+            raise ValueError(f"Expected posed_stride as an integer >= 1 "
+                             f"(got {self.posed_stride!r})")
         if not 0 < self.posed_max_rotation <= 180:
             raise ValueError(f"Expected posed_max_rotation in (0, 180] degrees "
                              f"(got {self.posed_max_rotation!r})")
@@ -344,7 +348,7 @@ class TrainConfig:
         ``"ignored"`` beside the ``"data"`` actually loaded, so a stored config does not
         describe data the run never saw)."""
         posed = ["train_scenes", "val_scenes", "posed_gaps", "posed_max_rotation",
-                 "posed_min_points", "posed_min_covisible", "val_gap", "val_stride",
+                 "posed_stride", "posed_min_points", "posed_min_covisible", "val_gap", "val_stride",
                  "synthetic_share", "synthetic_pairs"]
         kitti = ["kitti_k", "train_sequences", "val_sequences"]
         generator = ["scene", "scene_kinds", "scene_mix", "matches"]
@@ -416,6 +420,9 @@ def _add_posed_arguments(ap: argparse.ArgumentParser, d: TrainConfig) -> None:
                     help="posed: capture-order gaps k of the training pairs (i, i + k)")
     ap.add_argument("--posed-max-rotation", type=float, default=d.posed_max_rotation,
                     metavar="DEG", help="posed: largest relative rotation of a pair")
+    ap.add_argument("--posed-stride", type=int, default=d.posed_stride, metavar="N",
+                    help="posed: training pairs for every N-th first image, in every scene "
+                         "(thins the pairs evenly; --limit keeps the first scenes' pairs)")
     ap.add_argument("--posed-min-points", type=int, default=d.posed_min_points, metavar="N",
                     help="posed: leave out training pairs with fewer than N cached point "
                          "matches (validation keeps every pair)")

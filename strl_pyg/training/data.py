@@ -273,6 +273,7 @@ def _posed_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
     train = PosedImagePairs([root / n for n in train_names], limit=cfg.limit, **mixed,
                             min_points=cfg.posed_min_points, pairs=
                             PosedPairOptions(gaps=tuple(cfg.posed_gaps),
+                                             stride=cfg.posed_stride,
                                              max_rotation_deg=cfg.posed_max_rotation,
                                              min_covisible=cfg.posed_min_covisible),
                             **common)

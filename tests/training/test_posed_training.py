@@ -237,3 +237,32 @@ def test_photographs_and_generated_pairs_collate_for_a_model_without_pixels(pose
     train_ds, _ = build_datasets(cfg, progress=False)
     batch = collater(cfg.model_config())([train_ds[i] for i in range(len(train_ds))])
     assert batch.num_graphs == len(train_ds) == 4
+
+
+@pytest.mark.slow
+def test_posed_stride_thins_every_scene(posed_root, tmp_path, monkeypatch):
+    """Training pairs could only be thinned by --limit, which keeps the first scenes' pairs;
+    --posed-stride takes every N-th first image in every scene."""
+    import argparse
+
+    from strl_pyg.datasets import posed as posed_mod
+    from strl_pyg.training.commandline import config_from_args
+    from strl_pyg.training.config import add_train_arguments
+
+    ap = argparse.ArgumentParser()
+    add_train_arguments(ap)
+    args = ap.parse_args(["--dataset", "posed", "--data-root", str(posed_root),
+                          "--posed-stride", "3"])
+    assert config_from_args(args, ap).posed_stride == 3
+    with pytest.raises(ValueError, match=r"Expected posed_stride as an integer >= 1 \(got 0"):
+        TrainConfig(posed_stride=0)
+    seen = []
+    real = posed_mod.PosedImagePairs
+
+    def spy(scenes, **kw):
+        seen.append(kw["pairs"].stride)
+        return real(scenes, **kw)
+
+    monkeypatch.setattr(posed_mod, "PosedImagePairs", spy)
+    build_datasets(posed_config(posed_root, tmp_path, posed_stride=3), progress=False)
+    assert seen[0] == 3  # the training pairs; validation keeps its own --val-stride
