@@ -36,6 +36,8 @@ __all__ = [
     "rng_state",
     "set_rng_state",
     "init_weights",
+    "inherit_policy",
+    "INHERITED_METADATA",
     "load_training_model",
     "TRAINING_KEYS",
 ]
@@ -244,3 +246,27 @@ def init_weights(model: Any, path: str | os.PathLike) -> None:
     except RuntimeError as err:
         raise ValueError(f"Expected weights matching this run's model config in '{path}' "
                          f"(got {str(err).splitlines()[0]})") from err
+
+
+#: Metadata of the initial weights that a run started from them keeps: the recommended order
+#: of the methods (a policy measured with those weights; the calibration scales are not kept:
+#: they describe the initial network's variances).
+INHERITED_METADATA = ("recommended_order", "recommended_evidence")
+
+
+def inherit_policy(model: Any, path: str | os.PathLike) -> None:
+    """Copies :data:`INHERITED_METADATA` of the model checkpoint at ``path`` (``model.pt`` or
+    shipped weights; a training ``last.pt`` has none) into ``model.metadata``, with
+    ``recommended_order_from`` naming ``path``, so that the run's ``model.pt`` and
+    ``best_model.pt`` recommend poses as the weights they started from did (not re-measured
+    for the new weights: ``benchmarks/bench_pose.py --calibrate`` measures their own)."""
+    from strl_pyg.model.strl_pose import StrLPose
+
+    path = resolve_weights(path)
+    payload = safe_torch_load(path, "weights file (model.pt or last.pt)")
+    if not (isinstance(payload, dict) and "format" in payload):
+        return
+    md = StrLPose.load(path).metadata
+    kept = {k: md[k] for k in INHERITED_METADATA if k in md}
+    if kept:
+        model.metadata = {**model.metadata, **kept, "recommended_order_from": str(path)}

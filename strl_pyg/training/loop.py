@@ -37,6 +37,7 @@ from tqdm.auto import tqdm
 from strl_pyg.data import keys as keys_
 from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.training.checkpoints import (
+    inherit_policy,
     CHECKPOINT_VERSION,
     init_weights,
     load_checkpoint,
@@ -251,6 +252,8 @@ def _start(cfg: TrainConfig, model: StrLPose, optimizer: torch.optim.Optimizer, 
     step, history, trivial_buf, norms = 0, [], [], []
     if cfg.init_from and not resume:
         init_weights(model, cfg.init_from)
+    if cfg.init_from:  # also on resume: last.pt holds the weights, not the metadata
+        inherit_policy(model, cfg.init_from)
     if resume:
         step, history, trivial_buf, norms = _resume(cfg, Path(cfg.out_dir) / "last.pt", model,
                                                     optimizer)

@@ -71,3 +71,26 @@ def test_pose_weight_flag(tmp_path):
     add_train_arguments(ap)
     args = ap.parse_args(["--pose-weight", "0.05", "--out", str(tmp_path / "r")])
     assert config_from_args(args, ap).pose_weight == 0.05
+
+
+def test_a_run_from_shipped_weights_keeps_their_recommended_order(tmp_path):
+    """Before: a model.pt trained from shipped:geometric carried none of its metadata, so the
+    estimator fell back to the default order (poselib, opencv, regression) and the run was
+    not comparable with the weights it started from."""
+    from strl_pyg.model import StrLPose, StrLPoseConfig
+    from strl_pyg.training.checkpoints import inherit_policy
+
+    shipped = StrLPose.from_pretrained("geometric")
+    model = StrLPose(shipped.config)
+    inherit_policy(model, "shipped:geometric")
+    md = model.metadata
+    assert md["recommended_order"] == shipped.metadata["recommended_order"]
+    assert "calibration" not in md and md["recommended_order_from"].endswith(".pt")
+    model.save(tmp_path / "m.pt")
+    assert StrLPose.load(tmp_path / "m.pt").metadata["recommended_order"] == \
+        shipped.metadata["recommended_order"]
+    plain = StrLPose(StrLPoseConfig(hidden=16, layers=1, heads=2))
+    plain.save(tmp_path / "plain.pt")
+    other = StrLPose(StrLPoseConfig(hidden=16, layers=1, heads=2))
+    inherit_policy(other, tmp_path / "plain.pt")  # nothing to keep
+    assert "recommended_order" not in other.metadata
