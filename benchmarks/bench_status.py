@@ -44,7 +44,8 @@ RULES = (("focal lengths do not fit", "focal"), ("resamples found", "bootstrap")
          ("principal point", "intrinsics"), ("looks normalised", "intrinsics"),
          ("focal length (fx=", "intrinsics"), ("different sizes", "intrinsics"),
          ("pure rotation", "configuration"), ("plane", "configuration"),
-         ("too few", "too few matches"), ("two motions", "multiple"))
+         ("too few", "too few matches"), ("two motions", "multiple"),
+         ("a watermark", "watermark"))
 
 
 def rule_of(reason: str) -> str:
@@ -142,6 +143,8 @@ def rules_of(r: dict) -> list[str]:
     ``degenerate``: every method failed, e.g. its bootstrap found other poses) is "no pose"."""
     if r["status"] in ("failed", "degenerate"):
         return [f"no pose ({r['status']})"]
+    if r.get("reasons"):  # named again from the stored reasons (rules added since the run)
+        return sorted({rule_of(x) for x in r["reasons"]})
     return r["rules"]
 
 

@@ -14,7 +14,12 @@ def test_each_refusal_names_its_rule():
     assert bs.rule_of("12 of 40 point matches lie behind a camera (more than 10 %)") == \
         "cheirality"
     assert bs.rule_of("two motions (COLMAP's MULTIPLE): 80 of the 199 matches") == "multiple"
+    assert bs.rule_of("a watermark (COLMAP's WATERMARK): 40 of the pose's inliers") == \
+        "watermark"
     assert bs.rule_of("something new") == "other"
+    assert bs.rules_of({"status": "failed", "rules": []}) == ["no pose (failed)"]
+    assert bs.rules_of({"status": "unreliable", "rules": ["other"],
+                        "reasons": ["two motions (COLMAP's MULTIPLE): 8 of 9"]}) == ["multiple"]
 
 
 def test_perturbed_intrinsics():

@@ -17,6 +17,9 @@ COLMAP's "panoramic" case implies:
 * ``"multiple"``: set by the estimator, not here, where a second rigid motion explains a large
   share of the matches beside the pose's (COLMAP's MULTIPLE: a turntable's static room and its
   turning object; :func:`strl_pyg.inference.evidence.apply_multiple_motions`).
+* ``"watermark"``: set by the estimator too, where many of the pose's inliers stay put near
+  the image borders while the rest move (COLMAP's WATERMARK: a stamped overlay;
+  :func:`strl_pyg.inference.evidence.apply_watermark`).
 
 All counts are of distinct correspondences within ``threshold_px`` (symmetric transfer for
 the homography and the rotation, Sampson for the essential matrix, all in pixels at the mean
@@ -35,7 +38,7 @@ import numpy as np
 __all__ = ["CONFIGURATIONS", "H_RATIO", "ROTATION_RATIO", "MIN_INLIERS", "TwoViewGeometry",
            "classify_two_view", "rotation_only", "planar_candidates"]
 
-CONFIGURATIONS = ("general", "planar", "rotation", "degenerate", "multiple")
+CONFIGURATIONS = ("general", "planar", "rotation", "degenerate", "multiple", "watermark")
 #: A homography with at least this share of the essential matrix's inliers makes a pair
 #: planar (COLMAP's ``max_H_inlier_ratio``).
 H_RATIO = 0.8

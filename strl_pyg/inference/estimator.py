@@ -49,6 +49,7 @@ from strl_pyg.inference.config import CheckpointSettings, EstimatorConfig
 from strl_pyg.inference.evidence import (
     apply_configuration,
     apply_multiple_motions,
+    apply_watermark,
     focal_sensitivity,
     learned_pose_evidence,
     pair_geometry,
@@ -294,8 +295,11 @@ class PoseEstimator:
         pair_rules(results, pair.matches, pair.rows, pair.problems)
         estimate = self._recommend(results, list(pair.warnings), pair.matches, pair.geometry)
         with normalisation_scope(pair.memo):
-            estimate = apply_multiple_motions(estimate, pair.geometry, pair.matches,
-                                              self.config.threshold_px, self.config.seed)
+            estimate = apply_watermark(estimate, pair.geometry, pair.matches,
+                                       self.config.threshold_px)
+            estimate = apply_multiple_motions(estimate, estimate.geometry or pair.geometry,
+                                              pair.matches, self.config.threshold_px,
+                                              self.config.seed)
             if self.config.focal_sensitivity:
                 estimate.pose = focal_sensitivity(estimate.pose, pair.matches,
                                                   self.config.threshold_px, self.config.seed)

@@ -46,7 +46,8 @@ __all__ = ["LEARNED_SUPPORT_SHARE", "FOCAL_SV_RATIO_MIN", "FOCAL_MIN_INLIERS", "
            "FOCAL_RANGE_FACTOR", "FOCAL_VERIFIED_SHARE", "pair_geometry", "focal_consistency",
            "focal_sensitivity", "apply_configuration", "learned_pose_evidence",
            "apply_multiple_motions", "MULTIPLE_MIN_INLIERS", "MULTIPLE_SHARE",
-           "MULTIPLE_APART_DEG"]
+           "MULTIPLE_APART_DEG", "apply_watermark", "WATERMARK_MIN_MATCHES",
+           "WATERMARK_STILL_PX", "WATERMARK_BORDER", "WATERMARK_MOVING_PX"]
 
 #: Below this ratio of the implied essential matrix's two singular values, the intrinsics do
 #: not fit the matches (module docstring).
@@ -67,6 +68,13 @@ MULTIPLE_MIN_INLIERS = 15
 MULTIPLE_SHARE = 0.4
 #: ... when it is this far (deg) from the pose in rotation, or 3x this in translation direction
 MULTIPLE_APART_DEG = 5.0
+#: WATERMARK: this many of the pose's inliers ...
+WATERMARK_MIN_MATCHES = 15
+#: ... moving less than this (px) ...
+WATERMARK_STILL_PX = 1.0
+#: ... within this share of the image size from a border, while the others move this much (px)
+WATERMARK_BORDER = 0.15
+WATERMARK_MOVING_PX = 3.0
 #: The network's pose stands in for the solvers only where it explains at least this share of
 #: the matches that the pair's best essential matrix explains (its inliers within the support
 #: band, against the essential matrix's within the inlier threshold).
@@ -222,6 +230,45 @@ def apply_multiple_motions(estimate: PoseEstimate, geo: TwoViewGeometry | None,
         f"translation direction from the pose, which {n1} matches fit): e.g. a turntable's "
         "room and object; which is the relative pose is yours to say "
         "(info['second_motion_T_0to1'])"])
+    return estimate
+
+
+def apply_watermark(estimate: PoseEstimate, geo: TwoViewGeometry | None,
+                    matches: PairMatches, threshold_px: float) -> PoseEstimate:
+    """COLMAP's WATERMARK: at least :data:`WATERMARK_MIN_MATCHES` of the recommended pose's
+    inliers stay put (moving less than :data:`WATERMARK_STILL_PX`) within
+    :data:`WATERMARK_BORDER` of the image's size from a border, while the other matches move
+    (median over :data:`WATERMARK_MOVING_PX`): a stamped overlay (a logo, a time stamp) that
+    matches itself. Such matches fit any pose without rotation, so they pull the pose towards
+    one: the configuration is ``"watermark"`` and the pose ``"unreliable"``."""
+    pose = estimate.pose
+    if geo is None or pose.status != "ok" or pose.T_0to1 is None or not matches.has_intrinsics:
+        return estimate
+    p0, p1 = np.asarray(matches.points0), np.asarray(matches.points1)
+    if len(p0) < WATERMARK_MIN_MATCHES:
+        return estimate
+    h, w = matches.image_size0
+    still = np.linalg.norm(p1 - p0, axis=1) < WATERMARK_STILL_PX
+    bx, by = WATERMARK_BORDER * w, WATERMARK_BORDER * h
+    border = (p0[:, 0] < bx) | (p0[:, 0] > w - 1 - bx) | (p0[:, 1] < by) | (p0[:, 1] > h - 1 - by)
+    from strl_pyg.estimation.classical import normalised_matches
+
+    x0, x1, focal = (v.numpy() if hasattr(v, "numpy") else v
+                     for v in normalised_matches(matches))
+    inl = _essential_inliers(np.asarray(pose.T_0to1, dtype=np.float64), x0, x1,
+                             threshold_px / float(focal))
+    stamp = still & border & inl
+    others = ~(still & border)
+    if stamp.sum() < WATERMARK_MIN_MATCHES or others.sum() < WATERMARK_MIN_MATCHES or \
+            np.median(np.linalg.norm(p1[others] - p0[others], axis=1)) < WATERMARK_MOVING_PX:
+        return estimate
+    estimate.geometry = replace(geo, configuration="watermark")
+    estimate.pose = replace(pose, info={**pose.info, "watermark_matches": int(stamp.sum())}
+                            ).unreliable([
+        f"a watermark (COLMAP's WATERMARK): {int(stamp.sum())} of the pose's inliers stay put "
+        f"(under {WATERMARK_STILL_PX:g} px) near the image borders while the other matches "
+        "move: a stamped overlay matches itself and fits any pose without rotation; crop or "
+        "mask it"])
     return estimate
 
 

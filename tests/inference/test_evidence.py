@@ -226,3 +226,30 @@ def test_a_few_stray_matches_are_not_a_second_motion():
     m, _ = _two_motions(300, 12)  # below MULTIPLE_MIN_INLIERS
     est = PoseEstimator(methods=("poselib",)).estimate(m)
     assert est.configuration == "general" and est.pose.status == "ok"
+
+
+def _stamped(n_scene: int, n_stamp: int, seed: int = 0):
+    """A general pair's matches plus a stamped overlay: ``n_stamp`` matches that stay put in
+    the top-left corner of both images (a logo)."""
+    m, R, t = make_pair("general", n=n_scene, seed=seed)
+    rng = np.random.default_rng(seed + 7)
+    s0 = rng.uniform([5, 5], [90, 60], size=(n_stamp, 2))
+    s1 = s0 + rng.normal(scale=0.1, size=s0.shape)
+    return PairMatches(np.r_[m.points0, s0], np.r_[m.points1, s1], K0=K, K1=K,
+                       image_size0=SIZE, image_size1=SIZE)
+
+
+def test_a_stamped_overlay_that_carries_the_pose_is_a_watermark():
+    """A logo's matches fit any pose without rotation; where they outnumber the scene's, the
+    solver's pose is theirs. Before: 'ok'."""
+    m = _stamped(80, 120)  # (250 stamps: the input check already calls it degenerate)
+    est = PoseEstimator(methods=("poselib",)).estimate(m)
+    assert est.configuration == "watermark" and est.pose.status == "unreliable"
+    assert "watermark" in est.pose.warnings[-1] and est.pose.info["watermark_matches"] >= 15
+
+
+def test_a_few_still_border_matches_are_no_watermark():
+    """The scene's pose does not fit the logo's matches: nothing to refuse (the stamp's
+    matches are outliers); and a pair that barely moves anywhere is no watermark either."""
+    est = PoseEstimator(methods=("poselib",)).estimate(_stamped(300, 20))
+    assert est.configuration == "general" and est.pose.status == "ok"
