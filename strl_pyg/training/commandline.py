@@ -67,6 +67,7 @@ def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> T
         train_scenes=split(args.train_scenes), val_scenes=split(args.val_scenes),
         posed_gaps=[int(g) for g in split(args.posed_gaps)],
         posed_max_rotation=args.posed_max_rotation, posed_stride=args.posed_stride,
+        matcher=args.matcher,
         posed_min_points=args.posed_min_points,
         posed_min_covisible=args.posed_min_covisible,
         val_gap=args.val_gap,

@@ -87,6 +87,9 @@ class TrainConfig:
     posed_gaps: list[int] = field(default_factory=lambda: [1, 2, 3])  # posed: training pairs
     posed_max_rotation: float = 60.0  # posed: largest relative rotation of a pair (degrees)
     posed_stride: int = 1  # posed: training pairs (i, i + k) for every this many i, all scenes
+    # photographs (posed, KITTI, DeMoN): the front end's preset (FrontendConfig.preset; None:
+    # the FrontendConfig defaults); part of the match caches' key
+    matcher: str | None = None
     posed_min_points: int = 0  # posed: training pairs with fewer point matches are left out
     # posed: smallest share of co-visible 3D points of a training pair (COLMAP models with
     # point tracks; other formats carry none and ignore it)
@@ -278,6 +281,12 @@ class TrainConfig:
         if not 0 <= self.posed_min_covisible <= 1:
             raise ValueError(f"Expected posed_min_covisible in [0, 1] "
                              f"(got {self.posed_min_covisible!r})")
+        if self.matcher is not None:
+            from strl_pyg.frontend.config import PRESETS
+
+            if self.matcher not in PRESETS:
+                raise ValueError(f"Expected matcher in {tuple(PRESETS)} or None "
+                                 f"(got {self.matcher!r})")
         if not (isinstance(self.posed_stride, int) and self.posed_stride >= 1):
             raise ValueError(f"Expected posed_stride as an integer >= 1 "
                              f"(got {self.posed_stride!r})")
@@ -348,8 +357,8 @@ class TrainConfig:
         ``"ignored"`` beside the ``"data"`` actually loaded, so a stored config does not
         describe data the run never saw)."""
         posed = ["train_scenes", "val_scenes", "posed_gaps", "posed_max_rotation",
-                 "posed_stride", "posed_min_points", "posed_min_covisible", "val_gap", "val_stride",
-                 "synthetic_share", "synthetic_pairs"]
+                 "posed_stride", "posed_min_points", "posed_min_covisible", "val_gap",
+                 "val_stride", "synthetic_share", "synthetic_pairs"]
         kitti = ["kitti_k", "train_sequences", "val_sequences"]
         generator = ["scene", "scene_kinds", "scene_mix", "matches"]
         # a named scene mix replaces the scene settings
@@ -360,8 +369,8 @@ class TrainConfig:
             if self.synthetic_share == 0:
                 return [*out, "scene", "scene_kinds", "scene_mix", "synthetic_pairs"]
             return [*out, *per_scene]
-        if self.dataset == "synthetic":
-            return [*posed, *kitti, "data_root", "limit", *per_scene]
+        if self.dataset == "synthetic":  # (its front-end matches: the default front end)
+            return [*posed, *kitti, "data_root", "limit", "matcher", *per_scene]
         if self.dataset == "kitti":
             return [*posed, *generator, "train_pairs", "val_pairs"]
         return [*posed, *kitti, *generator, "train_pairs", "val_pairs"]
@@ -420,6 +429,9 @@ def _add_posed_arguments(ap: argparse.ArgumentParser, d: TrainConfig) -> None:
                     help="posed: capture-order gaps k of the training pairs (i, i + k)")
     ap.add_argument("--posed-max-rotation", type=float, default=d.posed_max_rotation,
                     metavar="DEG", help="posed: largest relative rotation of a pair")
+    ap.add_argument("--matcher", default=d.matcher, metavar="PRESET",
+                    help="photographs: the front end's preset, fast | thorough | adaptive | "
+                         "legacy (default: the FrontendConfig defaults, adaptive)")
     ap.add_argument("--posed-stride", type=int, default=d.posed_stride, metavar="N",
                     help="posed: training pairs for every N-th first image, in every scene "
                          "(thins the pairs evenly; --limit keeps the first scenes' pairs)")

@@ -163,7 +163,8 @@ def build_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
     # model, e.g. fine-tuning the shipped weights, reads colour data as grey
     grey = model_input_channels(model_cfg, cfg.patch_size) == 1
     common = dict(cache_dir=cfg.cache_dir, patch_size=cfg.patch_size, keep_images=keep,
-                  limit=cfg.limit, on_missing="skip", grayscale=grey)
+                  limit=cfg.limit, on_missing="skip", grayscale=grey,
+                  frontend_config=frontend_of(cfg))
     if cfg.dataset == "kitti":
         train = D.KITTIOdometry(cfg.data_root, split="train", sequences=cfg.train_sequences,
                                 frame_gap=cfg.kitti_k, **common)
@@ -254,6 +255,16 @@ def drop_match_scores(data: HeteroData) -> HeteroData:
     return data
 
 
+def frontend_of(cfg: TrainConfig) -> Any:
+    """The front end of a run on photographs: ``cfg.matcher``'s preset, or ``None`` (the
+    datasets' default, ``FrontendConfig()``)."""
+    if cfg.matcher is None:
+        return None
+    from strl_pyg.frontend.config import FrontendConfig
+
+    return FrontendConfig.preset(cfg.matcher)
+
+
 def _posed_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
     """Posed photographs (training scenes, pairs by overlap; validation scenes, pairs
     ``(i, i + val_gap)``), with generated pairs mixed into training at ``synthetic_share``."""
@@ -267,7 +278,7 @@ def _posed_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
     train_names, val_names = posed_scenes(cfg)
     root = Path(cfg.data_root)
     common = dict(cache_dir=cfg.cache_dir, patch_size=cfg.patch_size, keep_images=keep,
-                  grayscale=grey)
+                  grayscale=grey, frontend_config=frontend_of(cfg))
     # generated graphs carry no front-end scores: a mixed batch collates the keys both have
     mixed = dict(transform=drop_match_scores) if cfg.synthetic_share > 0 else {}
     train = PosedImagePairs([root / n for n in train_names], limit=cfg.limit, **mixed,

@@ -266,3 +266,33 @@ def test_posed_stride_thins_every_scene(posed_root, tmp_path, monkeypatch):
     monkeypatch.setattr(posed_mod, "PosedImagePairs", spy)
     build_datasets(posed_config(posed_root, tmp_path, posed_stride=3), progress=False)
     assert seen[0] == 3  # the training pairs; validation keeps its own --val-stride
+
+
+def test_matcher_reaches_the_photographs_front_end(posed_root, tmp_path, monkeypatch):
+    """`--matcher` on `train`, as on `predict` and `match`: the posed datasets match with the
+    preset (its settings are in the match caches' key); a name that is no preset is refused."""
+    import argparse
+
+    from strl_pyg.datasets import posed as posed_mod
+    from strl_pyg.frontend import FrontendConfig
+    from strl_pyg.training.commandline import config_from_args
+    from strl_pyg.training.config import add_train_arguments
+    from strl_pyg.training.data import frontend_of
+
+    ap = argparse.ArgumentParser()
+    add_train_arguments(ap)
+    args = ap.parse_args(["--dataset", "posed", "--data-root", str(posed_root),
+                          "--matcher", "thorough"])
+    cfg = config_from_args(args, ap)
+    assert cfg.matcher == "thorough" and frontend_of(cfg) == FrontendConfig.preset("thorough")
+    assert frontend_of(TrainConfig()) is None
+    assert "matcher" in TrainConfig(dataset="synthetic").ignored_fields()
+    with pytest.raises(ValueError, match=r"Expected matcher in \('fast', 'thorough'"):
+        TrainConfig(matcher="best")
+    seen = []
+    monkeypatch.setattr(posed_mod, "PosedImagePairs",
+                        lambda scenes, **kw: seen.append(kw["frontend_config"]) or
+                        (_ for _ in ()).throw(RuntimeError("stop")))
+    with pytest.raises(RuntimeError, match="stop"):
+        build_datasets(posed_config(posed_root, tmp_path, matcher="fast"), progress=False)
+    assert seen == [FrontendConfig.preset("fast")]
