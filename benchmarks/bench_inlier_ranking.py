@@ -47,13 +47,9 @@ SUBSETS = (0.5, 0.7, 0.85)
 
 
 def roc_auc(score: np.ndarray, label: np.ndarray) -> float:
-    from strl_pyg.training.validation import _average_ranks
+    from strl_pyg.metrics.stats import roc_auc as auc
 
-    npos, nneg = int(label.sum()), int((~label).sum())
-    if npos == 0 or nneg == 0:
-        return float("nan")
-    r = _average_ranks(np.asarray(score, float))
-    return float((r[label].sum() - npos * (npos + 1) / 2) / (npos * nneg))
+    return auc(score, label)
 
 
 def consensus(p0: np.ndarray, p1: np.ndarray, k: int = K_NEIGHBOURS) -> np.ndarray:

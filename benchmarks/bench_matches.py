@@ -213,15 +213,16 @@ def front_end(name: str):
 
 # ----------------------------------------------------------------------------- scoring
 def sampson_px(p0, p1, K0, K1, T) -> np.ndarray:
-    R, t = T[:3, :3], T[:3, 3]
-    tx = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
-    F = np.linalg.inv(K1).T @ tx @ R @ np.linalg.inv(K0)
-    x0 = np.c_[p0, np.ones(len(p0))]
-    x1 = np.c_[p1, np.ones(len(p1))]
-    Fx0, Ftx1 = x0 @ F.T, x1 @ F
-    num = np.sum(x1 * Fx0, axis=1) ** 2
-    den = Fx0[:, 0] ** 2 + Fx0[:, 1] ** 2 + Ftx1[:, 0] ** 2 + Ftx1[:, 1] ** 2
-    return np.sqrt(num / np.maximum(den, 1e-30))
+    """Sampson distances (px) of point matches under the pose: the package's
+    :func:`~strl_pyg.geometry.epipolar.epipolar_residuals`."""
+    from types import SimpleNamespace
+
+    from strl_pyg.geometry.epipolar import epipolar_residuals
+
+    none = np.zeros((0, 2, 2))
+    return epipolar_residuals(SimpleNamespace(points0=p0, points1=p1, lines0=none, lines1=none,
+                                              K0=K0, K1=K1, line_endpoints_correspond=True),
+                              T)[0]
 
 
 def poselib_error(p0, p1, K0, K1, T, size0, size1) -> float:

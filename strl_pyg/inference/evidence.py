@@ -17,7 +17,8 @@ matches) and two rules on the recommended pose:
 
 The focal length (:func:`focal_sensitivity`): two views rarely verify it. On the real_scenes
 validation pairs an essential matrix with both focal lengths x2 or x0.5 explains at least 95 %
-as many matches as the true one on 81 % of the pairs (``benchmarks/results_real_scenes/status``), and the
+as many matches as the true one on 81 % of the pairs (``benchmarks/results_real_scenes/
+status``), and the
 singular-value ratio of the implied essential matrix ``K1^T F K0`` (:func:`focal_consistency`,
 1 for a perfect fit; in ``est.geometry.focal_sv_ratio``) was as close to 1 with x0.5 / x2 / x10
 as with the true K, while refusing right poses at 0.5-0.6 on real pairs kept apart from this
@@ -42,18 +43,15 @@ from strl_pyg.estimation.two_view import TwoViewGeometry, classify_two_view, pla
 from strl_pyg.inference.record import MethodResult, PoseEstimate
 from strl_pyg.inference.support import check_support
 
-__all__ = ["LEARNED_SUPPORT_SHARE", "FOCAL_SV_RATIO_MIN", "FOCAL_MIN_INLIERS", "PLANAR_AGREE_DEG",
+__all__ = ["LEARNED_SUPPORT_SHARE", "FOCAL_MIN_INLIERS", "PLANAR_AGREE_DEG",
            "FOCAL_RANGE_FACTOR", "FOCAL_VERIFIED_SHARE", "pair_geometry", "focal_consistency",
            "focal_sensitivity", "apply_configuration", "learned_pose_evidence",
            "apply_multiple_motions", "MULTIPLE_MIN_INLIERS", "MULTIPLE_SHARE",
            "MULTIPLE_APART_DEG", "apply_watermark", "WATERMARK_MIN_MATCHES",
            "WATERMARK_STILL_PX", "WATERMARK_BORDER", "WATERMARK_MOVING_PX", "WATERMARK_SHARE"]
 
-#: Below this ratio of the implied essential matrix's two singular values, the intrinsics do
-#: not fit the matches (module docstring).
-FOCAL_SV_RATIO_MIN = 0.6
-#: The focal check reads a fundamental matrix with at least this many inliers, on a pair
-#: whose configuration is ``"general"`` (a plane or a rotation does not fix F).
+#: The singular-value ratio (information only) is read from a fundamental matrix with at
+#: least this many inliers, on a pair whose configuration is ``"general"``.
 FOCAL_MIN_INLIERS = 30
 #: How far a user's focal lengths may be off where the matches cannot tell (a factor each way)
 FOCAL_RANGE_FACTOR = math.sqrt(2.0)
@@ -131,15 +129,9 @@ def focal_sensitivity(pose: MethodResult, matches: PairMatches, threshold_px: fl
     if pose.status != "ok" or pose.covariance is None or not matches.has_intrinsics \
             or pose.T_0to1 is None or len(np.asarray(pose.covariance)) != 5:
         return pose
-    solver = "opencv" if pose.method == "opencv" else "poselib"
-    try:
-        import poselib  # noqa: F401
-    except ImportError:
-        solver = "opencv"
-    given = estimate_relative_pose(matches, solver, threshold_px, seed=seed)
-    if not given.success:
-        return pose
+    solver = "opencv" if pose.method == "opencv" else _solver()
     T = np.asarray(pose.T_0to1, dtype=np.float64)
+    n_given = int(_pose_inliers(T, matches, threshold_px).sum())  # the pose's own support
     R_ref = torch.as_tensor(T[:3, :3])
     t_ref = torch.as_tensor(T[:3, 3] / max(np.linalg.norm(T[:3, 3]), 1e-300))
     basis = tangent_basis(t_ref)
@@ -155,8 +147,7 @@ def focal_sensitivity(pose: MethodResult, matches: PairMatches, threshold_px: fl
             P = alt.T_0to1 if isinstance(alt.T_0to1, Pose) else Pose.from_matrix(alt.T_0to1)
             deltas.append(pose_to_tangent(Pose(P.R.double(), P.t.double()), R_ref, t_ref,
                                           basis).numpy())
-    n_given = int(given.inliers.sum())
-    verified = all(c <= FOCAL_VERIFIED_SHARE * n_given for c in counts)
+    verified = n_given > 0 and all(c <= FOCAL_VERIFIED_SHARE * n_given for c in counts)
     info = {**pose.info, "focal": {"verdict": "verified" if verified else "not verified",
                                    "inliers_given": n_given, "inliers_scaled": counts,
                                    "factor": FOCAL_RANGE_FACTOR}}
@@ -172,18 +163,17 @@ def focal_sensitivity(pose: MethodResult, matches: PairMatches, threshold_px: fl
     return replace(pose, covariance=cov, info=info)
 
 
-def _essential_inliers(T: np.ndarray, x0: np.ndarray, x1: np.ndarray,
-                       thr: float) -> np.ndarray:
-    """Rows of normalised matches within ``thr`` (Sampson, normalised units) of the pose."""
-    R, t = T[:3, :3], T[:3, 3]
-    tx = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
-    E = tx @ R
-    a = np.c_[x0, np.ones(len(x0))]
-    b = np.c_[x1, np.ones(len(x1))]
-    Ea, Etb = a @ E.T, b @ E
-    num = np.sum(b * Ea, axis=1) ** 2
-    den = Ea[:, 0] ** 2 + Ea[:, 1] ** 2 + Etb[:, 0] ** 2 + Etb[:, 1] ** 2
-    return num / np.maximum(den, 1e-300) < thr * thr
+def _pose_inliers(T: np.ndarray, matches: PairMatches, threshold_px: float) -> np.ndarray:
+    """Point matches within ``threshold_px`` (Sampson, pixels) of the pose ``T``."""
+    from strl_pyg.geometry.epipolar import epipolar_residuals
+
+    return epipolar_residuals(matches, T)[0] < threshold_px
+
+
+def _solver() -> str:
+    from strl_pyg.estimation.classical import have_poselib
+
+    return "poselib" if have_poselib() else "opencv"
 
 
 def apply_multiple_motions(estimate: PoseEstimate, geo: TwoViewGeometry | None,
@@ -197,27 +187,20 @@ def apply_multiple_motions(estimate: PoseEstimate, geo: TwoViewGeometry | None,
     "the" relative pose is the user's call: the configuration is ``"multiple"`` and the pose
     ``"unreliable"``, with both poses' support in the reason (the second pose in
     ``info["second_motion_T_0to1"]``)."""
-    from strl_pyg.estimation.classical import estimate_relative_pose, normalised_matches
+    from strl_pyg.estimation.classical import estimate_relative_pose
 
     pose = estimate.pose
     if geo is None or pose.status != "ok" or pose.T_0to1 is None or not matches.has_intrinsics:
         return estimate
-    x0, x1, focal = (v.numpy() if hasattr(v, "numpy") else v
-                     for v in normalised_matches(matches))
     T = np.asarray(pose.T_0to1, dtype=np.float64)
-    first = _essential_inliers(T, x0, x1, threshold_px / float(focal))
+    first = _pose_inliers(T, matches, threshold_px)
     rest = np.flatnonzero(~first)
     n1 = int(first.sum())
     if len(rest) < max(MULTIPLE_MIN_INLIERS, 8):
         return estimate
-    solver = "poselib"
-    try:
-        import poselib  # noqa: F401
-    except ImportError:
-        solver = "opencv"
     others = replace(matches, points0=matches.points0[rest], points1=matches.points1[rest],
                      point_scores=None, lines0=None, lines1=None, line_scores=None)
-    second = estimate_relative_pose(others, solver, threshold_px, seed=seed)
+    second = estimate_relative_pose(others, _solver(), threshold_px, seed=seed)
     n2 = int(second.inliers.sum()) if second.success else 0
     if n2 < max(MULTIPLE_MIN_INLIERS, MULTIPLE_SHARE * n1):
         return estimate
@@ -240,8 +223,9 @@ def apply_multiple_motions(estimate: PoseEstimate, geo: TwoViewGeometry | None,
 def apply_watermark(estimate: PoseEstimate, geo: TwoViewGeometry | None,
                     matches: PairMatches, threshold_px: float) -> PoseEstimate:
     """COLMAP's WATERMARK: at least :data:`WATERMARK_MIN_MATCHES` (and
-    :data:`WATERMARK_SHARE`) of the recommended pose's inliers stay put (moving less than :data:`WATERMARK_STILL_PX`) within
-    :data:`WATERMARK_BORDER` of the image's size from a border, while the other matches move
+    :data:`WATERMARK_SHARE`) of the recommended pose's inliers stay put (moving less than
+    :data:`WATERMARK_STILL_PX`) within :data:`WATERMARK_BORDER` of the image's size from a
+    border, while the other matches move
     (median over :data:`WATERMARK_MOVING_PX`): a stamped overlay (a logo, a time stamp) that
     matches itself. Such matches fit any pose without rotation, so they pull the pose towards
     one: the configuration is ``"watermark"`` and the pose ``"unreliable"``."""
@@ -254,13 +238,9 @@ def apply_watermark(estimate: PoseEstimate, geo: TwoViewGeometry | None,
     h, w = matches.image_size0
     still = np.linalg.norm(p1 - p0, axis=1) < WATERMARK_STILL_PX
     bx, by = WATERMARK_BORDER * w, WATERMARK_BORDER * h
-    border = (p0[:, 0] < bx) | (p0[:, 0] > w - 1 - bx) | (p0[:, 1] < by) | (p0[:, 1] > h - 1 - by)
-    from strl_pyg.estimation.classical import normalised_matches
-
-    x0, x1, focal = (v.numpy() if hasattr(v, "numpy") else v
-                     for v in normalised_matches(matches))
-    inl = _essential_inliers(np.asarray(pose.T_0to1, dtype=np.float64), x0, x1,
-                             threshold_px / float(focal))
+    border = (p0[:, 0] < bx) | (p0[:, 0] > w - 1 - bx) | (p0[:, 1] < by) | \
+        (p0[:, 1] > h - 1 - by)
+    inl = _pose_inliers(np.asarray(pose.T_0to1, dtype=np.float64), matches, threshold_px)
     stamp = still & border & inl
     others = ~(still & border)
     if stamp.sum() < max(WATERMARK_MIN_MATCHES, WATERMARK_SHARE * inl.sum()) or \
@@ -275,16 +255,6 @@ def apply_watermark(estimate: PoseEstimate, geo: TwoViewGeometry | None,
         "move: a stamped overlay matches itself and fits any pose without rotation; crop or "
         "mask it"])
     return estimate
-
-
-def focal_problem(geo: TwoViewGeometry | None) -> str | None:
-    """Why the intrinsics do not fit the matches (``None`` where they do or cannot be told)."""
-    ratio = None if geo is None else geo.focal_sv_ratio
-    if ratio is None or geo.focal_inliers < FOCAL_MIN_INLIERS or ratio >= FOCAL_SV_RATIO_MIN:
-        return None
-    return (f"the focal lengths do not fit the matches: the essential matrix they imply, "
-            f"K1^T F K0, has singular values in the ratio {ratio:.2f} (a right K gives 1; "
-            f"below {FOCAL_SV_RATIO_MIN} on {geo.focal_inliers} inliers): check K0 and K1")
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:

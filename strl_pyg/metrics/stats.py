@@ -30,7 +30,7 @@ import numpy as np
 from strl_pyg.metrics.two_view import pose_auc
 
 __all__ = ["AUC_THRESHOLDS", "pose_error_stats", "coverage_interval", "median_ratio_interval",
-           "seeded_median_ratio_interval", "auc_difference_interval"]
+           "seeded_median_ratio_interval", "auc_difference_interval", "roc_auc"]
 
 #: Thresholds (degrees) of the pose AUC in the training log and the evaluation tables.
 AUC_THRESHOLDS = (5.0, 10.0, 20.0)
@@ -241,3 +241,21 @@ def auc_difference_interval(worst_a: Any, worst_b: Any, threshold: float = 10.0,
     boot = np.array([auc(x[i]) - auc(y[i]) for i in idx])
     lo, hi = np.quantile(boot, [(1 - level) / 2, (1 + level) / 2])
     return float(auc(x) - auc(y)), float(lo), float(hi)
+
+
+def roc_auc(score: Any, label: Any) -> float:
+    """The ROC-AUC of ``score`` ``(n,)`` against the bool ``label`` ``(n,)``: the chance that a
+    positive scores above a negative, ties counting half (the Mann-Whitney statistic from
+    average ranks); NaN where only one class is present."""
+    s = _vector(score, "score")
+    y = np.asarray(label, dtype=bool).reshape(-1)
+    if s.shape != y.shape:
+        raise ValueError(f"Expected score and label of one length (got {s.size} and {y.size})")
+    npos, nneg = int(y.sum()), int((~y).sum())
+    if npos == 0 or nneg == 0:
+        return float("nan")
+    order = np.argsort(s, kind="mergesort")
+    _, first, counts = np.unique(s[order], return_index=True, return_counts=True)
+    ranks = np.empty(len(s))
+    ranks[order] = np.repeat(first + (counts + 1) / 2.0, counts)
+    return float((ranks[y].sum() - npos * (npos + 1) / 2) / (npos * nneg))

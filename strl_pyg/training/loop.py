@@ -37,8 +37,8 @@ from tqdm.auto import tqdm
 from strl_pyg.data import keys as keys_
 from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.training.checkpoints import (
-    inherit_policy,
     CHECKPOINT_VERSION,
+    inherit_policy,
     init_weights,
     load_checkpoint,
     rng_state,

@@ -23,6 +23,7 @@ from strl_pyg.geometry import Pose, quaternion_to_rotation, rotation_to_quaterni
 from strl_pyg.metrics.two_view import rotation_error_deg, translation_angle_error_deg
 
 __all__ = ["aleatoric_loss", "beta_nll", "angle_between", "pose_targets", "PoseLoss",
+           "inlier_labels",
            "GeometricLoss", "LOSS_FORMS"]
 
 TRANSLATION_MODES = ("direction", "metric")
@@ -188,6 +189,21 @@ class PoseLoss(nn.Module):
                 f"form={self.form!r}{extra})")
 
 
+def inlier_labels(geo: Any, pose: Pose, threshold_px: float) -> Tensor:
+    """Per match of a geometric head's output ``geo``, whether it is a true inlier: Sampson
+    distance under the true ``pose`` (one per pair) below ``threshold_px`` (in each pair's
+    normalised units: divided by its focal length). Bool ``[N]``."""
+    from strl_pyg.geometry import essential_from_pose
+    from strl_pyg.geometry.essential import sampson_sq
+
+    b = geo.batch
+    t = pose.t.to(geo.coords)
+    E = essential_from_pose(pose.R.to(geo.coords),
+                            t / t.norm(dim=-1, keepdim=True).clamp_min(1e-12))
+    d = sampson_sq(E[b], geo.coords[:, None, :2], geo.coords[:, None, 2:])[:, 0].sqrt()
+    return d < threshold_px / geo.focal[b]
+
+
 class GeometricLoss(nn.Module):
     r"""Loss of the geometric head (beyond the paper; :class:`~strl_pyg.model.GeometricOutput`).
 
@@ -228,7 +244,6 @@ class GeometricLoss(nn.Module):
         self.cap = cap
 
     def forward(self, pred: Any, T_0to1: Any) -> dict[str, Tensor]:
-        from strl_pyg.geometry import essential_from_pose
         from strl_pyg.geometry.essential import sampson_sq
 
         geo = getattr(pred, "geometric", None)
@@ -242,11 +257,8 @@ class GeometricLoss(nn.Module):
         x0, x1 = geo.coords[:, None, :2], geo.coords[:, None, 2:]  # [N, 1, 2]
         t = pose.t.to(geo.coords)
         has_t = t.norm(dim=-1) > 1e-9
-        E_gt = essential_from_pose(pose.R.to(geo.coords), t / t.norm(
-            dim=-1, keepdim=True).clamp_min(1e-12))
-        d_gt = sampson_sq(E_gt[b], x0, x1)[:, 0].sqrt()  # [N]
         thr = self.threshold_px / geo.focal[b]
-        label = (d_gt < thr).to(geo.logits)
+        label = inlier_labels(geo, pose, self.threshold_px).to(geo.logits)
         bce = nn.functional.binary_cross_entropy_with_logits(geo.logits, label,
                                                              reduction="none")
         pos = torch.zeros(B, device=bce.device, dtype=bce.dtype)

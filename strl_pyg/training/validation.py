@@ -120,37 +120,14 @@ def evaluate_model(model: torch.nn.Module, loader, loss_fn: PoseLoss | None = No
     return res
 
 
-def _average_ranks(s: np.ndarray) -> np.ndarray:
-    """1-based ranks of ``s``, ties sharing their average rank."""
-    order = np.argsort(s, kind="mergesort")
-    _, first, counts = np.unique(s[order], return_index=True, return_counts=True)
-    ranks = np.empty(len(s))
-    ranks[order] = np.repeat(first + (counts + 1) / 2.0, counts)
-    return ranks
-
-
 def inlier_ranking_auc(geo: Any, T_gt: Tensor, threshold_px: float = 2.0) -> list[float]:
-    """Per pair, the ROC-AUC of the geometric head's inlier logits against the true labels
-    (Sampson distance under ``T_gt`` below ``threshold_px``, as its loss labels them); NaN
-    for a pair with only inliers or only outliers."""
-    from strl_pyg.geometry import essential_from_pose
-    from strl_pyg.geometry.essential import sampson_sq
+    """Per pair, the ROC-AUC (:func:`~strl_pyg.metrics.stats.roc_auc`) of the geometric head's
+    inlier logits against the true labels (:func:`~strl_pyg.training.loss.inlier_labels`, as
+    its loss labels them); NaN for a pair with only inliers or only outliers."""
+    from strl_pyg.metrics.stats import roc_auc
+    from strl_pyg.training.loss import inlier_labels
 
-    pose = Pose.from_matrix(T_gt.double())
-    t = pose.t / pose.t.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    b = geo.batch
-    E = essential_from_pose(pose.R.to(geo.coords), t.to(geo.coords))
-    d = sampson_sq(E[b], geo.coords[:, None, :2], geo.coords[:, None, 2:])[:, 0].sqrt()
-    label = (d < threshold_px / geo.focal[b]).cpu().numpy()
+    label = inlier_labels(geo, Pose.from_matrix(T_gt.double()), threshold_px).cpu().numpy()
     score = geo.logits.detach().double().cpu().numpy()
-    bn = b.cpu().numpy()
-    out = []
-    for k in range(int(E.shape[0])):
-        y, s = label[bn == k], score[bn == k]
-        npos, nneg = int(y.sum()), int((~y).sum())
-        if npos == 0 or nneg == 0:
-            out.append(float("nan"))
-            continue
-        r = _average_ranks(s)
-        out.append(float((r[y].sum() - npos * (npos + 1) / 2) / (npos * nneg)))
-    return out
+    bn = geo.batch.cpu().numpy()
+    return [roc_auc(score[bn == k], label[bn == k]) for k in range(int(T_gt.shape[0]))]

@@ -11,12 +11,17 @@ import torch
 
 from strl_pyg.training import TrainConfig
 from strl_pyg.training.config import BEST_METRICS
-from strl_pyg.training.validation import _average_ranks, inlier_ranking_auc
+from strl_pyg.metrics.stats import roc_auc
+from strl_pyg.training.validation import inlier_ranking_auc
 
 
-def test_average_ranks_share_ties():
-    np.testing.assert_array_equal(_average_ranks(np.array([3.0, 1.0, 3.0, 2.0])),
-                                  [3.5, 1.0, 3.5, 2.0])
+def test_roc_auc_shares_ties_and_checks_lengths():
+    y = np.array([True, False, True, False])
+    assert roc_auc(np.array([3.0, 1.0, 3.0, 2.0]), y) == 1.0
+    assert roc_auc(np.array([3.0, 3.0, 1.0, 2.0]), y) == 0.375  # (0.5 + 1 + 0 + 0) / 4
+    assert roc_auc(np.array([2.0, 2.0, 1.0, 1.0]), y) == 0.5  # ties count half
+    with pytest.raises(ValueError, match=r"Expected score and label of one length"):
+        roc_auc(np.ones(3), y)
 
 
 def _pairs(flip: bool):
