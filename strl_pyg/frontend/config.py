@@ -172,6 +172,13 @@ class FrontendConfig:
                              f"(got {self.line_matcher!r})")
         if not 0.0 < self.lsd_scale <= 1.0:
             raise ValueError(f"Expected lsd_scale in (0, 1] (got {self.lsd_scale})")
+        if not 0.0 < self.contrast_threshold < 1.0:
+            raise ValueError(f"Expected contrast_threshold in (0, 1) "
+                             f"(got {self.contrast_threshold})")
+        for name in ("upsample_below", "thorough_below"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"Expected {name} as an integer >= 0 (got {v!r})")
 
 
 

@@ -140,3 +140,10 @@ def test_the_second_pass_keeps_the_callers_caps_and_matching():
     assert (t.max_points, t.ratio, t.mutual, t.detector) == (50, 0.7, False, "orb")
     assert t.thorough_below == 0 and t.upsample_below >= 1024 and t.max_keypoints >= 8000
     assert thorough_points(FrontendConfig(max_keypoints=20000)).max_keypoints == 20000
+
+
+@pytest.mark.parametrize("field, value", [("contrast_threshold", 0.0), ("upsample_below", -1),
+                                          ("thorough_below", 2.5)])
+def test_bad_point_settings_are_one_line_errors(field, value):
+    with pytest.raises(ValueError, match=rf"Expected {field} .*\(got {value!r}\)"):
+        FrontendConfig(**{field: value})
