@@ -20,6 +20,7 @@ _EXPORTS = {
     "build_pair_graph": _GRAPH,
     "PairGraph": "strl_pyg.data.pair_graph",
     "ImplicitEdgesError": "strl_pyg.data.pair_graph",
+    "MixedEdgesError": "strl_pyg.data.pair_graph",
     "CompleteEdges": "strl_pyg.data.pair_graph",
     "drop_legacy_cross_edges": "strl_pyg.data.pair_graph",
     "edge_index_dict": "strl_pyg.data.pair_graph",
@@ -46,6 +47,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
     from strl_pyg.data.build import build_pair_graph, load_graph, save_graph
     from strl_pyg.data.pair_graph import (
         ImplicitEdgesError,
+        MixedEdgesError,
         PairGraph,
         complete_edge_index,
         edge_index_dict,

@@ -28,11 +28,13 @@ graph is complete on the kept nodes, which is what the marker says).
 from __future__ import annotations
 
 import copy
-from typing import Any
+from contextlib import contextmanager
+from typing import Any, Iterator
 
 import torch
 from torch import Tensor
 from torch_geometric.data import Batch, HeteroData
+from torch_geometric.data.storage import EdgeStorage
 
 from strl_pyg.data import keys as keys_
 
@@ -40,6 +42,8 @@ __all__ = [
     "PairGraph",
     "CompleteEdges",
     "ImplicitEdgesError",
+    "MixedEdgesError",
+    "PairEdgeStorage",
     "complete_edge_index",
     "drop_legacy_cross_edges",
     "edge_index_dict",
@@ -100,6 +104,70 @@ class ImplicitEdgesError(ValueError):
     """A PyG path that reads ``edge_index`` met implicit complete edge types."""
 
 
+class MixedEdgesError(KeyError):
+    """A batch mixes graphs whose complete edges are implicit with graphs whose are explicit."""
+
+    def __str__(self) -> str:  # a KeyError quotes its message; this one is a sentence
+        return str(self.args[0])
+
+
+def stored(store: Any, key: str) -> bool:
+    """Whether ``store`` holds ``key`` (what it holds, not what a :class:`PairEdgeStorage` of
+    an implicit complete edge type answers PyG's edge-based code)."""
+    return key in store._mapping
+
+
+class PairEdgeStorage(EdgeStorage):
+    """The edge store of a :class:`PairGraph`. An implicit complete edge type (a ``dense``
+    marker, no ``edge_index``) does not look edgeless to PyG's edge-based transforms and
+    utilities: ``"edge_index" in store`` is true and reading it raises
+    :class:`ImplicitEdgesError`, naming :func:`materialize_complete_edges`. An explicit store
+    asked for a ``dense`` marker it lacks (a batch that mixes both kinds) raises
+    :class:`MixedEdgesError`."""
+
+    def _implicit(self) -> bool:
+        m = self._mapping
+        return keys_.DENSE in m and keys_.EDGE_INDEX not in m and not _native_now(self)
+
+    def __contains__(self, key: object) -> bool:
+        if key == keys_.EDGE_INDEX and self._implicit():
+            return True
+        return super().__contains__(key)
+
+    def __getitem__(self, key: str) -> Any:
+        if key == keys_.EDGE_INDEX and self._implicit():
+            raise ImplicitEdgesError(
+                f"Expected an explicit 'edge_index' on edge type {self._key} (got an implicit "
+                f"complete edge type, a '{keys_.DENSE}' marker: every node to every node of its "
+                "graph): call strl_pyg.data.materialize_complete_edges(data) first (also before "
+                "batching such a graph with explicit ones)")
+        if key == keys_.DENSE and keys_.DENSE not in self._mapping \
+                and keys_.EDGE_INDEX in self._mapping and not _native_now(self):
+            raise MixedEdgesError(
+                f"Expected the complete edge type {self._key} implicit ('{keys_.DENSE}') in every "
+                "graph of a batch or explicit in every one (got both): call "
+                "strl_pyg.data.materialize_complete_edges(data) on the implicit ones first")
+        return super().__getitem__(key)
+
+
+def _native_now(store: EdgeStorage) -> bool:
+    parent = store.__dict__.get("_parent")
+    graph = parent() if parent is not None else None
+    return bool(graph is not None and graph.__dict__.get("_native", False))
+
+
+@contextmanager
+def _native(data: HeteroData) -> Iterator[None]:
+    """Within: ``data``'s stores answer as plain PyG stores (for PyG methods that
+    :class:`PairGraph` knows keep the implicit markers right)."""
+    before = data.__dict__.get("_native", False)
+    data.__dict__["_native"] = True
+    try:
+        yield
+    finally:
+        data.__dict__["_native"] = before
+
+
 def complete_edge_index(
     batch_src: Tensor, batch_dst: Tensor, num_graphs: int | None = None
 ) -> Tensor:
@@ -156,7 +224,7 @@ def _num_graphs(data: HeteroData) -> int:
 def implicit_edge_types(data: HeteroData) -> list[tuple[str, str, str]]:
     """The edge types that carry a ``dense`` marker and no ``edge_index``."""
     return [et for et in data.edge_types
-            if keys_.DENSE in data[et] and keys_.EDGE_INDEX not in data[et]]
+            if stored(data[et], keys_.DENSE) and not stored(data[et], keys_.EDGE_INDEX)]
 
 
 def has_implicit_complete_edges(data: HeteroData) -> bool:
@@ -193,10 +261,11 @@ def drop_legacy_cross_edges(data: HeteroData) -> HeteroData:
     Explicit ``cross`` edges are the user's own cross-attention edges and are kept; so are
     implicit ones beside explicit ``self`` edges (they then mean complete cross-attention over
     different edges than the self-attention's, which the model honours)."""
-    if any(keys_.EDGE_INDEX in data[et] for et in keys_.SELF_EDGE_TYPES if et in data.edge_types):
+    if any(stored(data[et], keys_.EDGE_INDEX) for et in keys_.SELF_EDGE_TYPES
+           if et in data.edge_types):
         return data
     for et in keys_.CROSS_EDGE_TYPES:
-        if et in data.edge_types and keys_.EDGE_INDEX not in data[et]:
+        if et in data.edge_types and not stored(data[et], keys_.EDGE_INDEX):
             del data[et]
     return data
 
@@ -218,7 +287,7 @@ def edge_index_dict(data: HeteroData) -> dict[tuple[str, str, str], Tensor | Com
             batched = isinstance(data, Batch)
             out[et] = CompleteEdges(_batch_of(data, src), _batch_of(data, dst)) if batched \
                 else CompleteEdges()
-        elif keys_.EDGE_INDEX in data[et]:
+        elif stored(data[et], keys_.EDGE_INDEX):
             out[et] = data[et].edge_index
         else:
             raise ValueError(f"Expected '{keys_.EDGE_INDEX}' or '{keys_.DENSE}' on edge type {et} "
@@ -249,6 +318,44 @@ class PairGraph(HeteroData):
     types survive PyG's conversions, or make them refuse (see the module docstring). Returned
     by :func:`~strl_pyg.data.build_pair_graph` and :func:`~strl_pyg.data.load_graph`; a plain
     ``HeteroData`` converts with ``PairGraph.from_dict(data.to_dict())``."""
+
+    def get_edge_store(self, src: str, rel: str, dst: str) -> EdgeStorage:
+        key = (src, rel, dst)
+        out = self._edge_store_dict.get(key)
+        if out is None:
+            self._check_type_name(rel)
+            out = PairEdgeStorage(_parent=self, _key=key)
+            self._edge_store_dict[key] = out
+        return out
+
+    @classmethod
+    def from_dict(cls, mapping: dict[Any, Any]) -> PairGraph:
+        out = super().from_dict(mapping)
+        for key, store in list(out._edge_store_dict.items()):
+            if type(store) is EdgeStorage:
+                out._edge_store_dict[key] = PairEdgeStorage(_parent=out, _key=key,
+                                                             **store.to_dict())
+        return out
+
+    def subgraph(self, subset_dict: dict[str, Tensor]) -> PairGraph:
+        """As :meth:`HeteroData.subgraph`; an implicit complete edge type stays implicit (a
+        subgraph of a complete graph is complete on the kept nodes)."""
+        with _native(self):
+            out = super().subgraph(subset_dict)
+        out.__dict__["_native"] = False
+        return out
+
+    def node_type_subgraph(self, node_types: list[str]) -> PairGraph:
+        with _native(self):
+            out = super().node_type_subgraph(node_types)
+        out.__dict__["_native"] = False
+        return out
+
+    def edge_type_subgraph(self, edge_types: list[tuple[str, str, str]]) -> PairGraph:
+        with _native(self):
+            out = super().edge_type_subgraph(edge_types)
+        out.__dict__["_native"] = False
+        return out
 
     def collect(self, key: str, allow_empty: bool = False) -> dict[Any, Any]:
         if key == keys_.EDGE_INDEX:
@@ -293,7 +400,8 @@ class PairGraph(HeteroData):
         """:meth:`HeteroData.validate`, plus: each complete edge type carries exactly one of
         ``dense`` (a bool per graph) and explicit edges (``edge_index``, or the ``adj_t`` /
         ``adj`` that :class:`torch_geometric.transforms.ToSparseTensor` makes of it)."""
-        status = super().validate(raise_on_error)
+        with _native(self):  # PyG's own checks skip the edge types without 'edge_index'
+            status = super().validate(raise_on_error)
         n = _num_graphs(self)
         marked = [et for et in self.edge_types if keys_.DENSE in self[et]]
         for et in dict.fromkeys((*keys_.COMPLETE_EDGE_TYPES, *marked)):
@@ -303,7 +411,7 @@ class PairGraph(HeteroData):
             # explicit edges: an edge index, or the sparse adjacency PyG's ToSparseTensor
             # makes of one ('adj_t', or 'adj' with its layout options)
             has_dense = keys_.DENSE in store
-            has_ei = any(k in store for k in (keys_.EDGE_INDEX, "adj_t", "adj"))
+            has_ei = any(stored(store, k) for k in (keys_.EDGE_INDEX, "adj_t", "adj"))
             problem = None
             if has_dense == has_ei:
                 got = "both" if has_dense else "neither"

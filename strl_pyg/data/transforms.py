@@ -13,6 +13,7 @@ from torch_geometric.transforms import BaseTransform
 from strl_pyg.data import keys as keys_
 from strl_pyg.data.build import line_edge_index
 from strl_pyg.data import has_implicit_complete_edges, materialize_complete_edges
+from strl_pyg.data.pair_graph import stored
 from strl_pyg.geometry.manifold import so3_exp
 
 __all__ = [
@@ -92,7 +93,7 @@ class FixedSizeResample(BaseTransform):
         if explicit:  # the complete edges of the kept nodes, rebuilt
             for et in keys_.COMPLETE_EDGE_TYPES:
                 if et in data.edge_types:
-                    if keys_.EDGE_INDEX in data[et]:
+                    if stored(data[et], keys_.EDGE_INDEX):
                         del data[et][keys_.EDGE_INDEX]
                     data[et][keys_.DENSE] = torch.ones(1, dtype=torch.bool)
             data = materialize_complete_edges(data)

@@ -17,6 +17,7 @@ from torch import Tensor
 from torch_geometric.data import Batch, HeteroData
 
 from strl_pyg.data import keys as K
+from strl_pyg.data.pair_graph import stored
 from strl_pyg.model.config import StrLPoseConfig
 from strl_pyg.nn import DenseLayout
 
@@ -196,7 +197,7 @@ def _complete_inputs(cfg: StrLPoseConfig, data: HeteroData, types: list[str], of
         (``dense`` markers) or absent."""
         ets = [(s, rel, d) for s in types for d in types]
         present = [et for et in ets if et in data.edge_types]
-        explicit = [et for et in present if K.EDGE_INDEX in data[et]]
+        explicit = [et for et in present if stored(data[et], K.EDGE_INDEX)]
         if not explicit:
             return None
         if len(explicit) != len(present):
