@@ -250,7 +250,8 @@ class AttentionConv(MessagePassing):
         synchronises with the host (graph ids are read on the host on every call);
         ``edge_attr`` ``[E, edge_dim]`` features of the explicit edges (layers built with
         ``edge_dim``); ``return_attention_weights=True``: also ``(edge_index, alpha [E, H])``
-        (for complete attention the complete edges are built for it: O(N^2), as asked)."""
+        (for complete attention the complete edges are built for it: O(N^2), as asked), or,
+        for a ``torch.sparse`` adjacency, the weights in its layout ``[N_dst, N_src, H]``."""
         if complete:
             if edge_index is not None:
                 raise ValueError("Expected edge_index=None with complete=True (got an "
@@ -308,7 +309,7 @@ class AttentionConv(MessagePassing):
                     lay.num_nodes, dtype=torch.long, device=q.device)
 
             edge_index = complete_edge_index(ids(ls), ids(ld), ls.num_graphs)
-        alpha = None
+        alpha, given = None, edge_index
         if isinstance(edge_index, CompleteEdges):
             msg = self._dense(q, k, v, *_complete_layouts(edge_index, batch, layout, *size))
         else:
@@ -323,6 +324,11 @@ class AttentionConv(MessagePassing):
         msg = self.lin_out(msg.reshape(-1, H * D))
         out = x_dst + self.update_mlp(torch.cat([x_dst, msg], dim=-1))
         if return_attention_weights:
+            if isinstance(given, Tensor) and given.layout != torch.strided:
+                # a sparse adjacency: the weights in its layout, [N_dst, N_src, H] (GATConv's)
+                from torch_geometric.utils.sparse import set_sparse_value
+
+                return out, set_sparse_value(given, alpha)
             return out, (edge_index, alpha)
         return out
 

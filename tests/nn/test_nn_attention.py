@@ -445,3 +445,24 @@ def test_attention_conv_pyg_habits_get_one_line_each():
     lf = torch.randn(6, 8)
     torch.testing.assert_close(line(x, ei.int(), lf), line(x, ei, lf))
 
+
+
+@pytest.mark.parametrize("layout", ["csr", "coo"])
+def test_attention_weights_in_the_sparse_adjacency_layout(layout):
+    """A sparse adjacency's attention comes back in its layout, [N_dst, N_src, H], as
+    GATConv's does (it returned the input adjacency)."""
+    from torch_geometric.utils import to_torch_coo_tensor, to_torch_csr_tensor
+
+    torch.manual_seed(0)
+    x = torch.randn(6, 16)
+    ei = torch.tensor([[0, 1, 2, 3, 4, 5, 1], [1, 0, 3, 2, 5, 4, 2]])
+    conv = AttentionConv(16, heads=2).eval()
+    ref, (_, alpha) = conv(x, ei, return_attention_weights=True)
+    make = to_torch_csr_tensor if layout == "csr" else to_torch_coo_tensor
+    adj_t = make(ei.flip(0), size=(6, 6))  # adj_t[dst, src], PyG's convention
+    out, weights = conv(x, adj_t, return_attention_weights=True)
+    torch.testing.assert_close(out, ref, atol=1e-5, rtol=1e-5)
+    assert weights.layout == adj_t.layout and weights.shape == (6, 6, 2)
+    dense = weights.to_dense()
+    torch.testing.assert_close(dense[ei[1], ei[0]], alpha, atol=1e-6, rtol=1e-5)
+    assert dense.sum() == pytest.approx(float(alpha.sum()), abs=1e-5)  # nothing elsewhere
