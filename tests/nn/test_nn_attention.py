@@ -465,4 +465,4 @@ def test_attention_weights_in_the_sparse_adjacency_layout(layout):
     assert weights.layout == adj_t.layout and weights.shape == (6, 6, 2)
     dense = weights.to_dense()
     torch.testing.assert_close(dense[ei[1], ei[0]], alpha, atol=1e-6, rtol=1e-5)
-    assert dense.sum() == pytest.approx(float(alpha.sum()), abs=1e-5)  # nothing elsewhere
+    assert float(dense.sum()) == pytest.approx(float(alpha.sum()), abs=1e-5)  # nothing else
