@@ -268,6 +268,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --pairs: the folder the names are relative to")
     p.add_argument("--png", default=None,
                    help="also draw the matches, coloured by the recommended pose's support")
+    p.add_argument("--explain", default=None, metavar="PNG",
+                   help="also draw which matches and lines drove the network's pose "
+                        "(strl_pyg.explain), coloured by importance")
+    p.add_argument("--explainer", default="saliency", choices=("saliency", "attention", "gnn"),
+                   help="with --explain: the pose's gradient per match (default), the "
+                        "attention the network pays each match, or PyG's GNNExplainer")
     p.add_argument("--threshold-px", type=float, default=1.0, metavar="PX",
                    help="inlier threshold of the solvers and the support check (default 1)")
     p.add_argument("--bootstrap", type=bootstrap_count, default=8, metavar="N",

@@ -274,6 +274,31 @@ def _draw_estimate(path: str, est, file=None, images=None) -> None:
           file=file)
 
 
+def _draw_explanation(path: str, est, estimator, method: str, file=None, images=None) -> None:
+    """``predict --explain``: which point matches and line segments drove the network's pose
+    (:func:`strl_pyg.explain.explain_matches`), drawn by importance."""
+    from dataclasses import replace
+
+    from strl_pyg.explain import explain_matches
+    from strl_pyg.viz.plots import plot_match_importance
+
+    m = est.matches
+    if m is None or not m.has_images:
+        print("note: --explain needs the images (a match file without them draws nothing)",
+              file=file)
+        return
+    if m.num_lines and not m.line_endpoints_correspond:  # the network reads no such lines
+        m = m.select(line_index=np.zeros(0, dtype=np.int64))
+    e = explain_matches(m, estimator.model, method)
+    if images is not None and tuple(np.shape(images[0])[:2]) == tuple(m.image_size0) \
+            and tuple(np.shape(images[1])[:2]) == tuple(m.image_size1):
+        m = replace(m, image0=images[0], image1=images[1])
+    title = (f"what drove the network's pose ({method}); the recommended pose: "
+             f"{est.pose.method}, {est.status}")
+    print(f"explanation -> {plot_match_importance(path, m, e.points, e.lines, title)}",
+          file=file)
+
+
 def cmd_predict(args) -> int:
     """Pose of two images: the recommended ``"pose"`` record (:mod:`strl_pyg.inference.estimator`)
     and the own result of each method run (``--methods``; default: only the ones the
@@ -282,6 +307,10 @@ def cmd_predict(args) -> int:
     when it is ``"unreliable"`` (printed either way)."""
     if args.png:
         check_file_arg(args.png, "--png", "pose.png")  # before any work
+    if args.explain:
+        check_file_arg(args.explain, "--explain", "explain.png")
+        if not args.explain.lower().endswith(".png"):
+            raise UsageError(f"Expected a .png path for --explain (got '{args.explain}')")
     if not (np.isfinite(args.threshold_px) and args.threshold_px > 0):
         raise UsageError(f"Expected a positive --threshold-px (got {args.threshold_px})")
     methods = "regression" if args.no_baseline else args.methods
@@ -292,9 +321,9 @@ def cmd_predict(args) -> int:
         if args.image0 or args.image1:
             raise UsageError(f"Expected either two images or --pairs (got both: "
                              f"{args.image0} and --pairs {args.pairs})")
-        if args.png:
-            raise UsageError(f"Expected --png with one pair (got --pairs {args.pairs}: run "
-                             "the pair alone to draw it)")
+        if args.png or args.explain:
+            raise UsageError(f"Expected --png / --explain with one pair (got --pairs "
+                             f"{args.pairs}: run the pair alone to draw it)")
         return _predict_pairs(args, methods)
     # one estimator for both inputs: "recommended" (estimator.RECOMMENDED) walks the
     # recommended order (the images matched once), "all" runs every installed method; torch
@@ -327,11 +356,15 @@ def cmd_predict(args) -> int:
                           "intrinsics": K0 is not None}))
         if args.png:  # stdout is the JSON record: the drawing's line goes to stderr
             _draw_estimate(args.png, est, file=sys.stderr, images=images)
+        if args.explain:
+            _draw_explanation(args.explain, est, estimator, args.explainer, sys.stderr, images)
         return code
     print(f"matches: {est.num_points} points, {est.num_lines} lines")
     _print_estimate(est)
     if args.png:
         _draw_estimate(args.png, est, images=images)
+    if args.explain:
+        _draw_explanation(args.explain, est, estimator, args.explainer, images=images)
     if args.checkpoint and methods == "recommended":
         from strl_pyg.inference import METHODS
 

@@ -124,13 +124,27 @@ class StrLPose(CheckpointIO, nn.Module):
             if m is not None:
                 m.reset_parameters()
 
-    def forward(self, data: HeteroData) -> PoseOutput:
+    def forward(self, data: HeteroData, node_gate: Tensor | None = None) -> PoseOutput:
         """Validates and gathers the graph (:func:`~strl_pyg.model.gather.gather_inputs`), reads
         the padded block size of complete attention from the host (the one synchronisation;
         none for a single graph, or for explicit edges without the geometric head and the
-        image encoder), then runs without touching the host."""
+        image encoder), then runs without touching the host.
+
+        ``node_gate`` (``[N]`` or ``[N, 1]``, the nodes in the model's order: a single graph's
+        points, then its endpoints) scales each node's encoded features: the soft node mask
+        that explainers learn (:mod:`strl_pyg.explain`); ``None`` (the default) is all ones."""
         cfg = self.config
         inp = _in_dtype(gather_inputs(cfg, data), next(self.parameters()).dtype)
+        gate = None
+        if node_gate is not None:
+            n = inp.coords.shape[0]
+            if not isinstance(node_gate, Tensor) or node_gate.reshape(-1).shape[0] != n \
+                    or node_gate.dim() > 2:
+                got = tuple(node_gate.shape) if isinstance(node_gate, Tensor) else \
+                    type(node_gate).__name__
+                raise ValueError(f"Expected node_gate of shape [{n}] or [{n}, 1], one per "
+                                 f"node (got {got})")
+            gate = node_gate.reshape(n, 1).to(inp.coords.dtype)
         dense = (inp.self_edges is None or (cfg.visual_graph and inp.cross_edges is None)
                  or cfg.visual == "cnn" or cfg.geometric)  # what needs padded blocks
         layout = None
@@ -140,18 +154,24 @@ class StrLPose(CheckpointIO, nn.Module):
             counts, index = inp.block
             layout = DenseLayout.from_counts(inp.batch, index, counts, int(counts.max()))
         g = self.sce(inp.coords, inp.batch, layout)  # the layout: read by parallax inputs
+        if gate is not None:
+            g = g * gate
 
         line_full = None
         if self.lse is not None and inp.line_feat is not None and inp.line_edges is not None:
             f0_line = self.lse(inp.line_feat)
             line_full = f0_line.new_zeros(g.shape[0], f0_line.shape[1])
             line_full = line_full.index_copy(0, inp.endpoint_idx, f0_line)
+            if gate is not None:
+                line_full = line_full * gate
 
         v = None
         if self.pe is not None:
             v = self.pe(inp.visual)
         elif self.image_encoder is not None:
             v = self.image_encoder.encode_nodes(*inp.images, *inp.kpts, None, layout)
+        if v is not None and gate is not None:
+            v = v * gate
 
         complete = CompleteEdges()
         self_edges = complete if inp.self_edges is None else inp.self_edges

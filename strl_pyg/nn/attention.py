@@ -298,8 +298,10 @@ class AttentionConv(MessagePassing):
         if edge_attr is not None and isinstance(edge_index, CompleteEdges):
             raise ValueError("Expected explicit edges with edge_attr (got complete attention: "
                              "materialise the edges and give their features)")
-        if isinstance(edge_index, CompleteEdges) and return_attention_weights:
-            # the weights of every complete edge, asked for: the reference path on them
+        listening = bool(self._message_forward_hooks)  # an explainer reads the messages
+        if isinstance(edge_index, CompleteEdges) and (return_attention_weights or listening):
+            # the weights of every complete edge, asked for (or read by a message hook, as
+            # PyG's AttentionExplainer does): the reference path on them, O(N^2)
             from strl_pyg.data.pair_graph import complete_edge_index
 
             ls, ld = _complete_layouts(edge_index, batch, layout, *size)
@@ -324,12 +326,7 @@ class AttentionConv(MessagePassing):
         msg = self.lin_out(msg.reshape(-1, H * D))
         out = x_dst + self.update_mlp(torch.cat([x_dst, msg], dim=-1))
         if return_attention_weights:
-            if isinstance(given, Tensor) and given.layout != torch.strided:
-                # a sparse adjacency: the weights in its layout, [N_dst, N_src, H] (GATConv's)
-                from torch_geometric.utils.sparse import set_sparse_value
-
-                return out, set_sparse_value(given, alpha)
-            return out, (edge_index, alpha)
+            return out, _attention_weights(given, edge_index, alpha)
         return out
 
     def edge_update(
@@ -387,3 +384,13 @@ class AttentionConv(MessagePassing):
             f"{self.__class__.__name__}({self.channels}, heads={self.heads}, "
             f"mlp_ratio={self.mlp_ratio}{edge})"
         )
+
+
+def _attention_weights(given: object, edge_index: Tensor, alpha: Tensor) -> object:
+    """``(edge_index, alpha)``; for a sparse adjacency the weights in its layout,
+    ``[N_dst, N_src, H]``, as GATConv returns them."""
+    if isinstance(given, Tensor) and given.layout != torch.strided:
+        from torch_geometric.utils.sparse import set_sparse_value
+
+        return set_sparse_value(given, alpha)
+    return edge_index, alpha

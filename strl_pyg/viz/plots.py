@@ -20,7 +20,7 @@ from strl_pyg.geometry import Pose, as_tensor
 from strl_pyg.metrics import KittiSegmentErrors, kitti_odometry_summary
 from strl_pyg.utils.io import atomic_open
 
-__all__ = ["save_figure", "plot_trajectory_topview", "plot_segment_errors"]
+__all__ = ["save_figure", "plot_trajectory_topview", "plot_segment_errors", "plot_match_importance"]
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -138,4 +138,41 @@ def plot_segment_errors(
     if title:
         fig.suptitle(title)
     fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def plot_match_importance(path: str | os.PathLike, matches: Any, points: Any, lines: Any = None,
+                          title: str | None = None) -> Path:
+    """The two images side by side with each point match (dots) and line segment (lines) of
+    ``matches`` coloured by its importance (``points`` ``[Np]``, ``lines`` ``[Nl]``, in
+    ``[0, 1]``; e.g. a :class:`~strl_pyg.explain.PoseExplanation`'s), the most important
+    drawn on top, a colour bar as the legend; written to ``path`` (PNG)."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1)
+    lines = np.zeros(0) if lines is None else np.asarray(lines, dtype=np.float64).reshape(-1)
+    if not matches.has_images:
+        raise ValueError("Expected matches with both images to draw the importance on (got "
+                         "none)")
+    if len(points) != matches.num_points or len(lines) not in (0, matches.num_lines):
+        raise ValueError(f"Expected one importance per point match ({matches.num_points}) and "
+                         f"per line ({matches.num_lines}) (got {len(points)} and {len(lines)})")
+    fig = Figure(figsize=(12, 5.2))
+    axes = fig.subplots(1, 2)
+    cmap, order = "viridis", np.argsort(points, kind="stable")
+    scatter = None
+    for k, ax in enumerate(axes):
+        image = matches.image0 if k == 0 else matches.image1
+        ax.imshow(image, cmap="gray" if np.ndim(image) == 2 else None)
+        xy = (matches.points0 if k == 0 else matches.points1)[order]
+        scatter = ax.scatter(xy[:, 0], xy[:, 1], c=points[order], cmap=cmap, vmin=0, vmax=1,
+                             s=12, edgecolors="none")
+        segs = matches.lines0 if k == 0 else matches.lines1
+        for i in np.argsort(lines, kind="stable"):
+            ax.plot(segs[i, :, 0], segs[i, :, 1], color=scatter.cmap(float(lines[i])),
+                    linewidth=2)
+        ax.set_title(f"image {k}: {matches.num_points} points, {len(lines)} lines")
+        ax.set_xlabel("x (px)")
+        ax.set_ylabel("y (px)")
+    fig.colorbar(scatter, ax=list(axes), label="importance to the network's pose (1 = most)")
+    if title:
+        fig.suptitle(title)
     return save_figure(fig, path)

@@ -38,7 +38,7 @@ def test_pairs_refuses_images_and_png_beside_it(pair_files, capsys):
     assert "Expected either two images or --pairs (got both" in capsys.readouterr().err
     assert cli_main(["predict", "--pairs", str(d / "pairs.txt"), "--image-dir", str(d),
                      "--K", K, "--png", str(d / "p.png")]) == 2
-    assert "Expected --png with one pair" in capsys.readouterr().err
+    assert "Expected --png / --explain with one pair" in capsys.readouterr().err
 
 
 def test_pairs_exit_1_when_a_pair_has_no_pose(pair_files, capsys):
@@ -116,3 +116,16 @@ def test_the_picture_is_in_colour_and_its_header_fits(tmp_path, held_out_pair, c
     assert len(lines) > 2
     assert all(cv2.getTextSize(t, cv2.FONT_HERSHEY_SIMPLEX, 0.45, 1)[0][0] <= 300
                for t in lines if " " in t)
+
+
+def test_explain_draws_the_importance(pair_files, capsys):
+    d, K = pair_files
+    code = cli_main(["predict", str(d / "0.png"), str(d / "1.png"), "--K", K, "--json",
+                     "--explain", str(d / "why.png"), "--explainer", "attention"])
+    cap = capsys.readouterr()
+    assert code == 0 and json.loads(cap.out)["pose"]["status"] == "ok"
+    assert "explanation ->" in cap.err
+    assert cv2.imread(str(d / "why.png")) is not None
+    assert cli_main(["predict", str(d / "0.png"), str(d / "1.png"), "--explain",
+                     str(d / "why.jpg")]) == 2
+    assert "Expected a .png path for --explain" in capsys.readouterr().err
