@@ -18,6 +18,7 @@ import torch
 
 from strl_pyg.training.checkpoints import load_checkpoint
 from strl_pyg.training.config import TrainConfig, add_train_arguments
+from strl_pyg.training.options import config_values, flag_dest, option_fields
 from strl_pyg.training.log import plot_history
 from strl_pyg.training.loop import TrainingDiverged, train
 
@@ -25,63 +26,23 @@ __all__ = ["config_from_args", "FLAG_FIELDS", "given_fields", "settings_from_run
            "run_from_args", "check_device"]
 
 
-def _parse_value(text: str):
+def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser,
+                     config: type[TrainConfig] = TrainConfig) -> TrainConfig:
+    """The :class:`TrainConfig` (or subclass ``config``) of parsed :func:`add_train_arguments`
+    flags (``ValueError`` / ``TypeError`` on bad values; a malformed list or ``KEY=VALUE`` is
+    ``ap.error``)."""
     try:
-        return json.loads(text)
-    except json.JSONDecodeError:
-        return text
-
-
-def config_from_args(args: argparse.Namespace, ap: argparse.ArgumentParser) -> TrainConfig:
-    """The :class:`TrainConfig` of parsed :func:`add_train_arguments` flags (``ValueError`` /
-    ``TypeError`` on bad values; a malformed ``KEY=VALUE`` is ``ap.error``)."""
-    def pairs(items):
-        out = {}
-        for item in items:
-            if "=" not in item:
-                ap.error(f"Expected --set KEY=VALUE (got {item!r})")
-            k, v = item.split("=", 1)
-            out[k] = _parse_value(v)
-        return out
-
-    split = lambda s: None if s is None else [x.strip() for x in s.split(",")]  # noqa: E731
-    return TrainConfig(
-        dataset=args.dataset, data_root=args.data_root, cache_dir=args.cache_dir,
-        scene=pairs(args.scene), scene_kinds=split(args.scene_kinds),
-        train_pairs=args.train_pairs, val_pairs=args.val_pairs, kitti_k=args.kitti_k,
-        train_sequences=split(args.train_sequences), val_sequences=split(args.val_sequences),
-        limit=args.limit, model=args.model, model_overrides=pairs(args.set), lr=args.lr,
-        batch_size=args.batch_size, steps=args.steps, val_every=args.val_every,
-        num_points=args.num_points, num_lines=args.num_lines, patch_size=args.patch_size,
-        swap_prob=args.swap_prob, roll_augment=args.roll_augment, init_from=args.init_from,
-        seed=args.seed, out_dir=args.out, num_workers=args.workers, device=args.device,
-        tensorboard=not args.no_tensorboard, scene_mix=args.scene_mix,
-        matches=args.matches, outlier_augment=args.outlier_augment,
-        geo_ess_start=args.geo_ess_start, pose_weight=args.pose_weight,
-        data_seed=args.data_seed,
-        checkpoint_every=args.checkpoint_every, checkpoint_minutes=args.checkpoint_minutes,
-        loss=args.loss, grad_clip=None if args.grad_clip == 0 else args.grad_clip,
-        grad_clip_relative=args.grad_clip_relative,
-        angle_weight=args.angle_weight, rot_weight=args.rot_weight, beta=args.beta,
-        lr_schedule=args.lr_schedule, warmup_steps=args.warmup_steps,
-        train_scenes=split(args.train_scenes), val_scenes=split(args.val_scenes),
-        posed_gaps=[int(g) for g in split(args.posed_gaps)],
-        posed_max_rotation=args.posed_max_rotation, posed_stride=args.posed_stride,
-        matcher=args.matcher,
-        posed_min_points=args.posed_min_points,
-        posed_min_covisible=args.posed_min_covisible,
-        val_gap=args.val_gap,
-        val_stride=args.val_stride, synthetic_share=args.synthetic_share,
-        synthetic_pairs=args.synthetic_pairs,
-        budget_minutes=args.budget_minutes, best_metric=args.best_metric,
-    )
+        values = config_values(args, config)
+    except ValueError as err:
+        ap.error(str(err))
+    return config(**values)
 
 
 #: ``add_train_arguments`` flags whose destination is not the :class:`TrainConfig` field of the
-#: same name (``None``: not a setting of the run).
-FLAG_FIELDS = {"set": "model_overrides", "workers": "num_workers", "out": "out_dir",
-               "no_tensorboard": "tensorboard", "resume": None, "overwrite": None,
-               "no_progress": None, "help": None}
+#: same name (``None``: not a setting of the run), from the fields' options.
+FLAG_FIELDS = {**{flag_dest(f): f.name for f in option_fields(TrainConfig)
+                  if flag_dest(f) != f.name},
+               "resume": None, "overwrite": None, "no_progress": None, "help": None}
 
 
 def given_fields(argv: Sequence[str]) -> set[str]:

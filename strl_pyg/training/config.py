@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import argparse
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 from typing import Any
 
 from strl_pyg.synthetic.config import LINE_SCENE_KINDS  # numpy only
 from strl_pyg.training.clip import MIN_HISTORY, WINDOW  # standard library only
+from strl_pyg.training.options import add_config_arguments, option  # standard library only
 from strl_pyg.utils.dataclass import strict_from_dict
 
 __all__ = [
@@ -59,116 +60,160 @@ STORED_BEFORE = {**PAPER_RECIPE, "beta": 0.5, "grad_clip_relative": 0.0}
 
 @dataclass
 class TrainConfig:
-    """Everything that decides a training run (stored in each checkpoint)."""
+    """Everything that decides a training run (stored in each checkpoint). Each field declared
+    with :func:`~strl_pyg.training.options.option` is one flag of ``examples/train.py`` and
+    ``strl-pose train`` (:func:`add_train_arguments`), its help text written here once."""
 
-    dataset: str = "synthetic"  # synthetic | kitti | demon | posed
-    # dataset root (kitti: the odometry root; demon: DeepSfM root; posed: a folder of scene
-    # folders, each in a format of strl_pyg.datasets.posed.read_posed_folder)
-    data_root: str | None = None
-    cache_dir: str = "outputs/match_cache"  # front-end match cache of real datasets
-    scene: dict[str, Any] = field(default_factory=dict)  # SceneConfig fields (synthetic)
-    scene_kinds: list[str] = field(default_factory=lambda: list(LINE_SCENE_KINDS))
-    # synthetic: a named mixture of scene configurations (strl_pyg.training.loop.SCENE_MIXES), which
-    # replaces `scene` / `scene_kinds`; pairs are split evenly over its configurations
-    scene_mix: str | None = None
-    # synthetic: "ground_truth" or "frontend" (cached, workers); posed: its generated share
-    # always uses the generator's matches ("ground_truth")
-    matches: str = "ground_truth"
-    outlier_augment: float = 0.0  # up to this fraction of point matches shuffled into outliers
-    train_pairs: int = 2048  # synthetic: pairs in the training set (seeds 0..N-1)
-    val_pairs: int = 128  # synthetic: held-out pairs (seeds from 1_000_000)
-    kitti_k: int = 1  # kitti: frame gap of a pair
-    train_sequences: list[str] | None = None  # kitti: override the standard split (00-08)
-    val_sequences: list[str] | None = None  # kitti: override the standard split (09-10)
-    # posed: the training and validation scenes (folder names under data_root); None: the
-    # fixed split of real_scenes (strl_pyg.datasets.REAL_SCENES_SPLIT)
-    train_scenes: list[str] | None = None
-    val_scenes: list[str] | None = None
-    posed_gaps: list[int] = field(default_factory=lambda: [1, 2, 3])  # posed: training pairs
-    posed_max_rotation: float = 60.0  # posed: largest relative rotation of a pair (degrees)
-    posed_stride: int = 1  # posed: training pairs (i, i + k) for every this many i, all scenes
-    # photographs (posed, KITTI, DeMoN): the front end's preset (FrontendConfig.preset; None:
-    # the FrontendConfig defaults); part of the match caches' key
-    matcher: str | None = None
-    posed_min_points: int = 0  # posed: training pairs with fewer point matches are left out
-    # posed: smallest share of co-visible 3D points of a training pair (COLMAP models with
-    # point tracks; other formats carry none and ignore it)
-    posed_min_covisible: float = 0.1
-    # posed: validation pairs (i, i + val_gap) for every val_stride-th i
-    val_gap: int = 2
-    val_stride: int = 4
-    # posed: share of generated pairs in the training set (--scene / --scene-kinds /
-    # --scene-mix, generator's matches); 0: posed photographs only
-    synthetic_share: float = 0.0
-    # posed: distinct generated pairs (None: as many as the share needs); fewer are cycled to
-    # reach the share (each is generated once, on first use: the slow part on a CPU)
-    synthetic_pairs: int | None = None
-    limit: int | None = None  # real datasets: keep only the first pairs (smoke runs)
-    model: str = "full"  # ablation row of the paper (StrLPoseConfig.ablation)
-    model_overrides: dict[str, Any] = field(default_factory=dict)  # other StrLPoseConfig fields
-    # Adam's rate (the peak under a schedule). The defaults are the study's recipe
-    # (benchmarks/studies/results_pose_recipe.md: better on the baseline, LP and full rows); the
-    # paper's is lr=1e-4, lr_schedule="constant", warmup_steps=0 (PAPER_RECIPE)
-    lr: float = 1e-3
-    # "cosine": half a cosine from lr down to 0 at `steps`, after the warm-up | "constant" (the
-    # paper); self.learning_rate(step) is the rate of every step
-    lr_schedule: str = "cosine"
-    # linear warm-up from lr / warmup_steps to lr (0: none; None: min(100, steps // 20))
-    warmup_steps: int | None = None
-    batch_size: int = 16  # global batch (split over DDP ranks), as the paper
-    steps: int = 2000  # optimiser steps
-    val_every: int = 200  # validate and checkpoint every this many steps (and at the end)
-    num_points: int = 384  # resampled per pair, as the paper
-    num_lines: int = 192
-    patch_size: int = 1  # the paper's single pixel
-    swap_prob: float = 0.5  # training pairs have their images exchanged with this probability
-    # both cameras of a training pair rolled about their optical axes by U(-roll, roll) degrees
-    # (strl_pyg.data.RandomRoll; 0: off, the paper): generated scenes are always upright
-    roll_augment: float = 0.0
-    # start from these weights (model.pt, last.pt or shipped:NAME), fine-tuning: the model is
-    # then theirs (architecture, inputs; `model` is not read), with model_overrides on top
-    init_from: str | None = None
-    grad_clip: float | None = 10.0  # max gradient norm (None: off); see grad_clip_relative
-    # > 0: the clip is this many times the median gradient norm of the last clip.WINDOW steps,
-    # once clip.MIN_HISTORY are seen (grad_clip before; strl_pyg.training.clip); 0: grad_clip
-    # throughout
-    grad_clip_relative: float = 0.0
-    # pose loss (strl_pyg.training.loss.LOSS_FORMS): "balanced" (beta-NLL, w's variance on a
-    # detached residual, angular translation term) | "paper" (the paper's aleatoric loss); a
-    # config stored without this key predates it: "paper" loss on "paper" inputs (from_dict)
-    loss: str = "balanced"
-    angle_weight: float = 1.0  # "balanced": weight of the angular translation term (radians)
-    beta: float = 0.25  # "balanced": beta of beta-NLL (0: the aleatoric loss's weighting, 1: MSE's)
-    rot_weight: float = 1.0  # weight of the pose loss's rotation terms (both loss forms)
-    seed: int = 0  # model initialisation (and, unless data_seed is set, the data below)
-    # pairs, batch order and resampling (None: ``seed``); rows of an ablation share it so they
-    # train on the same pairs in the same order while ``seed`` varies the initialisation
-    data_seed: int | None = None
-    out_dir: str = "runs/default"
-    num_workers: int = 0  # data-loading processes
-    device: str = "cpu"
-    tensorboard: bool = True  # also log to TensorBoard when it is installed
-    # last.pt is also written every this many steps (0: off) and every this many minutes
-    # (0: off), besides every validation and on SIGINT / SIGTERM
-    checkpoint_every: int = 0
-    checkpoint_minutes: float = 10.0
-    # wall-clock budget: the run validates, checkpoints and stops after this many minutes of
-    # training (inf: none); resume with a larger budget or --steps to go on
-    budget_minutes: float = math.inf
-    # the validation metric whose best value keeps best_model.pt (lower is better):
-    # "pose_err_med" (median of max(rotation, translation) error), "rot_err_med", "loss",
-    # "inlier_rank_err" (1 - median per-pair ROC-AUC of the geometric head's inlier logits)
-    best_metric: str = "pose_err_med"
+    dataset: str = option("synthetic", "synthetic | kitti | demon | posed", choices=DATASETS)
+    data_root: str | None = option(
+        None, "dataset root (kitti: the odometry root; demon: DeepSfM root; posed: a folder of "
+        "scene folders, each in a format of strl_pyg.datasets.posed.read_posed_folder, e.g. "
+        "real_scenes)")
+    cache_dir: str = option("outputs/match_cache", "front-end match cache of real datasets")
+    train_scenes: list[str] | None = option(
+        None, "posed: training scene folders, comma-separated (default: the real_scenes split, "
+        "strl_pyg.datasets.REAL_SCENES_SPLIT)", kind="list")
+    val_scenes: list[str] | None = option(
+        None, "posed: validation scene folders, comma-separated", kind="list")
+    posed_gaps: list[int] = option(default_factory=lambda: [1, 2, 3], kind="int_list",
+                                   help="posed: capture-order gaps k of the training pairs "
+                                   "(i, i + k)")
+    posed_max_rotation: float = option(60.0, "posed: largest relative rotation of a pair",
+                                       metavar="DEG")
+    matcher: str | None = option(
+        None, "photographs (posed, KITTI, DeMoN): the front end's preset, fast | thorough | "
+        "adaptive | legacy (default: the FrontendConfig defaults, adaptive); part of the match "
+        "caches' key", metavar="PRESET")
+    posed_stride: int = option(
+        1, "posed: training pairs for every N-th first image, in every scene (thins the pairs "
+        "evenly; --limit keeps the first scenes' pairs)", metavar="N")
+    posed_min_points: int = option(
+        0, "posed: leave out training pairs with fewer than N cached point matches (validation "
+        "keeps every pair)", metavar="N")
+    posed_min_covisible: float = option(
+        0.1, "posed: smallest share of co-visible 3D points of a training pair (COLMAP models "
+        "with point tracks; other formats carry none; 0: off)", metavar="SHARE")
+    val_gap: int = option(2, "posed: validation pairs (i, i + val_gap)")
+    val_stride: int = option(4, "posed: validation pairs for every this many i")
+    synthetic_share: float = option(
+        0.0, "posed: share of generated pairs mixed into the training set (--scene / "
+        "--scene-kinds / --scene-mix, generator's matches), e.g. 0.5 for 1:1; 0: photographs "
+        "only")
+    synthetic_pairs: int | None = option(
+        None, "posed: distinct generated pairs, cycled to reach --synthetic-share (each is "
+        "generated once, on first use; default: as many as the share needs)")
+    budget_minutes: float = option(
+        math.inf, "stop (validated and checkpointed) after this many minutes of training; "
+        "--resume with a larger budget or --steps goes on")
+    best_metric: str = option(
+        "pose_err_med", "validation metric that keeps best_model.pt (lower is better): "
+        "pose_err_med (median of max(rotation, translation) error), rot_err_med, "
+        "trans_err_med, loss, inlier_rank_err (1 - median per-pair ROC-AUC of the geometric "
+        "head's inlier logits)", choices=BEST_METRICS)
+    model: str = option("full", "ablation row of the paper (StrLPoseConfig.ablation)",
+                        choices=ABLATION_NAMES)
+    model_overrides: dict[str, Any] = option(
+        default_factory=dict, flag="--set", kind="pairs",
+        help="model config override (other StrLPoseConfig fields), e.g. --set hidden=64 "
+        "--set layers=3")
+    scene: dict[str, Any] = option(default_factory=dict, kind="pairs",
+                                   help="SceneConfig field of generated scenes, e.g. --scene "
+                                   "noise_px=0.5")
+    scene_kinds: list[str] = option(default_factory=lambda: list(LINE_SCENE_KINDS),
+                                    kind="list", help="generated scene kinds, comma-separated")
+    scene_mix: str | None = option(
+        None, "generated scenes drawn per seed from this distribution (e.g. mixed_small, "
+        "mixed; strl_pyg.synthetic.distributions); replaces --scene / --scene-kinds; pairs "
+        "are split evenly over its configurations")
+    matches: str = option(
+        "ground_truth", "generated scenes: the generator's matches or front-end matches on "
+        "the rendered images (cached in --cache-dir); posed: its generated share always uses "
+        "the generator's", choices=("ground_truth", "frontend"))
+    loss: str = option(
+        "balanced", "pose loss (strl_pyg.training.loss.LOSS_FORMS): balanced (beta-NLL, an "
+        "angular translation term) or the paper's aleatoric loss; --loss paper --set "
+        "inputs=paper is the paper's recipe; a stored config without it predates it",
+        choices=("balanced", "paper"))
+    angle_weight: float = option(1.0, "--loss balanced: weight of the angular translation "
+                                 "term (radians)")
+    beta: float = option(0.25, "--loss balanced: beta of beta-NLL, in [0, 1] (0: the "
+                         "aleatoric weighting, 1: the gradient of a plain MSE)")
+    rot_weight: float = option(1.0, "weight of the pose loss's rotation terms (both loss "
+                               "forms; translation's: 1)")
+    grad_clip: float | None = option(10.0, "max gradient norm (0: off); the norm is logged "
+                                     "every step", kind="zero_is_none")
+    grad_clip_relative: float = option(
+        0.0, f"> 0: clip at K x the median norm of the last {WINDOW} steps (--grad-clip for "
+        f"the first {MIN_HISTORY}; strl_pyg.training.clip); 0: --grad-clip throughout",
+        metavar="K")
+    outlier_augment: float = option(0.0, "up to this fraction of point matches shuffled into "
+                                    "outliers")
+    # Geometric head (--set geometric=true): strl_pyg.training.loss.GeometricLoss
+    geo_threshold_px: float = option(2.0, "geometric head: inlier label threshold on the true "
+                                     "Sampson distance (px)")
+    geo_cls_weight: float = option(1.0, "geometric head: weight of the inlier classification "
+                                   "loss")
+    pose_weight: float = option(
+        1.0, "weight of the pose loss in the total (the geometric head's is added at its own "
+        "weights); < 1 lets the inlier classification lead on the shared layers (its gradient "
+        "there is 10^2-10^4 times smaller than the pose loss's at 1)")
+    geo_ess_weight: float = option(0.5, "geometric head: weight of the essential (epipolar) "
+                                   "loss ...")
+    geo_ess_start: int = option(200, "... from this step on (the classifier learns first)")
+    train_pairs: int = option(2048, "synthetic: pairs in the training set (seeds 0..N-1)")
+    val_pairs: int = option(128, "synthetic: held-out pairs (seeds from 1_000_000)")
+    kitti_k: int = option(1, "kitti: frame gap of a pair")
+    train_sequences: list[str] | None = option(
+        None, "kitti: training sequences, comma-separated (default: the standard split 00-08)",
+        kind="list")
+    val_sequences: list[str] | None = option(
+        None, "kitti: validation sequences, comma-separated (default: 09-10)", kind="list")
+    limit: int | None = option(
+        None, "real datasets, smoke runs: keep only the first N pairs in the order of the "
+        "scenes or sequences (posed: of the training pairs; kitti, demon: of the training and "
+        "of the validation pairs)", metavar="N")
+    lr: float = option(
+        1e-3, "Adam's rate, the cosine's peak; the defaults are the study's recipe "
+        "(benchmarks/studies/results_pose_recipe.md), the paper's is 1e-4 constant, no "
+        "warm-up (PAPER_RECIPE)")
+    lr_schedule: str = option("cosine", "cosine (half a cosine from --lr to 0 at --steps, "
+                              "after the warm-up) or constant (the paper)",
+                              choices=LR_SCHEDULES)
+    warmup_steps: int | None = option(None, "linear warm-up steps from lr / warmup to lr "
+                                      "(default: min(100, steps / 20); 0: none, the paper)")
+    batch_size: int = option(16, "global batch (split over DDP ranks), as the paper")
+    steps: int = option(2000, "optimiser steps")
+    val_every: int = option(200, "validate and checkpoint every this many steps (and at the "
+                            "end)")
+    num_points: int = option(384, "points resampled per pair, as the paper")
+    num_lines: int = option(192, "line segments resampled per pair, as the paper")
+    patch_size: int = option(1, "pixels sampled around each node (1: the paper's single "
+                             "pixel)")
+    swap_prob: float = option(0.5, "probability of exchanging the two images of a training "
+                              "pair")
+    roll_augment: float = option(
+        0.0, "roll both cameras of a training pair about their optical axes by up to this "
+        "many degrees (strl_pyg.data.RandomRoll; 0: off, the paper; 180: any orientation)",
+        metavar="DEG")
+    init_from: str | None = option(
+        None, "start from these weights (model.pt, last.pt, or shipped:synthetic / "
+        "shipped:geometric), e.g. to fine-tune; the model is theirs (architecture, inputs; "
+        "--model is not read), --set changes fields on top")
+    seed: int = option(0, "model initialisation (and the data, unless --data-seed is given)")
+    data_seed: int | None = option(
+        None, "seed of the training pairs, batch order and resampling (default: --seed); rows "
+        "of an ablation share it while --seed varies the initialisation")
+    checkpoint_every: int = option(0, "also write last.pt every this many steps (0: off)")
+    checkpoint_minutes: float = option(
+        10.0, "also write last.pt every this many minutes (0: off); always on Ctrl-C / SIGTERM "
+        "and at every validation")
+    num_workers: int = option(0, "data-loading processes", flag="--workers")
+    device: str = option("cpu", "cpu, cuda, cuda:N or mps")
+    out_dir: str = option("runs/default", "run folder (checkpoint, logs, curves)",
+                          flag="--out")
+    tensorboard: bool = option(True, "do not also log to TensorBoard (it is used when "
+                               "installed)", flag="--no-tensorboard", kind="negated")
     in_memory: bool = True  # keep generated / loaded graphs in memory after first access
-    # Geometric head (model_overrides={"geometric": True}): strl_pyg.training.loss.GeometricLoss
-    geo_threshold_px: float = 2.0  # inlier label threshold on the true Sampson distance
-    geo_cls_weight: float = 1.0  # weight of the inlier classification loss
-    # weight of the pose loss in the total (the geometric head's is added at its own weights);
-    # < 1 lets the classification term lead on the shared layers (its gradient there is
-    # 10^2-10^4 times smaller than the pose loss's at 1)
-    pose_weight: float = 1.0
-    geo_ess_weight: float = 0.5  # weight of the essential (epipolar) loss ...
-    geo_ess_start: int = 200  # ... from this step on (the classifier learns first)
 
     def __post_init__(self) -> None:
         import math
@@ -397,146 +442,14 @@ class TrainConfig:
         return strict_from_dict(cls, d)
 
 
-def _add_loss_and_clip_arguments(ap: argparse.ArgumentParser, d: TrainConfig) -> None:
-    """The pose loss's flags and the gradient clip's."""
-    ap.add_argument("--loss", choices=("balanced", "paper"), default=d.loss,
-                    help="pose loss: balanced (default; beta-NLL and an angular translation "
-                         "term) or the paper's aleatoric loss; --loss paper --set inputs=paper "
-                         "is the paper's recipe")
-    ap.add_argument("--angle-weight", type=float, default=d.angle_weight,
-                    help="--loss balanced: weight of the angular translation term")
-    ap.add_argument("--beta", type=float, default=d.beta,
-                    help=f"--loss balanced: beta of beta-NLL, in [0, 1] (default {d.beta:g}; 0: "
-                         "the aleatoric weighting, 1: the gradient of a plain MSE)")
-    ap.add_argument("--rot-weight", type=float, default=d.rot_weight,
-                    help="weight of the pose loss's rotation terms (translation's: 1)")
-    ap.add_argument("--grad-clip", type=float, default=d.grad_clip,
-                    help="max gradient norm (0: off); the norm is logged every step")
-    ap.add_argument("--grad-clip-relative", type=float, default=d.grad_clip_relative,
-                    metavar="K", help=f"clip at K x the median norm of the last {WINDOW} "
-                    f"steps (--grad-clip for the first {MIN_HISTORY}; 0: off)")
-
-
-def _add_posed_arguments(ap: argparse.ArgumentParser, d: TrainConfig) -> None:
-    """The flags of posed-photograph runs, the generated share, the budget and the best
-    checkpoint."""
-    ap.add_argument("--train-scenes", default=None,
-                    help="posed: training scene folders, comma-separated (default: the "
-                         "real_scenes split)")
-    ap.add_argument("--val-scenes", default=None,
-                    help="posed: validation scene folders, comma-separated")
-    ap.add_argument("--posed-gaps", default=",".join(map(str, d.posed_gaps)),
-                    help="posed: capture-order gaps k of the training pairs (i, i + k)")
-    ap.add_argument("--posed-max-rotation", type=float, default=d.posed_max_rotation,
-                    metavar="DEG", help="posed: largest relative rotation of a pair")
-    ap.add_argument("--matcher", default=d.matcher, metavar="PRESET",
-                    help="photographs: the front end's preset, fast | thorough | adaptive | "
-                         "legacy (default: the FrontendConfig defaults, adaptive)")
-    ap.add_argument("--posed-stride", type=int, default=d.posed_stride, metavar="N",
-                    help="posed: training pairs for every N-th first image, in every scene "
-                         "(thins the pairs evenly; --limit keeps the first scenes' pairs)")
-    ap.add_argument("--posed-min-points", type=int, default=d.posed_min_points, metavar="N",
-                    help="posed: leave out training pairs with fewer than N cached point "
-                         "matches (validation keeps every pair)")
-    ap.add_argument("--posed-min-covisible", type=float, default=d.posed_min_covisible,
-                    metavar="SHARE",
-                    help="posed: smallest share of co-visible 3D points of a training pair "
-                         "(COLMAP models with point tracks; 0: off)")
-    ap.add_argument("--val-gap", type=int, default=d.val_gap,
-                    help="posed: validation pairs (i, i + val_gap)")
-    ap.add_argument("--val-stride", type=int, default=d.val_stride,
-                    help="posed: validation pairs for every this many i")
-    ap.add_argument("--synthetic-share", type=float, default=d.synthetic_share,
-                    help="posed: share of generated pairs mixed into the training set (e.g. "
-                         "0.5 for 1:1; 0: photographs only)")
-    ap.add_argument("--synthetic-pairs", type=int, default=None,
-                    help="posed: distinct generated pairs, cycled to reach --synthetic-share "
-                         "(default: as many as the share needs)")
-    ap.add_argument("--budget-minutes", type=float, default=d.budget_minutes,
-                    help="stop (validated and checkpointed) after this many minutes of "
-                         "training; --resume goes on")
-    ap.add_argument("--best-metric", choices=BEST_METRICS, default=d.best_metric,
-                    help="validation metric that keeps best_model.pt (lower is better)")
-
-
-def add_train_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """Adds the training flags (one per :class:`TrainConfig` field that users set) to ``ap``."""
-    d = TrainConfig()
-    ap.add_argument("--dataset", choices=DATASETS, default=d.dataset)
-    ap.add_argument("--data-root", default=None,
-                    help="dataset root (kitti, demon; posed: a folder of scene folders, e.g. "
-                         "real_scenes)")
-    ap.add_argument("--cache-dir", default=d.cache_dir, help="front-end match cache")
-    _add_posed_arguments(ap, d)
-    ap.add_argument("--model", choices=ABLATION_NAMES, default=d.model,
-                    help="ablation row of the paper (default: full)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="model config override, e.g. --set hidden=64 --set layers=3")
-    ap.add_argument("--scene", action="append", default=[], metavar="KEY=VALUE",
-                    help="SceneConfig field of generated scenes, e.g. --scene noise_px=0.5")
-    ap.add_argument("--scene-kinds", default=",".join(d.scene_kinds),
-                    help="generated scene kinds, comma-separated")
-    ap.add_argument("--scene-mix", default=None,
-                    help="generated scenes drawn per seed from this distribution (e.g. "
-                         "mixed_small, mixed; see strl_pyg.synthetic.distributions); replaces "
-                         "--scene/--scene-kinds")
-    ap.add_argument("--matches", choices=("ground_truth", "frontend"), default=d.matches,
-                    help="generated scenes: the generator's matches or front-end matches on "
-                         "the rendered images (cached in --cache-dir)")
-    _add_loss_and_clip_arguments(ap, d)
-    ap.add_argument("--outlier-augment", type=float, default=d.outlier_augment,
-                    help="up to this fraction of point matches shuffled into outliers")
-    ap.add_argument("--geo-ess-start", type=int, default=d.geo_ess_start,
-                    help="geometric head (--set geometric=true): step the epipolar loss starts")
-    ap.add_argument("--pose-weight", type=float, default=d.pose_weight,
-                    help="weight of the pose loss in the total (default 1; with the geometric "
-                         "head, < 1 lets its inlier classification lead)")
-    ap.add_argument("--train-pairs", type=int, default=d.train_pairs)
-    ap.add_argument("--val-pairs", type=int, default=d.val_pairs)
-    ap.add_argument("--kitti-k", type=int, default=d.kitti_k, help="frame gap of KITTI pairs")
-    ap.add_argument("--train-sequences", default=None, help="KITTI sequences, comma-separated")
-    ap.add_argument("--val-sequences", default=None, help="KITTI sequences, comma-separated")
-    ap.add_argument("--limit", type=int, default=None, metavar="N",
-                    help="real datasets, smoke runs: keep only the first N pairs in the "
-                         "order of the scenes or sequences (posed: of the training pairs; "
-                         "kitti, demon: of the training and of the validation pairs)")
-    ap.add_argument("--lr", type=float, default=d.lr, help=f"Adam's rate, the cosine's peak "
-                    f"(default {d.lr:g}; the paper's: {PAPER_RECIPE['lr']:g} constant)")
-    ap.add_argument("--lr-schedule", choices=LR_SCHEDULES, default=d.lr_schedule,
-                    help="cosine (default: to 0 at --steps) or constant (the paper)")
-    ap.add_argument("--warmup-steps", type=int, default=d.warmup_steps, help="linear warm-up "
-                    "steps (default: min(100, steps/20); 0: none, the paper)")
-    ap.add_argument("--batch-size", type=int, default=d.batch_size)
-    ap.add_argument("--steps", type=int, default=d.steps)
-    ap.add_argument("--val-every", type=int, default=d.val_every)
-    ap.add_argument("--num-points", type=int, default=d.num_points)
-    ap.add_argument("--num-lines", type=int, default=d.num_lines)
-    ap.add_argument("--patch-size", type=int, default=d.patch_size)
-    ap.add_argument("--swap-prob", type=float, default=d.swap_prob,
-                    help="probability of exchanging the two images of a training pair")
-    ap.add_argument("--roll-augment", type=float, default=d.roll_augment, metavar="DEG",
-                    help="roll both cameras of a training pair by up to this many degrees "
-                         "(0: off; 180: any orientation)")
-    ap.add_argument("--init-from", default=None,
-                    help="start from these weights (model.pt, last.pt, or shipped:synthetic / "
-                         "shipped:geometric), e.g. to fine-tune; the model is theirs (--set "
-                         "changes fields on top)")
-    ap.add_argument("--seed", type=int, default=d.seed,
-                    help="model initialisation (and the data, unless --data-seed is given)")
-    ap.add_argument("--data-seed", type=int, default=None,
-                    help="seed of the training pairs, batch order and resampling (default: "
-                         "--seed); ablation rows share it")
-    ap.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every,
-                    help="also write last.pt every this many steps (0: off)")
-    ap.add_argument("--checkpoint-minutes", type=float, default=d.checkpoint_minutes,
-                    help="also write last.pt every this many minutes (0: off); always on "
-                         "Ctrl-C / SIGTERM and at every validation")
-    ap.add_argument("--workers", type=int, default=d.num_workers)
-    ap.add_argument("--device", default=d.device)
-    ap.add_argument("--out", default=d.out_dir, help="run folder (checkpoint, logs, curves)")
+def add_train_arguments(ap: argparse.ArgumentParser,
+                        config: type[TrainConfig] = TrainConfig) -> argparse.ArgumentParser:
+    """Adds the training flags to ``ap``: one per option field of ``config``
+    (:class:`TrainConfig` or a subclass; :mod:`strl_pyg.training.options`), then the run's
+    controls (``--resume``, ``--overwrite``, ``--no-progress``)."""
+    add_config_arguments(ap, config)
     ap.add_argument("--resume", action="store_true", help="continue from <out>/last.pt")
     ap.add_argument("--overwrite", action="store_true",
                     help="start afresh in an existing run folder (its checkpoint is replaced)")
-    ap.add_argument("--no-tensorboard", action="store_true")
     ap.add_argument("--no-progress", action="store_true")
     return ap
