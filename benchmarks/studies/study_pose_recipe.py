@@ -214,7 +214,8 @@ def gradient_shares(run: Path, batches: int = 8) -> dict[str, float]:
     from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.training.checkpoints import load_checkpoint
     from strl_pyg.training.config import TrainConfig
-    from strl_pyg.training.data import ResampledPairs, build_datasets
+    from strl_pyg.training.data import build_datasets
+    from strl_pyg.training.sampling import ResampledPairs
     from strl_pyg.training.data import collater
     from strl_pyg.training.loop import losses_for
 

@@ -49,10 +49,8 @@ from strl_pyg.training.clip import GradientClip
 from strl_pyg.training.distributed import StopSignals, distributed_setup, seed_everything
 from strl_pyg.training.skipped import keep_skipped
 from strl_pyg.training.config import TrainConfig
+from strl_pyg.training.sampling import ResampledPairs, StepBatchSampler, _InMemory
 from strl_pyg.training.data import (
-    StepBatchSampler,
-    _InMemory,
-    ResampledPairs,
     build_datasets,
     describe_data,
     check_graph_channels,

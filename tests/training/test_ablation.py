@@ -16,7 +16,7 @@ from strl_pyg.model import ABLATIONS
 from strl_pyg.synthetic import generate_pair
 from strl_pyg.synthetic.distributions import scene_distribution
 from strl_pyg.training import TrainConfig, train
-from strl_pyg.training.data import StepBatchSampler
+from strl_pyg.training.sampling import StepBatchSampler
 
 
 def _tiny(row: str, tmp_path: Path, **kw) -> TrainConfig:

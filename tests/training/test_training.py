@@ -454,7 +454,8 @@ def test_roll_augment_rolls_training_pairs_and_their_statistics(tmp_path):
     from strl_pyg.data import keys as K
     from strl_pyg.data.transforms import roll_cameras
     from strl_pyg.training.config import add_train_arguments
-    from strl_pyg.training.data import ResampledPairs, build_datasets
+    from strl_pyg.training.data import build_datasets
+    from strl_pyg.training.sampling import ResampledPairs
 
     args = add_train_arguments(argparse.ArgumentParser()).parse_args(["--roll-augment", "45"])
     assert args.roll_augment == 45.0
