@@ -52,14 +52,6 @@ def _K_from_numbers(values: list[float], source: str) -> np.ndarray:
                      f"{source} (got {len(values)})")
 
 
-#: COLMAP camera models (``cameras.txt``) whose first parameters are ``f, cx, cy``
-#: (``SIMPLE_*``, one focal length) or ``fx, fy, cx, cy``; the rest are distortion terms.
-COLMAP_ONE_FOCAL = ("SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL", "SIMPLE_RADIAL_FISHEYE",
-                    "RADIAL_FISHEYE")
-COLMAP_TWO_FOCALS = ("PINHOLE", "OPENCV", "OPENCV_FISHEYE", "FULL_OPENCV", "FOV",
-                     "THIN_PRISM_FISHEYE")
-
-
 def _colmap_K(text: str, source: str) -> np.ndarray:
     """K of the one camera of a COLMAP ``cameras.txt`` (``CAMERA_ID MODEL WIDTH HEIGHT
     PARAMS[]``), in this package's pixel convention: COLMAP puts the centre of the top-left
@@ -69,25 +61,16 @@ def _colmap_K(text: str, source: str) -> np.ndarray:
     if len(distinct) != 1:
         raise UsageError(f"Expected one camera in the COLMAP cameras file {source} (got "
                          f"{len(distinct)}: give each image's with --K0 / --K1 as fx,fy,cx,cy)")
-    model, params = cams[0][1], cams[0][4:]
+    from strl_pyg.geometry.camera import Camera
+
     try:
-        v = [float(x) for x in params]
+        cam = Camera.from_colmap(cams[0][1], cams[0][4:], where=source)
     except ValueError as err:
-        raise UsageError(f"Expected numbers as the camera parameters in {source} "
-                         f"(got {err})") from None
-    if model in COLMAP_ONE_FOCAL and len(v) >= 3:
-        fx = fy = v[0]
-        cx, cy, rest = v[1], v[2], v[3:]
-    elif model in COLMAP_TWO_FOCALS and len(v) >= 4:
-        fx, fy, cx, cy, rest = v[0], v[1], v[2], v[3], v[4:]
-    else:
-        raise UsageError(f"Expected a COLMAP camera model in "
-                         f"{COLMAP_ONE_FOCAL + COLMAP_TWO_FOCALS} with its parameters in "
-                         f"{source} (got {model} with {len(v)} parameters)")
-    if any(abs(x) > 0 for x in rest):
-        print(f"note: {model} distortion parameters in {source} are not applied: the "
+        raise UsageError(str(err)) from None
+    if cam.distorted:
+        print(f"note: {cam.model} distortion parameters in {source} are not applied: the "
               "matches must come from undistorted images", file=sys.stderr)
-    return np.array([[fx, 0.0, cx - 0.5], [0.0, fy, cy - 0.5], [0.0, 0.0, 1.0]])
+    return cam.K
 
 
 def read_intrinsics(text_or_path: str) -> np.ndarray:
@@ -308,8 +291,9 @@ def downscale_for_matching(image: np.ndarray, K: np.ndarray | None, max_side: in
     small = cv2.resize(image, (nw, nh), interpolation=cv2.INTER_AREA)
     sx, sy = nw / w, nh / h
     if K is not None:
-        S = np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5], [0.0, 0.0, 1.0]])
-        K = S @ np.asarray(K, dtype=np.float64)
+        from strl_pyg.geometry.camera import scale_intrinsics
+
+        K = scale_intrinsics(K, sx, sy)
     return small, K, (sx, sy)
 
 

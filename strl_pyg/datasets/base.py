@@ -102,14 +102,11 @@ def _read_h5_bytes(path: Path, key: str) -> np.ndarray:
 
 
 def scale_intrinsics(K: np.ndarray, old_size: tuple[int, int], new_size: tuple[int, int]):
-    """Intrinsics of an image resized from ``old_size`` to ``new_size`` (both ``(H, W)``).
+    """Intrinsics of an image resized from ``old_size`` to ``new_size`` (both ``(H, W)``):
+    :func:`strl_pyg.geometry.scale_intrinsics` with the sizes' ratios."""
+    from strl_pyg.geometry.camera import scale_intrinsics as scale
 
-    With pixel centres at integer coordinates, a resize maps ``x' = (x + 0.5) s_x - 0.5``,
-    so ``f' = s f`` and ``c' = (c + 0.5) s - 0.5`` (skew scales with ``s_x``).
-    """
-    sy, sx = new_size[0] / old_size[0], new_size[1] / old_size[1]
-    S = np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5], [0.0, 0.0, 1.0]])
-    return S @ np.asarray(K, dtype=np.float64)
+    return scale(K, new_size[1] / old_size[1], new_size[0] / old_size[0])
 
 
 def resize_image(image: np.ndarray, size: tuple[int, int] | None) -> np.ndarray:

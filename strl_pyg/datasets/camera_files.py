@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from strl_pyg.geometry.camera import COLMAP_CAMERA_MODELS, Camera
+
 __all__ = ["PosedImage", "posed_format", "check_pinhole", "read_real_scene", "read_colmap_model",
            "read_nerf_transforms", "read_llff_poses", "read_posed_folder"]
 
@@ -111,30 +113,11 @@ def read_real_scene(scene_dir: str | os.PathLike) -> list[PosedImage]:
 
 # -- COLMAP --------------------------------------------------------------------------------
 
-#: COLMAP camera models: (id, name, number of parameters, parameter layout).
-_COLMAP_MODELS = {
-    0: ("SIMPLE_PINHOLE", 3), 1: ("PINHOLE", 4), 2: ("SIMPLE_RADIAL", 4), 3: ("RADIAL", 5),
-    4: ("OPENCV", 8), 5: ("OPENCV_FISHEYE", 8), 6: ("FULL_OPENCV", 12), 7: ("FOV", 5),
-    8: ("SIMPLE_RADIAL_FISHEYE", 4), 9: ("RADIAL_FISHEYE", 5), 10: ("THIN_PRISM_FISHEYE", 12),
-}
-_COLMAP_BY_NAME = {name: (i, n) for i, (name, n) in _COLMAP_MODELS.items()}
-
-
 def _colmap_camera(model: str, params: Sequence[float], where: str):
-    """``(K, distortion)`` of a COLMAP camera, K in OpenCV pixel centres."""
-    p = [float(v) for v in params]
-    if model not in _COLMAP_BY_NAME:
-        raise ValueError(f"Expected a COLMAP camera model among {sorted(_COLMAP_BY_NAME)} in "
-                         f"{where} (got {model!r})")
-    if len(p) != _COLMAP_BY_NAME[model][1]:
-        raise ValueError(f"Expected {_COLMAP_BY_NAME[model][1]} parameters for COLMAP model "
-                         f"{model} in {where} (got {len(p)})")
-    if model.startswith("SIMPLE") or model in ("RADIAL", "FOV", "RADIAL_FISHEYE"):
-        fx = fy = p[0]
-        cx, cy, dist = p[1], p[2], tuple(p[3:])
-    else:
-        fx, fy, cx, cy, dist = p[0], p[1], p[2], p[3], tuple(p[4:])
-    return _pinhole(fx, fy, cx - 0.5, cy - 0.5), dist
+    """``(K, distortion)`` of a COLMAP camera, K in OpenCV pixel centres
+    (:meth:`strl_pyg.geometry.Camera.from_colmap`)."""
+    cam = Camera.from_colmap(model, params, where=where)
+    return cam.K, cam.distortion
 
 
 def _qvec_to_R(q: Sequence[float]) -> np.ndarray:
@@ -214,10 +197,10 @@ def _read_colmap_binary(model_dir: Path):
     r = _Reader(model_dir / "cameras.bin")
     for _ in range(r.take("Q")[0]):
         cam_id, model_id, w, h = r.take("iiQQ")
-        if model_id not in _COLMAP_MODELS:
-            raise ValueError(f"Expected a COLMAP camera model id 0-10 in '{r.path}' "
-                             f"(got {model_id})")
-        name, n = _COLMAP_MODELS[model_id]
+        if model_id not in COLMAP_CAMERA_MODELS:
+            raise ValueError(f"Expected a COLMAP camera model id 0-{max(COLMAP_CAMERA_MODELS)} "
+                             f"in '{r.path}' (got {model_id})")
+        name, n, _ = COLMAP_CAMERA_MODELS[model_id]
         cams[cam_id] = (name, (int(h), int(w)),
                         *_colmap_camera(name, r.take("d" * n), f"'{r.path}'"))
     r = _Reader(model_dir / "images.bin")

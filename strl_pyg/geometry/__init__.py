@@ -28,11 +28,13 @@ imported on the first quaternion conversion).
 
 from __future__ import annotations
 
+from strl_pyg.geometry import camera as _camera
 from strl_pyg.geometry import epipolar as _epipolar
 from strl_pyg.geometry import manifold as _manifold
 from strl_pyg.geometry import pose as _pose
+from strl_pyg.geometry.camera import *  # noqa: F403
 from strl_pyg.geometry.epipolar import *  # noqa: F403
 from strl_pyg.geometry.manifold import *  # noqa: F403
 from strl_pyg.geometry.pose import *  # noqa: F403
 
-__all__ = [*_pose.__all__, *_manifold.__all__, *_epipolar.__all__]
+__all__ = [*_pose.__all__, *_manifold.__all__, *_epipolar.__all__, *_camera.__all__]
