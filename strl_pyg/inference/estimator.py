@@ -302,7 +302,8 @@ class PoseEstimator:
                                               self.config.seed)
             if self.config.focal_sensitivity:
                 estimate.pose = focal_sensitivity(estimate.pose, pair.matches,
-                                                  self.config.threshold_px, self.config.seed)
+                                                  self.config.threshold_px, self.config.seed,
+                                                  self.config.focal_range)
             estimate = apply_configuration(estimate, estimate.geometry or pair.geometry,
                                            pair.matches)
         estimate.point_rows = pair.rows
@@ -348,7 +349,7 @@ class PoseEstimator:
             if bad_K and est.pose.status == "unreliable" and est.pose.method == name:
                 break  # every method reads the same K (or none): the later ones are too
         else:
-            if any(r.info.get("unsupported") for r in pair.ctx.results.values()):
+            if any(r.unsupported for r in pair.ctx.results.values()):
                 return self._run_all(pair, more_lines, known)
         # the last step's estimate is the answer; without intrinsics it gets the pair's
         # fundamental matrix (fitted once, at the end)
@@ -383,7 +384,7 @@ class PoseEstimator:
             if self.config.raise_errors:
                 raise
             first = str(err).splitlines()[0] if str(err) else ""
-            return MethodResult(name, "failed", info={"raised": type(err).__name__},
+            return MethodResult(name, "failed", raised=type(err).__name__,
                                 warnings=[f"{name} raised {type(err).__name__}: {first}"])
 
     def _missing_input(self, name: str, spec: MethodSpec, matches: PairMatches,
@@ -458,11 +459,11 @@ class PoseEstimator:
         chosen = recommended_order(self.settings, matches.num_distinct_points)
         order = [m for m in chosen if m in results]
         notes = [POSELIB_MISSING] if measured_with_missing_poselib(self.settings) else []
-        raised = [m for m, r in results.items() if r.info.get("raised")]
+        raised = [m for m, r in results.items() if r.raised]
         notes += [f"{m} could not run: {'; '.join(results[m].warnings)}" for m in raised]
         # the regression stands in only while some solver's pose is supported or none was
         # refused for lack of support
-        unsupported = any(r.info.get("unsupported") for r in results.values()) and not any(
+        unsupported = any(r.unsupported for r in results.values()) and not any(
             r.status == "ok" for m, r in results.items()
             if m in METHODS and METHODS[m].support_checked)
         fallback = None  # (record, notes so far) of the first "unreliable" pose

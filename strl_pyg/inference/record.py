@@ -71,6 +71,11 @@ class MethodResult:
             (``False``: a warning says why not; ``None``: not decided, or no covariance).
         bad_intrinsics: the pose was computed with intrinsics that fail the input checks
             (:func:`~strl_pyg.inference.checks.intrinsics_problems`).
+        unsupported: the support check refused the pose (its matches do not support it:
+            :func:`~strl_pyg.inference.support.check_support`); ``info["unsupported"]`` in
+            the JSON record.
+        raised: the exception's type name where the method raised (``status == "failed"``);
+            ``info["raised"]`` in the JSON record.
     """
 
     method: str | None
@@ -86,6 +91,8 @@ class MethodResult:
     rotation: np.ndarray | None = None
     calibrated: bool | None = None
     bad_intrinsics: bool = False
+    unsupported: bool = False
+    raised: str | None = None
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -166,7 +173,9 @@ class MethodResult:
         return _jsonable({"method": self.method, "status": self.status, "T_0to1": self.T_0to1,
                           "rotation": self.rotation, "sigma": self.sigma, "covariance": self.covariance,
                           "warnings": list(self.warnings), "time_ms": self.time_ms,
-                          "num_inliers": self.num_inliers, "info": self.info,
+                          "num_inliers": self.num_inliers, "info": {
+                              **self.info, **({"unsupported": True} if self.unsupported else {}),
+                              **({"raised": self.raised} if self.raised else {})},
                           "inliers": self.inliers})
 
 

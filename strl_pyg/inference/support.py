@@ -76,7 +76,7 @@ def check_support(res: MethodResult, matches: PairMatches, threshold_px: float =
            else f"fewer than {floor}")
     behind = f"; {m - k} more lie behind a camera" if m > k else ""
     return MethodResult(res.method, "failed", time_ms=res.time_ms, num_inliers=k,
-                        raw=res.raw, info={**res.info, "unsupported": True},
+                        raw=res.raw, info=dict(res.info), unsupported=True,
                         warnings=res.warnings + [
         f"the matches do not support this pose: {k} of {n} point matches are within "
         f"{band:g} px of it and in front of both cameras ({100 * k / n:.0f} %, {why}"

@@ -365,7 +365,7 @@ def test_estimator_refuses_points_of_another_pose():
     m, _, _ = manhattan_pair(2, n_points=15, point_pose=other)
     est = PoseEstimator(methods=("vp",), bootstrap=0).estimate(m)
     assert est.methods["vp"].status == "failed"
-    assert est.methods["vp"].info.get("unsupported")  # the support check, not the solver
+    assert est.methods["vp"].unsupported  # the support check, not the solver
 
 
 def test_estimator_random_matches_and_identical_images_are_not_ok():

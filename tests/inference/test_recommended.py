@@ -306,7 +306,7 @@ def test_the_walk_gives_the_full_runs_pose_when_the_regression_stands_in(model, 
         if name in ("regression", "vp"):
             return lambda m, ctx: MethodResult(name, "ok", true)
         if name in ("poselib", "opencv"):
-            return lambda m, ctx: MethodResult(name, "failed", info={"unsupported": True})
+            return lambda m, ctx: MethodResult(name, "failed", unsupported=True)
         return lambda m, ctx: MethodResult(name, "failed", warnings=["planted"])
 
     for name, spec in list(estimator.METHODS.items()):
@@ -366,3 +366,24 @@ def torch_equal(a, b) -> bool:
     import torch
 
     return bool(torch.equal(a, b))
+
+
+def test_decisions_read_typed_fields_not_info_keys(monkeypatch):
+    """A method that raises is ``failed`` with ``raised`` set (and ``info["raised"]`` in the
+    JSON record); the recommended pose names it, whatever its message says."""
+    import dataclasses
+
+    from strl_pyg.inference.registry import METHODS
+    from strl_pyg.inference.record import MethodResult
+
+    def boom(matches, ctx):
+        raise RuntimeError("unsupported and raised are words, not decisions")
+
+    monkeypatch.setitem(METHODS, "opencv", dataclasses.replace(METHODS["opencv"], fn=boom))
+    m = generate_pair(2).matches
+    est = PoseEstimator(methods=("opencv", "poselib")).estimate(m)
+    rec = est.methods["opencv"]
+    assert rec.status == "failed" and rec.raised == "RuntimeError" and not rec.unsupported
+    assert rec.to_dict()["info"]["raised"] == "RuntimeError"
+    assert any(w.startswith("opencv could not run") for w in est.pose.warnings)
+    assert MethodResult("x", "failed", info={"raised": "Fake"}).raised is None
