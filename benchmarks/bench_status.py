@@ -4,7 +4,8 @@ Pairs ``(i, i+g)`` of the real_scenes scenes (``--scenes val``: the 4 validation
 ``train``: the 11 training scenes, where rules are fitted), ``g`` in {1, 2, 4, 8, 16}, true
 rotation <= 60 deg (the pairs of ``bench_matches.py``), matched once by the default front end
 (cached under ``--cache``), each also with perturbed intrinsics: both focal lengths x0.5 or
-x2 (``f/2``, ``2f``) and ``cx`` / ``cy`` swapped (``swap``). On each: PoseLib called directly
+x2 (``f/2``, ``2f``), ``cx`` / ``cy`` swapped (``swap``) and every point match given twice
+(``dup``). On each: PoseLib called directly
 on the matches (``estimate_relative_pose(m, "poselib", 1.0)``) and the recommended pose of
 ``PoseEstimator()`` (its default order, bootstrap and checks). Errors are max(rotation,
 translation direction) in degrees; a pose that is not ``ok`` counts as 180.
@@ -34,7 +35,7 @@ import bench_matches as bm  # noqa: E402
 import bench_pose as bp  # noqa: E402
 from strl_bench_common import banner  # noqa: E402
 
-VARIANTS = ("true", "f/2", "2f", "swap")
+VARIANTS = ("true", "f/2", "2f", "swap", "dup")
 RIGHT_DEG, WRONG_DEG = 5.0, 10.0
 
 #: A refusal's reason -> the rule that gave it (first match wins).
@@ -58,6 +59,8 @@ def rule_of(reason: str) -> str:
 def perturbed(m, variant: str):
     if variant == "true":
         return m
+    if variant == "dup":  # every point match twice (a matcher run on both orders, say)
+        return m.select(point_index=np.tile(np.arange(m.num_points), 2))
     K0, K1 = (np.asarray(K, float).copy() for K in (m.K0, m.K1))
     for K in (K0, K1):
         if variant in ("f/2", "2f"):
@@ -103,6 +106,7 @@ def measure(est, m, T, pid: str, gap, variant: str) -> dict:
     row["rules"] = sorted({rule_of(r) for r in reasons})
     row["reasons"] = [r[:160] for r in reasons]
     row["configuration"] = e.configuration
+    row["focal"] = (pose.info.get("focal") or {}).get("verdict")
     refused = pose.info.get("unreliable_T_0to1")
     row["refused"] = None if refused is None else max(bp.errors(refused, T))
     return row
@@ -122,7 +126,7 @@ def run(args) -> int:
     if rows_path.is_file():
         done = {(r["pair"], r["variant"]) for r in map(json.loads, rows_path.open())}
     print(banner())
-    est = PoseEstimator()
+    est = PoseEstimator(**({} if args.focal_range is None else {"focal_range": args.focal_range}))
     with rows_path.open("a") as f:
         for pair in tqdm(pairs, desc=f"pairs ({args.scenes})"):
             todo = [v for v in VARIANTS if (pair[0], v) not in done]
@@ -252,6 +256,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="benchmarks/results_real_scenes/status/val")
     ap.add_argument("--scenes", choices=("val", "train"), default="val")
     ap.add_argument("--per-gap", type=int, default=12)
+    ap.add_argument("--focal-range", type=float, default=None,
+                    help="the estimator's focal_range (default: EstimatorConfig's)")
     ap.add_argument("--cache", default="outputs/bench_status_cache")
     args = ap.parse_args(argv)
     return run(args) if args.what == "run" else report(args)

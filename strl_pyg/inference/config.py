@@ -15,6 +15,7 @@ import numpy as np
 
 from strl_pyg.estimation.uncertainty import MIN_BOOTSTRAP
 from strl_pyg.inference.checks import check_device
+from strl_pyg.inference.evidence import FOCAL_RANGE_FACTOR
 from strl_pyg.inference.registry import checked_method_names
 from strl_pyg.inference.support import CHEIRALITY_MIN, MIN_INLIER_RATIO, MIN_SUPPORT_INLIERS
 
@@ -52,6 +53,7 @@ class EstimatorConfig:
     swap_check: bool = True
     data_check: bool = True
     focal_sensitivity: bool = True
+    focal_range: float = FOCAL_RANGE_FACTOR
 
     @property
     def support(self) -> tuple[float, int, float]:
@@ -94,6 +96,10 @@ class EstimatorConfig:
             if not isinstance(value, (bool, np.bool_)):
                 raise ValueError(f"Expected {name} as a bool (got {value!r})")
             object.__setattr__(self, name, bool(value))
+        if not (_is_number(self.focal_range) and 1 < self.focal_range <= 10):
+            raise ValueError(f"Expected focal_range, a factor each way, in (1, 10] (got "
+                             f"{self.focal_range!r})")
+        object.__setattr__(self, "focal_range", float(self.focal_range))
         object.__setattr__(self, "threshold_px", float(self.threshold_px))
         object.__setattr__(self, "min_inlier_ratio", float(self.min_inlier_ratio))
         object.__setattr__(self, "min_in_front", float(self.min_in_front))

@@ -154,9 +154,10 @@ class PoseEstimator:
             with that method) (:func:`~strl_pyg.estimation.uncertainty.data_covariance`; default
             ``True``; needs intrinsics and 8 distinct point matches).
         focal_sensitivity: the recommended pose is solved again with both focal lengths
-            scaled by sqrt(2) each way; where the matches do not verify the focal length, the
-            spread is added to its covariance (:func:`~strl_pyg.inference.evidence.
-            focal_sensitivity`; default ``True``; two more solves per pair).
+            scaled by ``focal_range`` (default 2) each way; where the matches do not verify
+            the focal length, the spread is added to its covariance
+            (:func:`~strl_pyg.inference.evidence.focal_sensitivity`; default ``True``; two
+            more solves per pair).
     """
 
     def __init__(self, model: Any = None, methods: Any = None, *,

@@ -5,6 +5,7 @@ general scenes, the focal check, and the recommended pose a user gets for each."
 from __future__ import annotations
 
 import json
+import math
 
 import cv2
 import numpy as np
@@ -144,7 +145,7 @@ def test_the_focal_check_reads_the_implied_essential_matrix():
 def test_a_wrong_focal_length_widens_sigma_instead_of_a_tight_wrong_pose():
     """Before: with both focal lengths x2 PoseLib's pose was 'ok', 138 deg off in translation
     with sigma 4.5 deg (a confident wrong answer, > 3 sigma). The matches explain the pose
-    as well at f / sqrt(2) and f * sqrt(2): the spread of those solves is in the sigma."""
+    as well at f / 2 and 2 f: the spread of those solves is in the sigma."""
     from dataclasses import replace
 
     from strl_pyg.inference.evidence import focal_sensitivity
@@ -164,6 +165,33 @@ def test_a_wrong_focal_length_widens_sigma_instead_of_a_tight_wrong_pose():
     assert wide.info["focal"]["verdict"] == "not verified"
     assert tr < 3 * wide.sigma["translation_deg"] and rot < 3 * wide.sigma["rotation_deg"]
     assert wide.sigma["translation_deg"] > 5 * rec.sigma["translation_deg"]
+
+
+def test_half_the_focal_length_is_inside_the_default_range():
+    """On real pairs a focal length x0.5 left 36 confident wrong poses of 211 with the range
+    sqrt(2) each way (it does not reach the true focal length), none outside the turntable
+    capture with 2: the solve at 2 f is the true K's."""
+    from dataclasses import replace
+
+    from strl_pyg.inference.evidence import focal_sensitivity
+
+    m, R, t = make_pair("general", n=400, seed=7)
+    Kw = K.copy()
+    Kw[:2, :2] *= 0.5
+    wrong = replace(m, K0=Kw, K1=Kw)
+    rec = PoseEstimator(methods=("poselib",), focal_sensitivity=False).estimate(wrong)
+    rec = rec.methods["poselib"]
+    T = np.r_[np.c_[R, t], [[0, 0, 0, 1]]]
+    rot, tr = (float(v[0]) for v in relative_pose_error(rec.T_0to1[None], T[None]))
+    assert rec.status == "ok" and tr > 10  # 14.5 deg off in translation
+    narrow = focal_sensitivity(rec, wrong, 1.0, factor=math.sqrt(2))  # before: confident wrong
+    assert tr > 3 * narrow.sigma["translation_deg"]
+    wide = focal_sensitivity(rec, wrong, 1.0)  # the default range, 2
+    assert wide.info["focal"]["factor"] == 2.0
+    assert rot < 3 * wide.sigma["rotation_deg"] and tr < 3 * wide.sigma["translation_deg"]
+    assert PoseEstimator().config.focal_range == 2.0
+    with pytest.raises(ValueError, match="Expected focal_range"):
+        PoseEstimator(focal_range=1.0)
 
 
 def test_a_focal_length_the_matches_verify_keeps_its_sigma():
