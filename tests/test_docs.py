@@ -374,7 +374,7 @@ for where, path in json.load(open(sys.argv[1])):
     registry = sys.modules.get("strl_pyg.inference.registry")
     if registry is not None:  # a block's own methods leave with it
         for name, spec in list(registry.METHODS.items()):
-            fn = spec.fn
+            fn = getattr(spec, "fn", spec)
             home = getattr(fn, "__module__", None) or type(fn).__module__
             if not str(home).startswith("strl_pyg."):
                 del registry.METHODS[name]

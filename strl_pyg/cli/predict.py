@@ -114,7 +114,7 @@ def jsonable(d: dict[str, Any]) -> dict[str, Any]:
 
 
 def _label(method: str | None) -> str | None:
-    """What a method is in words: its registry entry's label (``MethodSpec.label``)."""
+    """What a method is in words: its registry entry's label (``PoseMethod.label``)."""
     from strl_pyg.inference import METHODS
 
     return METHODS[method].label if method in METHODS else method

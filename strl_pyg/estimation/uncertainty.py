@@ -10,7 +10,7 @@ exactly that: the solver is re-run on ``n`` resamples (with replacement) of the 
 and the covariance of the resampled poses, in the tangent chart of the estimate, is returned.
 The estimators' ``poselib`` / ``opencv`` / ``guided`` records carry first-order + bootstrap
 covariances, the ``fused`` one information form + the classical bootstrap
-(:class:`strl_pyg.inference.PoseEstimator`, ``bootstrap=8``, ``MethodSpec.bootstrapped``),
+(:class:`strl_pyg.inference.PoseEstimator`, ``bootstrap=8``, ``PoseMethod.bootstrapped``),
 calibrated with one scale per method (``benchmarks/bench_pose.py --calibrate``). """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ __all__ = ["bootstrap_covariance", "bootstrap_resamples", "Bootstrap", "cap_cova
            "MAX_SIGMA_DEG", "data_covariance", "swap_covariance"]
 
 # Which methods' records carry first-order + bootstrap covariances is their registry entry's
-# (MethodSpec.bootstrapped; strl_pyg.inference.BOOTSTRAPPED lists them): ``guided`` carries
+# (PoseMethod.bootstrapped; strl_pyg.inference.BOOTSTRAPPED lists them): ``guided`` carries
 # the bootstrap of its chosen classical solve, ``fused`` that of the classical estimate it
 # starts from.
 

@@ -35,7 +35,7 @@ _EXPORTS = {
     "POINT_POOR_MAX_POINTS": "strl_pyg.inference.methods",
     "recommended_order": "strl_pyg.inference.policy",
     "METHODS": "strl_pyg.inference.registry",
-    "MethodSpec": "strl_pyg.inference.registry",
+    "FunctionMethod": "strl_pyg.inference.registry",
     "PoseEstimator": "strl_pyg.inference.estimator",
     "register_method": "strl_pyg.inference.registry",
     "MethodFn": "strl_pyg.inference.methods",

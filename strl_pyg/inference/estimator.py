@@ -79,7 +79,7 @@ from strl_pyg.inference.record import MethodResult, PoseEstimate
 from strl_pyg.inference.registry import (
     METHODS,
     RECOMMENDED,
-    MethodSpec,
+    PoseMethod,
     checked_method_names,
     classical_method,
     methods_needed,
@@ -127,7 +127,7 @@ class PoseEstimator:
             first order only. Their calibration scales apply only when the checkpoint's
             ``metadata["calibration_bootstrap"]`` (0 when absent) equals it; otherwise the
             record keeps the uncalibrated covariance and says so in ``warnings``.
-        min_inlier_ratio, min_inliers: a solver's pose (``MethodSpec.support_checked``) is
+        min_inlier_ratio, min_inliers: a solver's pose (``PoseMethod.support_checked``) is
             ``"failed"`` when the matches do not support it: fewer of the point matches lie
             within :data:`SUPPORT_BAND` x ``threshold_px`` of it (Sampson distance; the band
             keeps correct poses of 2 px matches) than this fraction of them, or than
@@ -380,7 +380,7 @@ class PoseEstimator:
         if skip is not None:
             return MethodResult(name, "skipped", warnings=[skip])
         try:
-            return spec.fn(matches, ctx)
+            return spec(matches, ctx)
         except Exception as err:
             if self.config.raise_errors:
                 raise
@@ -388,7 +388,7 @@ class PoseEstimator:
             return MethodResult(name, "failed", raised=type(err).__name__,
                                 warnings=[f"{name} raised {type(err).__name__}: {first}"])
 
-    def _missing_input(self, name: str, spec: MethodSpec, matches: PairMatches,
+    def _missing_input(self, name: str, spec: PoseMethod, matches: PairMatches,
                        ctx: MethodContext) -> str | None:
         """Why ``name`` cannot run on this input (``None`` when it can): the network reads
         pixels and the matches carry no images, or a method it reads was skipped."""

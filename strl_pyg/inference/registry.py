@@ -1,5 +1,6 @@
-"""The registry of pose methods: one :class:`MethodSpec` per name (:data:`METHODS`, in
-registration order), the tables derived from it and the check of method names.
+"""The registry of pose methods: one :class:`PoseMethod` per name (:data:`METHODS`, in
+registration order; the method is its own record), the tables derived from it and the check
+of method names.
 
 It imports nothing of :mod:`strl_pyg.inference` but the record, so every module of the
 folder (the configuration, the support check, the estimator) can read it: the methods
@@ -9,12 +10,12 @@ themselves are registered by :mod:`strl_pyg.inference.estimator`.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, fields
 from typing import Any
 
 from strl_pyg.estimation.classical import BASELINE_METHODS, MIN_POINTS
 
-__all__ = ["RECOMMENDED", "PoseMethod", "MethodSpec", "METHODS", "register_method", "methods_where",
+__all__ = ["RECOMMENDED", "PoseMethod", "FunctionMethod", "DESCRIPTION", "METHODS",
+           "register_method", "methods_where",
            "methods_needed", "network_free_methods", "classical_method",
            "checked_method_names"]
 
@@ -26,41 +27,11 @@ MethodFn = Callable[..., Any]
 RECOMMENDED = "recommended"
 
 
-@dataclass(frozen=True)
-class MethodSpec:
-    """Everything about one registered method, the one record every other table is derived
-    from (:func:`methods_where`): ``fn``; the point matches it needs (fewer:
-    ``"degenerate"``); whether it needs ``K0``/``K1`` (missing: ``"failed"``) and whether it is
-    installed; ``label``, what it is in words (the CLI prints it); whether it ``reads_lines``
-    (the front end then matches lines for it) and ``uses_network`` (the model is loaded for
-    it); ``depends_on``, the methods whose results it reads (``"classical"``: PoseLib if
-    installed, else OpenCV); ``support_checked``, whether its pose must be supported by the
-    point matches (:func:`~strl_pyg.inference.support.check_support`); ``bootstrapped``,
-    whether its covariance carries the classical bootstrap (its calibration then holds only
-    for the bootstrap count it was fitted with); ``classical_base``, whether it starts from
-    the classical solver's pose (its calibration was fitted with PoseLib as that base);
-    ``needs_geometric_head``, whether it reads the network's geometric head (a checkpoint
-    without one cannot run it)."""
-
-    fn: MethodFn
-    min_points: int = MIN_POINTS
-    needs_intrinsics: bool = True
-    available: Callable[[], bool] = lambda: True
-    label: str = ""
-    reads_lines: bool = False
-    uses_network: bool = False
-    depends_on: tuple[str, ...] = ()
-    support_checked: bool = True
-    bootstrapped: bool = False
-    classical_base: bool = False
-    needs_geometric_head: bool = False
-
-
 class PoseMethod:
     """A pose method, the way :class:`~strl_pyg.inference.PoseEstimator` runs it: called with
     one pair's checked matches and the pair's :class:`~strl_pyg.inference.methods.MethodContext`,
     it returns one :class:`~strl_pyg.inference.MethodResult`. What it needs and how its result
-    is treated are class attributes, the fields of :class:`MethodSpec` (``name``, ``label``,
+    is treated are class attributes, its description (:data:`DESCRIPTION`: ``name``, ``label``,
     ``min_points``, ``needs_intrinsics``, ``reads_lines``, ``uses_network``, ``depends_on``,
     ``support_checked``, ``bootstrapped``, ``classical_base``, ``needs_geometric_head``), and
     :meth:`available` says whether it is installed. Register one with
@@ -86,48 +57,79 @@ class PoseMethod:
         raise NotImplementedError(f"{type(self).__name__} runs no pose method (define "
                                   "__call__(matches, ctx) -> MethodResult)")
 
-    def spec(self) -> MethodSpec:
-        """This method's :class:`MethodSpec`."""
-        given = {f.name: getattr(self, f.name) for f in fields(MethodSpec) if f.name != "fn"}
-        return MethodSpec(self, **{**given, "label": self.label or self.name,
-                                   "depends_on": tuple(self.depends_on)})
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(name={self.name!r})"
 
 
-#: ``name -> MethodSpec``, run in this order.
-METHODS: dict[str, MethodSpec] = {}
+#: The attributes that describe a method (:class:`PoseMethod`'s class attributes).
+DESCRIPTION = ("label", "min_points", "needs_intrinsics", "reads_lines", "uses_network",
+               "depends_on", "support_checked", "bootstrapped", "classical_base",
+               "needs_geometric_head")
+
+
+class FunctionMethod(PoseMethod):
+    """A function ``fn(matches, context) -> MethodResult`` as a :class:`PoseMethod`, with its
+    description given as keywords (:data:`DESCRIPTION`) and ``available`` a callable."""
+
+    def __init__(self, name: str, fn: MethodFn, available: Callable[[], bool] | None = None,
+                 **description: Any) -> None:
+        unknown = sorted(set(description) - set(DESCRIPTION))
+        if unknown:
+            raise ValueError(f"Expected method attributes from {sorted(DESCRIPTION)} (got "
+                             f"{unknown})")
+        self.name, self.fn, self._available = name, fn, available or (lambda: True)
+        for key, value in description.items():
+            setattr(self, key, tuple(value) if key == "depends_on" else value)
+
+    @classmethod
+    def like(cls, method: PoseMethod, fn: MethodFn | None = None,
+             available: Callable[[], bool] | None = None) -> FunctionMethod:
+        """``method``'s name and description with another call and / or availability (tests
+        plant failures so)."""
+        return cls(method.name, fn or method, available or method.available,
+                   **{k: getattr(method, k) for k in DESCRIPTION})
+
+    def available(self) -> bool:
+        return bool(self._available())
+
+    def __call__(self, matches: Any, ctx: Any) -> Any:
+        return self.fn(matches, ctx)
+
+
+#: ``name -> PoseMethod`` (the method is its own record), run in this order.
+METHODS: dict[str, PoseMethod] = {}
 
 
 def register_method(name: str | PoseMethod, fn: MethodFn | None = None, *,
                     min_points: int = MIN_POINTS, needs_intrinsics: bool = True,
                     available: Callable[[], bool] | None = None,
-                    replace_existing: bool = False, **spec: Any) -> None:
+                    replace_existing: bool = False, **description: Any) -> None:
     """Adds a method to :data:`METHODS` (run after the ones registered before it): a
     :class:`PoseMethod` (``register_method(MyMethod())``, its attributes say what it needs), or
-    a name and a function ``fn(matches, context) -> MethodResult`` with ``spec``, the other
-    fields of :class:`MethodSpec` (``label``, ``reads_lines``, ...). The method is then in
-    ``strl-pose predict --methods``, ``evaluate``, the support check and the labels."""
+    a name and a function ``fn(matches, context) -> MethodResult`` with its ``description``
+    (:data:`DESCRIPTION`: ``label``, ``reads_lines``, ...), made a :class:`FunctionMethod`.
+    The method is then in ``strl-pose predict --methods``, ``evaluate``, the support check
+    and the labels."""
     if isinstance(name, PoseMethod):
-        if fn is not None or spec:
-            raise ValueError("Expected a PoseMethod alone (its attributes are its spec) (got "
-                             f"{'fn and ' if fn is not None else ''}{sorted(spec)} too)")
+        if fn is not None or description:
+            raise ValueError("Expected a PoseMethod alone (its attributes describe it) (got "
+                             f"{'fn and ' if fn is not None else ''}{sorted(description)} too)")
         method, name = name, name.name
         if not isinstance(name, str) or not name:
             raise ValueError(f"Expected a PoseMethod with a name (got {name!r} for "
                              f"{type(method).__name__})")
         _check_new(name, replace_existing)
-        METHODS[name] = method.spec()
+        if not method.label:
+            method.label = name
+        METHODS[name] = method
         return
     if not callable(fn):
         raise TypeError(f"Expected fn(matches, context) -> MethodResult for method {name!r} "
                         f"(got {type(fn).__name__})")
     _check_new(name, replace_existing)
-    known = {f for f in MethodSpec.__dataclass_fields__} - {"fn", "min_points",
-                                                             "needs_intrinsics", "available"}
-    unknown = sorted(set(spec) - known)
-    if unknown:
-        raise ValueError(f"Expected MethodSpec fields {sorted(known)} (got {unknown})")
-    METHODS[name] = MethodSpec(fn, min_points, needs_intrinsics, available or (lambda: True),
-                               **{"label": name, **spec})
+    METHODS[name] = FunctionMethod(name, fn, available, min_points=min_points,
+                                   needs_intrinsics=needs_intrinsics,
+                                   **{"label": name, **description})
 
 
 def _check_new(name: str, replace_existing: bool) -> None:
@@ -139,8 +141,8 @@ def _check_new(name: str, replace_existing: bool) -> None:
 
 
 def methods_where(**flags: Any) -> tuple[str, ...]:
-    """The registered methods whose :class:`MethodSpec` has these field values, in
-    registration order: ``methods_where(uses_network=True)``."""
+    """The registered methods with these attribute values, in registration order:
+    ``methods_where(uses_network=True)``."""
     return tuple(n for n, s in METHODS.items()
                  if all(getattr(s, k) == v for k, v in flags.items()))
 

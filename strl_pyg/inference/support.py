@@ -1,6 +1,6 @@
 """The support check of a method's pose: do the point matches support it?
 
-A checked pose (``MethodSpec.support_checked``; ``strl_pyg.inference.SUPPORT_CHECKED`` lists
+A checked pose (``PoseMethod.support_checked``; ``strl_pyg.inference.SUPPORT_CHECKED`` lists
 them) is ``"failed"`` when too few point matches lie within :data:`SUPPORT_BAND` x the inlier
 threshold of it (Sampson distance, every solver counted alike) and in front of both cameras,
 and ``"unreliable"`` when too many of those near it lie behind a camera (its sign or
@@ -45,7 +45,7 @@ def check_support(res: MethodResult, matches: PairMatches, threshold_px: float =
     of the ``n`` point matches; as ``"unreliable"`` when fewer than
     ``min_in_front`` of the matches within the band lie in front of both cameras. With
     ``checked=False`` ``res`` is returned unchanged; the default (``None``) is the method's
-    own ``MethodSpec.support_checked`` (false for the regression; true for a method the
+    own ``PoseMethod.support_checked`` (false for the regression; true for a method the
     registry does not know)."""
     if checked is None:
         spec = METHODS.get(res.method)

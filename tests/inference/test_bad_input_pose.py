@@ -22,6 +22,7 @@ import pytest
 import torch
 
 from strl_pyg import cli
+from strl_pyg.inference.registry import FunctionMethod
 from strl_pyg.data import PairMatches
 from strl_pyg.inference import estimator as inference
 from strl_pyg.inference.estimator import PoseEstimator
@@ -211,7 +212,7 @@ def test_a_network_method_that_cannot_run_is_named_in_the_recommended_pose(model
         raise RuntimeError("Expected all tensors to be on the same device\nmore")
 
     spec = inference.METHODS["regression"]
-    inference.METHODS["regression"] = replace(spec, fn=no_device)
+    inference.METHODS["regression"] = FunctionMethod.like(spec, no_device)
     est = PoseEstimator(model, methods=["regression", "opencv"]).estimate(pair.matches)
     assert est.methods["regression"].status == "failed"
     assert est.status == "ok" and est.pose.method == "opencv"

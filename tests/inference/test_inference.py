@@ -306,8 +306,8 @@ def test_the_method_registry_order():
 
     assert list(registry.METHODS) == ["regression", "opencv", "poselib", "fused", "geometric",
                                       "guided", "vp", "vp_checked"]
-    assert isinstance(registry.METHODS["fused"].fn, pose_methods.Fused)
-    assert [type(s.fn).__name__ for s in registry.METHODS.values()] == [
+    assert isinstance(registry.METHODS["fused"], pose_methods.Fused)
+    assert [type(s).__name__ for s in registry.METHODS.values()] == [
         "Regression", "Classical", "Classical", "Fused", "Geometric", "Guided", "VanishingPoint",
         "VanishingPointChecked"]
 

@@ -12,6 +12,7 @@ from strl_pyg.frontend import FrontendConfig, match_images
 from strl_pyg.inference.estimator import PoseEstimator
 from strl_pyg.inference.recommended import estimate_methods, estimate_recommended
 from strl_pyg.inference import methods_needed
+from strl_pyg.inference.registry import FunctionMethod
 from strl_pyg.synthetic import SceneConfig, generate_pair
 
 
@@ -115,8 +116,6 @@ def test_without_poselib_opencv_takes_its_place_and_the_record_says_so(monkeypat
     """Found by a newcomer trial: a plain `pip install -e .` has no PoseLib, and the shipped
     order ['poselib', 'fused', ...] then recommended `fused` (measured with PoseLib as its base,
     and within the noise of PoseLib on the calibration pairs) without a word."""
-    import dataclasses
-
     from strl_pyg import inference
     from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.synthetic import SceneConfig, generate_pair
@@ -125,7 +124,7 @@ def test_without_poselib_opencv_takes_its_place_and_the_record_says_so(monkeypat
     assert model.metadata["recommended_order"][0] == "poselib"
     spec = inference.METHODS["poselib"]
     monkeypatch.setitem(inference.METHODS, "poselib",
-                        dataclasses.replace(spec, available=lambda: False))
+                        FunctionMethod.like(spec, available=lambda: False))
     order = inference.recommended_order(model)
     assert order[0] == "opencv" and "poselib" not in order and order.count("opencv") == 1
     rest = [m for m in model.metadata["recommended_order"] if m not in ("poselib", "opencv")]
@@ -152,9 +151,8 @@ def test_without_poselib_opencv_takes_its_place_and_the_record_says_so(monkeypat
 def test_the_recommended_path_runs_each_method_at_most_once(model, pair, monkeypatch):
     """Before, every prefix of the order got a fresh PoseEstimator that re-ran the methods of
     the earlier prefixes (fused failing -> regression and opencv ran again for 'opencv')."""
-    import dataclasses
-
     from strl_pyg.inference import METHODS
+    from strl_pyg.inference.registry import FunctionMethod
     from strl_pyg.inference.record import MethodResult
 
     calls: dict[str, int] = {}
@@ -168,7 +166,7 @@ def test_the_recommended_path_runs_each_method_at_most_once(model, pair, monkeyp
         return run
 
     for name, spec in list(METHODS.items()):
-        monkeypatch.setitem(METHODS, name, dataclasses.replace(spec, fn=counted(name, spec.fn)))
+        monkeypatch.setitem(METHODS, name, FunctionMethod.like(spec, counted(name, spec)))
     mdl = _with_order(model, ("fused", "opencv"))
     est = estimate_recommended(mdl, pair.image0, pair.image1, pair.K, pair.K)
     assert est.status == "ok" and est.pose.method == "opencv"
@@ -224,16 +222,14 @@ def _outliers_checked(est) -> bool:
 def test_the_recommended_path_checks_a_point_poor_pair_once(model, monkeypatch):
     """The point-poor pair used to be checked (deduplicated, intrinsics) once per method
     tried: with vp not "ok", again for PoseLib, the next of the order."""
-    import dataclasses
-
     from strl_pyg.data.matches import PairMatches
     from strl_pyg.inference import estimator
     from strl_pyg.inference.record import MethodResult
 
     p = generate_pair(2, SceneConfig(kind="street", image_size=(240, 320)))
-    monkeypatch.setitem(estimator.METHODS, "vp", dataclasses.replace(
-        estimator.METHODS["vp"], fn=lambda m, ctx: MethodResult("vp", "failed",
-                                                                warnings=["planted"])))
+    monkeypatch.setitem(estimator.METHODS, "vp", FunctionMethod.like(
+        estimator.METHODS["vp"], lambda m, ctx: MethodResult("vp", "failed",
+                                                             warnings=["planted"])))
     dedup = _counting(monkeypatch, PairMatches, "deduplicated")
     from strl_pyg.inference import pair as pair_run
 
@@ -291,8 +287,6 @@ def test_the_walk_gives_the_full_runs_pose_when_the_regression_stands_in(model, 
                                                                          monkeypatch):
     """Found in review: the walk stopped at a regression it then refused (no supported solver
     yet), where running every method lets a supported solver outside the order (vp) keep it."""
-    import dataclasses
-
     import torch
 
     from strl_pyg.geometry import Pose
@@ -310,7 +304,7 @@ def test_the_walk_gives_the_full_runs_pose_when_the_regression_stands_in(model, 
         return lambda m, ctx: MethodResult(name, "failed", warnings=["planted"])
 
     for name, spec in list(estimator.METHODS.items()):
-        monkeypatch.setitem(estimator.METHODS, name, dataclasses.replace(spec, fn=planted(name)))
+        monkeypatch.setitem(estimator.METHODS, name, FunctionMethod.like(spec, planted(name)))
     mdl = _with_order(model, ("poselib", "regression"))
     full = PoseEstimator(mdl).estimate(pair.matches)
     lazy = PoseEstimator(mdl, methods="recommended").estimate(pair.matches)
@@ -320,8 +314,6 @@ def test_the_walk_gives_the_full_runs_pose_when_the_regression_stands_in(model, 
 
 
 def test_known_results_are_taken_by_the_recommended_walk(model, pair, monkeypatch):
-    import dataclasses
-
     from strl_pyg.inference import estimator
     from strl_pyg.inference.registry import classical_method
 
@@ -330,8 +322,8 @@ def test_known_results_are_taken_by_the_recommended_walk(model, pair, monkeypatc
     base = classical_method()
     assert first.pose.method == base
     spec = estimator.METHODS[base]
-    monkeypatch.setitem(estimator.METHODS, base, dataclasses.replace(
-        spec, fn=lambda *a: (_ for _ in ()).throw(AssertionError("ran again"))))
+    monkeypatch.setitem(estimator.METHODS, base, FunctionMethod.like(
+        spec, lambda *a: (_ for _ in ()).throw(AssertionError("ran again"))))
     again = PoseEstimator(model, methods="recommended").estimate(
         m, known={base: first.methods[base]})
     np.testing.assert_array_equal(again.T_0to1, first.T_0to1)
@@ -371,15 +363,13 @@ def torch_equal(a, b) -> bool:
 def test_decisions_read_typed_fields_not_info_keys(monkeypatch):
     """A method that raises is ``failed`` with ``raised`` set (and ``info["raised"]`` in the
     JSON record); the recommended pose names it, whatever its message says."""
-    import dataclasses
-
-    from strl_pyg.inference.registry import METHODS
+    from strl_pyg.inference.registry import METHODS, FunctionMethod
     from strl_pyg.inference.record import MethodResult
 
     def boom(matches, ctx):
         raise RuntimeError("unsupported and raised are words, not decisions")
 
-    monkeypatch.setitem(METHODS, "opencv", dataclasses.replace(METHODS["opencv"], fn=boom))
+    monkeypatch.setitem(METHODS, "opencv", FunctionMethod.like(METHODS["opencv"], boom))
     m = generate_pair(2).matches
     est = PoseEstimator(methods=("opencv", "poselib")).estimate(m)
     rec = est.methods["opencv"]
