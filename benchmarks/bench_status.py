@@ -239,7 +239,7 @@ def plot(rows, path: Path) -> None:
             a.plot(gs, [bm.auc([r[key] for r in rows if r["gap"] == g and r["variant"] == v],
                                10) for g in gs], "o-", label=label)
         a.set_xscale("log", base=2)
-        a.set_title(f"intrinsics: {v}")
+        a.set_title(f"input: {v}" if v == "dup" else f"intrinsics: {v}")
         a.set_xlabel("frame gap g")
         a.grid(alpha=0.3)
     ax[0].set_ylabel("AUC@10 (%), not ok = 180 deg")
