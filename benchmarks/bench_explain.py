@@ -139,7 +139,7 @@ def _plot(rows, path: Path) -> None:
 
     from strl_pyg.viz.plots import save_figure
 
-    fig = Figure(figsize=(7, 4.5))
+    fig = Figure(figsize=(8.5, 4.5))
     ax = fig.subplots()
     data = [[r["random"] for r in rows]] + [[r[m] for r in rows] for m in METHODS]
     ax.boxplot(data, showfliers=False)
