@@ -280,7 +280,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fit", type=int, default=0, metavar="N",
                     help="first fit vp_checked's angle and slack on N calibration pairs and "
                          "print the grid (the package's constants are not changed: set them "
-                         "in strl_pyg/inference/methods.py)")
+                         "in strl_pyg/inference/methods/vanishing_point.py)")
     ap.add_argument("--sets", default=",".join(SETS),
                     help=f"comma-separated sets to score, of {', '.join(SETS)} and "
                          "'calibration' (the --fit split: the evidence for an order)")

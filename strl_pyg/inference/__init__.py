@@ -1,5 +1,5 @@
 """Pose of one image pair by every method: :class:`PoseEstimator` (:mod:`.estimator`), the
-method registry (:mod:`.registry`), the method classes (:mod:`.methods`, :mod:`.line_methods`),
+method registry (:mod:`.registry`), the method classes (:mod:`.methods`, a module per concept),
 the support check (:mod:`.support`), the input checks (:mod:`.checks`), the network's input
 graph (:mod:`.network`), the records (:mod:`.record`) and the lazy recommended path
 (:mod:`.recommended`).
@@ -21,7 +21,7 @@ _EXPORTS = {
     "ZERO_PARALLAX_FRACTION": "strl_pyg.inference.checks",
     "FOCAL_RANGE": "strl_pyg.inference.checks",
     "MethodResult": "strl_pyg.inference.record",
-    "MethodContext": "strl_pyg.inference.methods",
+    "MethodContext": "strl_pyg.inference.methods.context",
     "PoseEstimate": "strl_pyg.inference.record",
     "prepare_matches": "strl_pyg.inference.network",
     "prepare_graph": "strl_pyg.inference.network",
@@ -32,13 +32,13 @@ _EXPORTS = {
     "RECOMMENDED_ORDER": "strl_pyg.inference.policy",
     "RECOMMENDED": "strl_pyg.inference.registry",
     "POINT_POOR_ORDER": "strl_pyg.inference.policy",
-    "POINT_POOR_MAX_POINTS": "strl_pyg.inference.methods",
+    "POINT_POOR_MAX_POINTS": "strl_pyg.inference.methods.context",
     "recommended_order": "strl_pyg.inference.policy",
     "METHODS": "strl_pyg.inference.registry",
     "FunctionMethod": "strl_pyg.inference.registry",
     "PoseEstimator": "strl_pyg.inference.estimator",
     "register_method": "strl_pyg.inference.registry",
-    "MethodFn": "strl_pyg.inference.methods",
+    "MethodFn": "strl_pyg.inference.methods.context",
     "MIN_INLIER_RATIO": "strl_pyg.inference.support",
     "MIN_SUPPORT_INLIERS": "strl_pyg.inference.support",
     "SUPPORT_BAND": "strl_pyg.inference.support",

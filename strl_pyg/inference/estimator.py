@@ -23,7 +23,7 @@ only with ``"ok"``.
 The folder's modules: the records (:mod:`~strl_pyg.inference.record`), the input checks
 (:mod:`~strl_pyg.inference.checks`), the network's graph and forward
 (:mod:`~strl_pyg.inference.network`), the method classes (:mod:`~strl_pyg.inference.methods`,
-:mod:`~strl_pyg.inference.line_methods`) and their registry (:mod:`~strl_pyg.inference.registry`:
+:mod:`~strl_pyg.inference.methods.vanishing_point`) and their registry (:mod:`~strl_pyg.inference.registry`:
 ``register_method(MyMethod())``, a :class:`~strl_pyg.inference.registry.PoseMethod`), one
 pair's run (:mod:`~strl_pyg.inference.pair`), the calibration
 (:mod:`~strl_pyg.inference.calibration`), the recommended order
@@ -54,15 +54,8 @@ from strl_pyg.inference.evidence import (
     learned_pose_evidence,
     pair_geometry,
 )
-from strl_pyg.inference.methods import (
-    Classical,
-    Fused,
-    Geometric,
-    Guided,
-    MethodContext,
-    Regression,
-)
-from strl_pyg.inference.line_methods import VanishingPoint, VanishingPointChecked
+from strl_pyg.inference.methods import builtin_methods
+from strl_pyg.inference.methods.context import MethodContext
 from strl_pyg.inference.pair import (
     PairRun,
     attach_fundamental,
@@ -94,8 +87,7 @@ __all__ = ["PoseEstimator"]
 
 
 # the built-in methods, in the order they run
-for _method in (Regression(), Classical("opencv"), Classical("poselib"), Fused(), Geometric(),
-                Guided(), VanishingPoint(), VanishingPointChecked()):
+for _method in builtin_methods():
     register_method(_method)
 
 

@@ -24,7 +24,7 @@ from strl_pyg.inference.checks import (
     intrinsics_problems,
     zero_parallax,
 )
-from strl_pyg.inference.methods import MethodContext
+from strl_pyg.inference.methods.context import MethodContext
 from strl_pyg.inference.record import MethodResult, PoseEstimate
 from strl_pyg.inference.registry import METHODS
 

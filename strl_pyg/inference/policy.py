@@ -12,7 +12,7 @@ from __future__ import annotations
 from typing import Any
 
 from strl_pyg.inference.config import CheckpointSettings
-from strl_pyg.inference.methods import POINT_POOR_MAX_POINTS
+from strl_pyg.inference.methods.context import POINT_POOR_MAX_POINTS
 from strl_pyg.inference.registry import METHODS
 
 __all__ = ["RECOMMENDED_ORDER", "POINT_POOR_ORDER", "POSELIB_MISSING", "recommended_order",

@@ -36,7 +36,7 @@ class PoseMethod:
     ``support_checked``, ``bootstrapped``, ``classical_base``, ``needs_geometric_head``), and
     :meth:`available` says whether it is installed. Register one with
     ``register_method(MyMethod())``; the built-in ones are in
-    :mod:`strl_pyg.inference.methods` and :mod:`strl_pyg.inference.line_methods`."""
+    :mod:`strl_pyg.inference.methods`, a module per concept."""
 
     name: str = ""
     label: str = ""

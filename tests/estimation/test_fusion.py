@@ -240,7 +240,8 @@ def test_estimator_fusion_uses_the_checkpoints_inflation():
 
     from strl_pyg.estimation.pose_fusion import fuse_poses
     from strl_pyg.inference.estimator import PoseEstimator
-    from strl_pyg.inference.methods import swap_covariance, swap_term
+    from strl_pyg.estimation.uncertainty import swap_covariance
+    from strl_pyg.inference.methods import swap_term
     from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.synthetic import SceneConfig, generate_pair
 

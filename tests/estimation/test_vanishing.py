@@ -477,9 +477,9 @@ def test_vp_checked_takes_vp_where_the_classical_rotation_contradicts_the_lines(
     """A planted classical pose 20 deg off (as a 5-point solve on a handful of points may be)
     and as well supported as vp's: the lines' vanishing direction contradicts it, so
     vp_checked answers with vp's pose; a right classical pose is kept as it is."""
-    from strl_pyg.inference.line_methods import VP_CHECK_ANGLE_DEG, VanishingPointChecked
+    from strl_pyg.inference.methods import VP_CHECK_ANGLE_DEG, VanishingPointChecked
     from strl_pyg.inference.config import EstimatorConfig
-    from strl_pyg.inference.methods import MethodContext
+    from strl_pyg.inference.methods.context import MethodContext
 
     m, R, t = manhattan_pair(1, n_points=15, noise=0.3)
     ctx = MethodContext(EstimatorConfig(bootstrap=0))
@@ -499,9 +499,9 @@ def test_vp_checked_takes_vp_where_the_classical_rotation_contradicts_the_lines(
 
 
 def test_vp_checked_keeps_a_classical_pose_that_fits_clearly_more_points():
-    from strl_pyg.inference.line_methods import VP_CHECK_SUPPORT_SLACK, VanishingPointChecked
+    from strl_pyg.inference.methods import VP_CHECK_SUPPORT_SLACK, VanishingPointChecked
     from strl_pyg.inference.config import EstimatorConfig
-    from strl_pyg.inference.methods import MethodContext
+    from strl_pyg.inference.methods.context import MethodContext
 
     m, R, t = manhattan_pair(1, n_points=15, noise=0.3)
     vp = PoseEstimator(methods=("vp",), bootstrap=0).estimate(m).methods["vp"]
@@ -514,7 +514,7 @@ def test_vp_checked_keeps_a_classical_pose_that_fits_clearly_more_points():
 
 
 def test_vp_checked_is_the_classical_pose_where_points_are_many_or_lines_absent():
-    from strl_pyg.inference.methods import POINT_POOR_MAX_POINTS
+    from strl_pyg.inference.methods.context import POINT_POOR_MAX_POINTS
 
     base = _base()
     m, _, _ = manhattan_pair(0, n_points=POINT_POOR_MAX_POINTS + 10, noise=0.3)

@@ -138,7 +138,7 @@ def test_the_data_check_widens_the_regression_covariance_by_its_distance_to_the_
 
 
 def _ctx():
-    from strl_pyg.inference.methods import MethodContext
+    from strl_pyg.inference.methods.context import MethodContext
 
     return MethodContext(EstimatorConfig(seed=0, threshold_px=1.0, bootstrap=0))
 
@@ -151,7 +151,7 @@ def test_the_data_check_measures_how_far_a_wrong_pose_is_from_what_the_matches_s
     import torch
 
     from strl_pyg.geometry import Pose, so3_exp
-    from strl_pyg.inference.methods import _data_disagreement
+    from strl_pyg.inference.methods.regression import _data_disagreement
     from strl_pyg.synthetic import SceneConfig
 
     p = generate_pair(2_000_011, SceneConfig(kind="indoor", noise_px=0.3))
@@ -172,7 +172,7 @@ def test_the_data_check_measures_how_far_a_wrong_pose_is_from_what_the_matches_s
 
 def test_the_data_check_and_the_classical_method_share_one_solve(monkeypatch):
     from strl_pyg.estimation.classical import have_poselib
-    from strl_pyg.inference import methods
+    from strl_pyg.inference.methods import context as methods  # the pair's one solve
 
     calls = []
     real = methods.estimate_relative_pose
@@ -199,7 +199,7 @@ def test_the_data_check_says_why_it_did_not_run():
     import torch
 
     from strl_pyg.geometry import Pose
-    from strl_pyg.inference.methods import _data_disagreement
+    from strl_pyg.inference.methods.regression import _data_disagreement
 
     p = generate_pair(2_000_005)
     pose = Pose.from_matrix(torch.as_tensor(p.T_0to1, dtype=torch.float64))
@@ -214,7 +214,7 @@ def test_the_data_check_says_why_it_did_not_run():
 
 
 def test_the_regression_says_when_its_data_check_did_not_run(monkeypatch):
-    from strl_pyg.inference import methods
+    from strl_pyg.inference.methods import regression as methods
 
     def broken(*args):
         raise RuntimeError("planted")
@@ -239,7 +239,7 @@ def test_numpy_scalars_are_options_as_python_ones():
 
 
 def test_a_failing_swap_pass_leaves_the_regression_with_a_warning(monkeypatch):
-    import strl_pyg.inference.methods as methods
+    import strl_pyg.inference.methods.regression as methods
 
     def boom(*a, **k):
         raise RuntimeError("out of memory\nmore")

@@ -178,7 +178,7 @@ def test_a_failed_classical_solver_is_failed_and_not_used(model, pair, monkeypat
 
     import strl_pyg.estimation.guided as guided
 
-    monkeypatch.setattr(pose_methods, "estimate_relative_pose", no_model)
+    monkeypatch.setattr(pose_methods.context, "estimate_relative_pose", no_model)
     monkeypatch.setattr(guided, "estimate_relative_pose", no_model)
     monkeypatch.setattr(guided, "_opencv_prosac", lambda *a, **k: None)
     est = PoseEstimator(model).estimate(pair.matches)
@@ -196,7 +196,7 @@ def test_a_failed_classical_solver_is_failed_and_not_used(model, pair, monkeypat
 
 
 def test_all_methods_failing_gives_status_failed(pair, monkeypatch):
-    monkeypatch.setattr(pose_methods, "estimate_relative_pose",
+    monkeypatch.setattr(pose_methods.context, "estimate_relative_pose",
                         lambda m, method, *a, **k: BaselineResult(
                             Pose.identity(), np.zeros(m.num_points, bool), 1.0, method, False))
     est = PoseEstimator(methods=("opencv",)).estimate(pair.matches)

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from strl_pyg.inference.methods import _add_bootstrap
+from strl_pyg.inference.methods.context import _add_bootstrap
 from strl_pyg.inference.record import MethodResult
 
 

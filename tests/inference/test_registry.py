@@ -80,9 +80,11 @@ def test_one_name_per_regime_and_per_bound():
     from strl_pyg.cli.readers import bootstrap_count
     from strl_pyg.estimation.uncertainty import MIN_BOOTSTRAP
     from strl_pyg.inference import estimator, methods, policy
+    from strl_pyg.inference.methods import context, vanishing_point
 
-    assert policy.POINT_POOR_MAX_POINTS is methods.POINT_POOR_MAX_POINTS
+    assert policy.POINT_POOR_MAX_POINTS is context.POINT_POOR_MAX_POINTS
     assert not hasattr(methods, "VP_CHECK_MAX_POINTS")
+    assert not hasattr(vanishing_point, "VP_CHECK_MAX_POINTS")
     assert bootstrap_count(str(MIN_BOOTSTRAP)) == MIN_BOOTSTRAP
     with pytest.raises(argparse.ArgumentTypeError):
         bootstrap_count(str(MIN_BOOTSTRAP - 1))
@@ -128,7 +130,7 @@ def test_a_pose_method_class_registers_with_its_own_spec(method_registry, tmp_pa
 
 def test_the_built_in_methods_are_classes_with_their_needs():
     from strl_pyg.estimation.classical import have_poselib
-    from strl_pyg.inference.line_methods import VanishingPointChecked
+    from strl_pyg.inference.methods import VanishingPointChecked
     from strl_pyg.inference.methods import Classical, Regression
 
     specs = est_mod.METHODS

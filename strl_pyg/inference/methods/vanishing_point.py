@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.inference.methods import (
+from strl_pyg.inference.methods.classical import Classical
+from strl_pyg.inference.methods.context import (
     POINT_POOR_MAX_POINTS,
     MethodContext,
-    Classical,
     classical_base,
     with_covariance,
 )

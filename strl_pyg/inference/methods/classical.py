@@ -1,0 +1,63 @@
+"""``opencv`` and ``poselib``: the classical essential-matrix solvers
+(:mod:`strl_pyg.estimation.classical`)."""
+
+from __future__ import annotations
+
+import time
+
+from strl_pyg.data.matches import PairMatches
+from strl_pyg.estimation.classical import have_poselib
+from strl_pyg.estimation.uncertainty import bootstrap_resamples
+from strl_pyg.inference.methods.context import MethodContext, _add_bootstrap, _solve
+from strl_pyg.inference.record import MethodResult
+from strl_pyg.inference.registry import PoseMethod
+
+__all__ = ["Classical"]
+
+
+class Classical(PoseMethod):
+    """A classical essential-matrix solver (:mod:`strl_pyg.estimation.classical`):
+    ``Classical("opencv")`` (OpenCV MAGSAC) or ``Classical("poselib")`` (PoseLib LO-RANSAC,
+    where installed), with the first-order covariance of its inliers and the bootstrap."""
+
+    bootstrapped = True
+    LABELS = {"opencv": "OpenCV MAGSAC", "poselib": "PoseLib"}
+
+    def __init__(self, solver: str) -> None:
+        if solver not in self.LABELS:
+            raise ValueError(f"Expected a classical solver in {sorted(self.LABELS)} "
+                             f"(got {solver!r})")
+        self.name, self.label = solver, self.LABELS[solver]
+
+    def available(self) -> bool:
+        return self.name != "poselib" or have_poselib()
+
+    def __call__(self, matches: PairMatches, ctx: MethodContext) -> MethodResult:
+        name = self.name
+        from strl_pyg.estimation.pose_fusion import classical_covariance
+
+        thr = ctx.config.threshold_px
+        res = _solve(name, matches, ctx)
+        if not res.success:
+            return MethodResult(name, "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
+                                warnings=[f"{name} found no pose (no essential matrix with "
+                                          "points in front of both cameras)"])
+        warnings, cov, info = [], None, dict(res.info)
+        try:
+            cov = classical_covariance(res.pose, matches, res.inliers, threshold_px=thr)[1]
+            cov = cov.numpy()
+        except ValueError as err:
+            warnings.append(f"{name}: no covariance ({err})")
+        rec = MethodResult(name, "ok", res.pose, cov, warnings, res.time_ms,
+                           res.num_inliers, info=info, raw=res)
+        if cov is not None and ctx.config.bootstrap:
+            # first order (noise around a right solution) + bootstrap (instability of the
+            # solution itself), see strl_pyg.estimation.uncertainty
+            start = time.perf_counter()
+            boot = bootstrap_resamples(matches, res.pose, name, ctx.config.bootstrap, thr,
+                                       ctx.config.seed)
+            rec.time_ms += (time.perf_counter() - start) * 1e3
+            ctx.cache[f"bootstrap_{name}"] = boot  # guided and fused reuse it
+        else:
+            boot = None
+        return _add_bootstrap(rec, boot, ctx.config.bootstrap, "first-order")

@@ -1,0 +1,146 @@
+"""What every pose method shares: the pair's :class:`MethodContext` (configuration, model,
+the results of the methods run before, shared work), the one classical solve a pair gets
+(:func:`_solve`), the classical base other methods start from, the network's full forward
+pass, and the covariance and bootstrap helpers."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+
+from strl_pyg.data.matches import PairMatches
+from strl_pyg.estimation.classical import estimate_relative_pose, have_poselib
+from strl_pyg.estimation.uncertainty import FAR_ROTATION_DEG, FAR_TRANSLATION_DEG, MIN_BOOTSTRAP
+from strl_pyg.inference.config import CheckpointSettings, EstimatorConfig
+from strl_pyg.inference.network import network_pose
+from strl_pyg.inference.record import MethodResult
+
+__all__ = ["MethodContext", "MethodFn", "DATA_CHECK_MIN_POINTS", "POINT_POOR_MAX_POINTS",
+           "classical_base", "with_covariance"]
+
+
+@dataclass
+class MethodContext:
+    """What a method sees besides the matches: the estimator's one read-only configuration
+    (:class:`~strl_pyg.inference.config.EstimatorConfig`: seed, classical inlier threshold,
+    bootstrap count, device, resampling, the swap and data checks, the support thresholds),
+    the model (loaded on first use by ``load_model``), what the checkpoint says, the results
+    of the methods run before it, and shared work (e.g. a forward pass)."""
+
+    config: EstimatorConfig = field(default_factory=EstimatorConfig)
+    load_model: Callable[[], torch.nn.Module] | None = field(default=None, repr=False)
+    results: dict[str, MethodResult] = field(default_factory=dict)
+    cache: dict[str, Any] = field(default_factory=dict)
+    #: what the checkpoint says (calibration, fusion inflation); None: read from ``model``
+    settings: CheckpointSettings | None = None
+
+    @property
+    def model(self) -> torch.nn.Module:
+        if "model" not in self.cache:
+            if self.load_model is None:
+                raise ValueError("Expected a model for a network method (got none)")
+            self.cache["model"] = self.load_model()
+        return self.cache["model"]
+
+
+MethodFn = Callable[[PairMatches, MethodContext], MethodResult]
+
+
+# ----------------------------------------------------------------------------- methods
+
+
+DATA_CHECK_MIN_POINTS = 8
+
+
+def _solve(name: str, matches: PairMatches, ctx: MethodContext) -> Any:
+    """The classical solver ``name`` on the pair, run once per pair (the data check and the
+    classical method share it)."""
+    key = f"solve_{name}"
+    if key not in ctx.cache:
+        ctx.cache[key] = estimate_relative_pose(matches, name, ctx.config.threshold_px,
+                                                seed=ctx.config.seed)
+    return ctx.cache[key]
+
+
+def classical_base(ctx: MethodContext) -> str:
+    """The classical solver a method reads: the one the run holds a result of (PoseLib first),
+    else PoseLib where installed, else OpenCV; a method's ``"classical"`` dependency is that
+    solver (:func:`~strl_pyg.inference.registry.methods_needed`)."""
+    return next((c for c in ("poselib", "opencv") if c in ctx.results),
+                "poselib" if have_poselib() else "opencv")
+
+
+#: The point-poor regime, one bound for everything that depends on it: at or below this many
+#: point matches the recommended order puts the line solver first (``POINT_POOR_ORDER``) and
+#: ``vp_checked`` consults the lines (above it, it is the classical pose). It is the definition
+#: of the evaluation set ``point_poor`` and its calibration split, not a fit.
+POINT_POOR_MAX_POINTS = 30
+
+
+def _full_forward(matches: PairMatches, ctx: MethodContext):
+    """The network on every match (no resampling: the geometric head weighs each match),
+    computed once per pair and shared by ``geometric`` and ``guided``."""
+    if "full_forward" not in ctx.cache:
+        model = ctx.model
+        start = time.perf_counter()
+        out = network_pose(model, matches, ctx.config.seed, None, ctx.config.device)
+        ctx.cache["full_forward"] = (out, (time.perf_counter() - start) * 1e3)
+    return ctx.cache["full_forward"]
+
+
+def _no_head(name: str, ctx: MethodContext) -> MethodResult | None:
+    if not getattr(ctx.model.config, "geometric", False):
+        return MethodResult(name, "failed", warnings=[
+            f"{name} needs a model with the geometric head (config.geometric=True); this "
+            "checkpoint has only the regression head"])
+    return None
+
+
+def with_covariance(name: str, pose: Any, matches: PairMatches, thr: float,
+                     **kw: Any) -> MethodResult:
+    """An ``"ok"`` record of ``pose`` (a float64 :class:`~strl_pyg.geometry.Pose`) with the
+    first-order covariance of the point matches within ``thr`` px of it."""
+    from strl_pyg.estimation.classical import normalised_matches
+    from strl_pyg.estimation.pose_fusion import classical_covariance
+    from strl_pyg.geometry import pose_sampson
+
+    x0, x1, focal = normalised_matches(matches)
+    inl = (pose_sampson(pose.R, pose.t, x0, x1).abs() < thr / focal).numpy()
+    warnings = list(kw.pop("warnings", []))
+    cov = None
+    try:
+        cov = classical_covariance(pose, matches, inl, threshold_px=thr)[1].numpy()
+    except ValueError as err:
+        warnings.append(f"{name}: no covariance ({err})")
+    return MethodResult(name, "ok", pose, cov, warnings, num_inliers=int(inl.sum()), **kw)
+
+
+def _add_bootstrap(rec: MethodResult, boot: np.ndarray | None, n_boot: int, kind: str,
+                   source: str = "", resampled: str | None = None) -> MethodResult:
+    """``rec`` with the bootstrap term ``boot`` added to its covariance (if both exist) and
+    ``info["covariance"]`` saying which covariance it carries (``kind``, ``+ <source>bootstrap
+    (n)``); a warning when the bootstrap was asked for but gave too few poses."""
+    if rec.covariance is None:
+        return rec
+    if boot is not None:
+        rec.covariance = rec.covariance + boot.covariance
+        rec.info["covariance"] = f"{kind} + {source}bootstrap ({n_boot})"
+        rec.info["bootstrap_far"] = boot.far
+        if boot.far:  # named by the solve it resampled: said once per pose, however many
+            who = resampled or source.strip() or rec.method  # methods reuse it
+            rec.warnings.append(
+                f"{who} bootstrap: {boot.far} of {boot.resamples} resamples found "
+                f"another pose (over {FAR_ROTATION_DEG:g} deg in rotation or "
+                f"{FAR_TRANSLATION_DEG:g} deg in translation away): the matches do not "
+                "single out this solution; its sigma includes the others")
+    else:
+        rec.info["covariance"] = kind
+        if n_boot:
+            rec.warnings.append(f"{rec.method}: fewer than {MIN_BOOTSTRAP} of {n_boot} "
+                                f"bootstrap resamples gave a pose; {kind} covariance only")
+    return rec
