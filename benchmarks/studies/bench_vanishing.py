@@ -189,8 +189,8 @@ def fit(cache: Path, n: int) -> tuple[float, int, str]:
 
     from strl_pyg.estimation import line_refine as L
     from strl_pyg.inference import PoseEstimator
-    from strl_pyg.inference import line_methods as LM
-    from strl_pyg.inference import methods as M
+    from strl_pyg.inference.methods import vanishing_point as LM
+    from strl_pyg.inference.methods import context as M
     from strl_pyg.inference.support import check_support
 
     pairs = ae.point_poor_pairs(cache, n, seed0=CALIBRATION_SEED)
@@ -265,7 +265,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from strl_pyg.estimation import line_refine as L
     from strl_pyg.frontend import FrontendConfig
-    from strl_pyg.inference import line_methods as LM
+    from strl_pyg.inference.methods import vanishing_point as LM
     from strl_pyg.inference import POINT_POOR_MAX_POINTS
     from strl_pyg.metrics.stats import median_ratio_interval
     from strl_pyg.model.strl_pose import StrLPose

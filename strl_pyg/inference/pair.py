@@ -156,8 +156,7 @@ class PairRun:
                                else lined.line_scores[li], info=info)
         self.ctx.results = {m: r for m, r in self.ctx.results.items()
                             if m in METHODS and not METHODS[m].reads_lines}
-        for key in ("vanishing_directions", "full_forward"):  # read the lines
-            self.ctx.cache.pop(key, None)
+        self.ctx.forget_lines()
 
     def _first_rows(self) -> np.ndarray:
         """The input row kept for every checked row (the first of its repeats)."""

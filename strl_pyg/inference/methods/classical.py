@@ -57,7 +57,7 @@ class Classical(PoseMethod):
             boot = bootstrap_resamples(matches, res.pose, name, ctx.config.bootstrap, thr,
                                        ctx.config.seed)
             rec.time_ms += (time.perf_counter() - start) * 1e3
-            ctx.cache[f"bootstrap_{name}"] = boot  # guided and fused reuse it
+            ctx.bootstraps[name] = boot  # guided and fused reuse it
         else:
             boot = None
         return _add_bootstrap(rec, boot, ctx.config.bootstrap, "first-order")

@@ -30,22 +30,40 @@ class MethodContext:
     (:class:`~strl_pyg.inference.config.EstimatorConfig`: seed, classical inlier threshold,
     bootstrap count, device, resampling, the swap and data checks, the support thresholds),
     the model (loaded on first use by ``load_model``), what the checkpoint says, the results
-    of the methods run before it, and shared work (e.g. a forward pass)."""
+    of the methods run before it, and the work they share, each in its own field (one solve
+    per solver, its bootstrap, the network's full forward pass, the lines' vanishing
+    directions)."""
 
     config: EstimatorConfig = field(default_factory=EstimatorConfig)
     load_model: Callable[[], torch.nn.Module] | None = field(default=None, repr=False)
     results: dict[str, MethodResult] = field(default_factory=dict)
-    cache: dict[str, Any] = field(default_factory=dict)
     #: what the checkpoint says (calibration, fusion inflation); None: read from ``model``
     settings: CheckpointSettings | None = None
+    #: the network, once loaded (:attr:`model`)
+    loaded_model: torch.nn.Module | None = field(default=None, repr=False)
+    #: each classical solver's one solve of the pair (:func:`_solve`), by solver name
+    solves: dict[str, Any] = field(default_factory=dict, repr=False)
+    #: each classical solver's bootstrap resamples, by solver name (guided and fused reuse them)
+    bootstraps: dict[str, Any] = field(default_factory=dict, repr=False)
+    #: the network on every match and its time in ms (:func:`_full_forward`)
+    full_forward: tuple[Any, float] | None = field(default=None, repr=False)
+    #: the lines' vanishing directions (``vp``, ``vp_checked``)
+    vanishing_directions: list | None = field(default=None, repr=False)
+    #: the classical start of ``vp``'s joint refinement, where no classical method ran
+    vp_start: MethodResult | None = field(default=None, repr=False)
 
     @property
     def model(self) -> torch.nn.Module:
-        if "model" not in self.cache:
+        if self.loaded_model is None:
             if self.load_model is None:
                 raise ValueError("Expected a model for a network method (got none)")
-            self.cache["model"] = self.load_model()
-        return self.cache["model"]
+            self.loaded_model = self.load_model()
+        return self.loaded_model
+
+    def forget_lines(self) -> None:
+        """Drops the shared work that read the lines (the pair's lines were replaced)."""
+        self.vanishing_directions = None
+        self.full_forward = None
 
 
 MethodFn = Callable[[PairMatches, MethodContext], MethodResult]
@@ -60,11 +78,10 @@ DATA_CHECK_MIN_POINTS = 8
 def _solve(name: str, matches: PairMatches, ctx: MethodContext) -> Any:
     """The classical solver ``name`` on the pair, run once per pair (the data check and the
     classical method share it)."""
-    key = f"solve_{name}"
-    if key not in ctx.cache:
-        ctx.cache[key] = estimate_relative_pose(matches, name, ctx.config.threshold_px,
-                                                seed=ctx.config.seed)
-    return ctx.cache[key]
+    if name not in ctx.solves:
+        ctx.solves[name] = estimate_relative_pose(matches, name, ctx.config.threshold_px,
+                                                  seed=ctx.config.seed)
+    return ctx.solves[name]
 
 
 def classical_base(ctx: MethodContext) -> str:
@@ -85,12 +102,12 @@ POINT_POOR_MAX_POINTS = 30
 def _full_forward(matches: PairMatches, ctx: MethodContext):
     """The network on every match (no resampling: the geometric head weighs each match),
     computed once per pair and shared by ``geometric`` and ``guided``."""
-    if "full_forward" not in ctx.cache:
+    if ctx.full_forward is None:
         model = ctx.model
         start = time.perf_counter()
         out = network_pose(model, matches, ctx.config.seed, None, ctx.config.device)
-        ctx.cache["full_forward"] = (out, (time.perf_counter() - start) * 1e3)
-    return ctx.cache["full_forward"]
+        ctx.full_forward = (out, (time.perf_counter() - start) * 1e3)
+    return ctx.full_forward
 
 
 def _no_head(name: str, ctx: MethodContext) -> MethodResult | None:

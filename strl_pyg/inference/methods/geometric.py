@@ -99,10 +99,9 @@ class Guided(PoseMethod):
             # matches; the refinement, when kept, is not re-run per resample
             start = time.perf_counter()
             subset = res.info.get("point_index")
-            key = f"bootstrap_{base}"
             if (subset is None and res.info["candidate"] == "all" and not res.info["refined"]
-                    and key in ctx.cache):
-                boot, resampled = ctx.cache[key], base
+                    and base in ctx.bootstraps):
+                boot, resampled = ctx.bootstraps[base], base
             else:
                 sub = matches if subset is None else matches.select(point_index=subset)
                 boot = bootstrap_resamples(sub, res.pose, base, n_boot,

@@ -61,9 +61,9 @@ class VanishingPoint(PoseMethod):
             from strl_pyg.inference.support import check_support
 
             base = classical_base(ctx)
-            cls = ctx.results.get(base) or ctx.cache.get("vp_start")
+            cls = ctx.results.get(base) or ctx.vp_start
             if cls is None:
-                cls = ctx.cache["vp_start"] = check_support(
+                cls = ctx.vp_start = check_support(
                     Classical(base)(matches, ctx), matches, ctx.config.threshold_px,
                     *ctx.config.support)
             starts = [cls.T_0to1] if cls.status == "ok" else []
@@ -85,9 +85,9 @@ def _vanishing_directions(matches: PairMatches, ctx: MethodContext) -> list:
     per pair and shared by ``vp`` and ``vp_checked``."""
     from strl_pyg.estimation.vanishing import vanishing_directions
 
-    if "vanishing_directions" not in ctx.cache:
-        ctx.cache["vanishing_directions"] = vanishing_directions(matches, seed=ctx.config.seed)
-    return ctx.cache["vanishing_directions"]
+    if ctx.vanishing_directions is None:
+        ctx.vanishing_directions = vanishing_directions(matches, seed=ctx.config.seed)
+    return ctx.vanishing_directions
 
 
 #: How far (deg) the classical rotation may carry the strongest vanishing direction shared by
