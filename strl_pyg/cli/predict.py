@@ -234,10 +234,8 @@ def _predict_pairs(args, methods: str) -> int:
             inputs = read_pair(one)
             estimator = estimator or _predict_estimator(args, names)
             img0, img1, K0, K1 = inputs
-            est = estimator.estimate_images(img0, img1, K0, K1,
-                                            frontend_config(args))
-            if inputs.downscaled:
-                _intrinsics_in_original_frame(est, inputs)
+            est = estimator.estimate_images(img0, img1, K0, K1, frontend_config(args),
+                                            original=inputs.original_frame)
             record = {"image0": a, "image1": b, **est.to_dict()}
             no_pose += STATUS_EXIT[est.status] == 1
         except (UsageError, OSError, ValueError, TypeError, KeyError) as err:  # as run_guarded
@@ -345,10 +343,8 @@ def cmd_predict(args) -> int:
         estimator = _predict_estimator(args, names)
         img0, img1, K0, K1 = inputs
         images = (img0, img1)
-        est = estimator.estimate_images(img0, img1, K0, K1,
-                                        frontend_config(args))
-        if inputs.downscaled:
-            _intrinsics_in_original_frame(est, inputs)
+        est = estimator.estimate_images(img0, img1, K0, K1, frontend_config(args),
+                                        original=inputs.original_frame)
     kind = estimator.model_config.translation  # without building the shipped network
     code = STATUS_EXIT[est.status]
     if args.json:
@@ -374,30 +370,6 @@ def cmd_predict(args) -> int:
             print(f"note: the recommended pose did not need the network, so --checkpoint "
                   f"{args.checkpoint} was not run; --methods all (or regression) shows its pose")
     return code
-
-
-def _intrinsics_in_original_frame(est, inputs) -> None:
-    """The intrinsics warnings of a pair matched downscaled (``--max-side``) quote the sizes
-    and K the user gave, not the downscaled ones (a 6000 px image's fx=4615 was quoted as
-    fx=153.8 at 1600 px)."""
-    from strl_pyg.inference.checks import intrinsics_problems
-
-    (s0, s1, sK0, sK1), (o0, o1, oK0, oK1) = tuple(inputs), inputs.original
-    small = intrinsics_problems(s0.shape[:2], s1.shape[:2], sK0, sK1)
-    original = intrinsics_problems(o0.shape[:2], o1.shape[:2], oK0, oK1)
-    if not small or len(small) != len(original):
-        return
-    swap = dict(zip(small, original, strict=True))
-
-    def fix(text: str) -> str:
-        for a, b in swap.items():
-            text = text.replace(a, b)
-        return text
-
-    for rec in (est.pose, *est.methods.values()):
-        rec.warnings = [fix(w) for w in rec.warnings]
-        if "unreliable" in rec.info:
-            rec.info["unreliable"] = [fix(w) for w in rec.info["unreliable"]]
 
 
 def _method_names(methods: str) -> tuple[str, ...] | str:

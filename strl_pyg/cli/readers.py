@@ -309,6 +309,16 @@ class PairInputs(tuple):
     def downscaled(self) -> bool:
         return self.scales != ((1.0, 1.0), (1.0, 1.0))
 
+    @property
+    def original_frame(self) -> dict | None:
+        """The sizes and intrinsics the user gave (``estimate_images(..., original=)``) where
+        the images were downscaled; ``None`` where they were not."""
+        if not self.downscaled:
+            return None
+        o0, o1, K0, K1 = self.original
+        return {"size0": tuple(np.shape(o0)[:2]), "size1": tuple(np.shape(o1)[:2]),
+                "K0": K0, "K1": K1}
+
     def to_original_frame(self, matches):
         """``matches`` of the downscaled images expressed in the original pixel frame
         (coordinates ``x = (x' + 0.5) / s - 0.5``, original sizes, intrinsics and images)."""

@@ -398,10 +398,12 @@ class PoseEstimator:
 
     def estimate_images(self, image0: np.ndarray, image1: np.ndarray, K0: Any = None,
                         K1: Any = None, frontend_config: Any = None,
-                        methods: Any = None) -> PoseEstimate:
+                        methods: Any = None, original: Any = None) -> PoseEstimate:
         """Matches two images with :func:`~strl_pyg.frontend.match_images`, then
         :meth:`estimate` (``methods`` as there). ``K1`` defaults to ``K0`` (one camera). No
-        matches at all gives status ``"degenerate"``. With :data:`RECOMMENDED`, the images
+        matches at all gives status ``"degenerate"``. ``original``: where the images are a
+        resized copy, the sizes and intrinsics the user gave (``{"size0", "size1", "K0",
+        "K1"}``, ``matches.info["original_frame"]``): the intrinsics warnings quote them. With :data:`RECOMMENDED`, the images
         are matched once: the points first, the line segments added to them (without
         detecting the points again) only when a method that reads lines is about to run and
         ``frontend_config.lines`` is on."""
@@ -427,8 +429,12 @@ class PoseEstimator:
             first = cfg
         try:
             matches = match_images(image0, image1, K0=K0, K1=K1, config=first)
+            if original is not None:
+                matches.info["original_frame"] = dict(original)
         except NoMatchesError as err:
-            warnings = input_warnings(np.shape(image0)[:2], np.shape(image1)[:2], K0, K1)
+            o = original or {"size0": np.shape(image0)[:2], "size1": np.shape(image1)[:2],
+                             "K0": K0, "K1": K1}
+            warnings = input_warnings(o["size0"], o["size1"], o["K0"], o["K1"])
             why = f"no matches: {str(err).splitlines()[0]}"
             records = {m: MethodResult(m, "degenerate", warnings=[why]) for m in names}
             return PoseEstimate(MethodResult(None, "degenerate", warnings=warnings + [why]),

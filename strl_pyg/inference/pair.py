@@ -59,9 +59,14 @@ def checked_pair(matches: PairMatches) -> tuple[PairMatches, list[str], np.ndarr
     """The pair's one input check: the matches with each correspondence once (every decision,
     minimum counts, support, bootstrap sigma, counts correspondences, not rows), the input
     warnings, the row of every input point in them, why the pair is degenerate (or ``None``)
-    and what is wrong with its intrinsics (:func:`intrinsics_problems`)."""
-    problems = intrinsics_problems(matches.image_size0, matches.image_size1, matches.K0,
-                                   matches.K1)
+    and what is wrong with its intrinsics (:func:`intrinsics_problems`), found once, in the
+    frame the user gave (``matches.info["original_frame"]``: the sizes and K of images that
+    were matched resized; the checks do not depend on the scale, their numbers do)."""
+    o = matches.info.get("original_frame") or {
+        "size0": matches.image_size0, "size1": matches.image_size1, "K0": matches.K0,
+        "K1": matches.K1}
+    problems = intrinsics_problems(o["size0"], o["size1"], o["K0"], o["K1"]) \
+        if matches.has_intrinsics else []
     warnings = list(problems) if matches.has_intrinsics else input_warnings(
         matches.image_size0, matches.image_size1, None, None)
     matches, repeats, rows = matches.deduplicated()

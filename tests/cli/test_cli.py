@@ -524,3 +524,31 @@ def test_the_command_line_runs_as_a_module():
     proc = subprocess.run([sys.executable, "-m", "strl_pyg.cli", "predict", "--help"],
                           capture_output=True, text=True, cwd=REPO, timeout=120)
     assert proc.returncode == 0 and "usage: strl-pose predict" in proc.stdout
+
+
+def test_a_downscaled_pair_checks_its_intrinsics_once_in_the_users_frame(tmp_path,
+                                                                        held_out_pair, capsys,
+                                                                        monkeypatch):
+    """Before: the CLI ran the check twice more (both frames) and replaced the warnings' text;
+    now the estimator renders the one check in the frame the user gave."""
+    import cv2
+
+    from strl_pyg.inference import checks, pair
+
+    calls = []
+    real = checks.intrinsics_problems
+
+    def counted(*args):
+        calls.append(args[0])
+        return real(*args)
+
+    monkeypatch.setattr(pair, "intrinsics_problems", counted)
+    monkeypatch.setattr(checks, "intrinsics_problems", counted)
+    for name, img in (("a.png", held_out_pair.image0), ("b.png", held_out_pair.image1)):
+        cv2.imwrite(str(tmp_path / name), cv2.resize(img, (3200, 960)))
+    code = cli_main(["predict", str(tmp_path / "a.png"), str(tmp_path / "b.png"),
+                     "--K", "100000,100000,1600,480", "--methods", "opencv",
+                     "--bootstrap", "0"])
+    out = capsys.readouterr().out
+    assert code == 3 and "fx=1e+05" in out and "(3200 px)" in out
+    assert [tuple(c) for c in calls] == [(960, 3200)]  # once, the original size
