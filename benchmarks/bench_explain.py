@@ -15,7 +15,6 @@ all matches and on the kept ones; "random" is the mean over ``--draws`` random r
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -26,7 +25,7 @@ from tqdm.auto import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_matches as bm  # noqa: E402
 import bench_status as bs  # noqa: E402
-from strl_bench_common import banner  # noqa: E402
+from strl_bench_common import banner, run_report_parser  # noqa: E402
 
 METHODS = ("saliency", "attention", "gnn")
 
@@ -150,9 +149,7 @@ def _plot(rows, path: Path) -> None:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("run", "report"))
-    ap.add_argument("--out", default="benchmarks/results_real_scenes/explain")
+    ap = run_report_parser(__doc__, "benchmarks/results_real_scenes/explain")
     ap.add_argument("--cache", default="outputs/bench_status_cache")
     ap.add_argument("--gaps", default="2,4,8")
     ap.add_argument("--per-gap", type=int, default=12)

@@ -27,7 +27,6 @@ outliers by the object-centred poses; they stay in, as they do for every method.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -39,7 +38,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_matches as bm  # noqa: E402
 import bench_pose as bp  # noqa: E402
 import bench_status as bs  # noqa: E402
-from strl_bench_common import banner  # noqa: E402
+from strl_bench_common import banner, run_report_parser  # noqa: E402
 
 K_NEIGHBOURS = 12
 #: shares of the best-ranked matches that PoseLib is run on (``top<percent>:<ranking>``)
@@ -250,9 +249,7 @@ def plot(pairs, rankers, path: Path) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("what", choices=("run", "report"))
-    ap.add_argument("--out", default="benchmarks/results_real_scenes/inlier_ranking")
+    ap = run_report_parser(__doc__, "benchmarks/results_real_scenes/inlier_ranking")
     ap.add_argument("--models", default="shipped:geometric")
     ap.add_argument("--scenes", choices=("val", "train"), default="val")
     ap.add_argument("--per-gap", type=int, default=12)

@@ -31,7 +31,6 @@ Rows are appended to ``<out>/rows.jsonl`` as they are measured (a rerun skips wh
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -42,7 +41,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from strl_bench_common import banner  # noqa: E402
+from strl_bench_common import banner, run_report_parser  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 VAL_SCENES = ("drone_hall", "fruit", "ethiopian_head", "office_drink")  # REAL_SCENES_SPLIT
@@ -369,9 +368,7 @@ def plot(summary: dict, fronts: list[str], path: Path) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("what", choices=("run", "report"))
-    ap.add_argument("--out", default="benchmarks/results_frontend/real")
+    ap = run_report_parser(__doc__, "benchmarks/results_frontend/real")
     ap.add_argument("--fronts", default="ours:legacy,ours:fast,ours:thorough,colmap,opencv-8k,"
                                         "opencv-8k-up2")
     ap.add_argument("--per-gap", type=int, default=6, help="pairs per scene and gap")

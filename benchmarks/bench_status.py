@@ -21,7 +21,6 @@ give) how many right and wrong poses it refused; the 2-sigma coverage per scene.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from dataclasses import replace
@@ -33,7 +32,7 @@ from tqdm.auto import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_matches as bm  # noqa: E402
 import bench_pose as bp  # noqa: E402
-from strl_bench_common import banner  # noqa: E402
+from strl_bench_common import banner, run_report_parser  # noqa: E402
 
 VARIANTS = ("true", "f/2", "2f", "swap", "dup")
 RIGHT_DEG, WRONG_DEG = 5.0, 10.0
@@ -251,9 +250,7 @@ def plot(rows, path: Path) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("what", choices=("run", "report"))
-    ap.add_argument("--out", default="benchmarks/results_real_scenes/status/val")
+    ap = run_report_parser(__doc__, "benchmarks/results_real_scenes/status/val")
     ap.add_argument("--scenes", choices=("val", "train"), default="val")
     ap.add_argument("--per-gap", type=int, default=12)
     ap.add_argument("--focal-range", type=float, default=None,

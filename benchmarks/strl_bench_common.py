@@ -1,7 +1,9 @@
-"""Helpers shared by the benchmarks: machine/version banner and a robust timer."""
+"""Helpers shared by the benchmarks: machine/version banner, a robust timer and the command
+line of a resumable ``run`` / ``report`` benchmark."""
 
 from __future__ import annotations
 
+import argparse
 import os
 import platform
 import statistics
@@ -46,3 +48,12 @@ def time_it(fn: Callable[[], object], repeat: int = 20, warmup: int = 3) -> dict
         "min_ms": min(times),
         "mean_ms": statistics.fmean(times),
     }
+
+
+def run_report_parser(doc: str, out: str) -> argparse.ArgumentParser:
+    """The command line of a benchmark that measures (``run``, resumable, rows in ``--out``)
+    and writes its report (``report``): its docstring's first paragraph as the description."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
+    ap.add_argument("what", choices=("run", "report"))
+    ap.add_argument("--out", default=out)
+    return ap

@@ -130,7 +130,7 @@ def explain_pose(model: nn.Module, data: Any, method: str = "gnn",
                  epochs: int = 100) -> PoseExplanation:
     """The importance of each point match and line segment of ``data`` (one pair graph) to
     ``model``'s pose, by one of :data:`EXPLAINERS` (module docstring); ``epochs``: the
-    GNNExplainer's optimisation steps. The model is put in eval mode."""
+    GNNExplainer's optimisation steps. The model runs in eval mode (its mode is restored)."""
     if method not in EXPLAINERS:
         raise ValueError(f"Expected method in {EXPLAINERS} (got {method!r})")
     if not (isinstance(epochs, int) and epochs >= 1):
@@ -138,8 +138,12 @@ def explain_pose(model: nn.Module, data: Any, method: str = "gnn",
     adapter = PoseExplainerModel(model, data)
     if adapter.num_nodes == 0:
         raise ValueError("Expected at least one point match or line segment (got none)")
+    was_training = model.training
     model.eval()
-    scores = _node_scores(adapter, method, epochs).detach().double().cpu().numpy()
+    try:
+        scores = _node_scores(adapter, method, epochs).detach().double().cpu().numpy()
+    finally:
+        model.train(was_training)
     scores = np.nan_to_num(scores, nan=0.0)
     points = scores[:adapter.num_points]
     ends = scores[adapter.num_points:]

@@ -48,6 +48,9 @@ def test_every_explainer_runs_on_the_complete_attention_path(method):
     assert np.all(np.isfinite(e.points)) and e.points.min() >= 0
     assert e.points.max() == pytest.approx(1.0) and e.lines.max() <= 1.0
     assert len(e.top_points(0.25)) == 6
+    model.train()
+    explain_pose(model, g, method, epochs=2)
+    assert model.training  # the caller's mode is restored
 
 
 def test_attention_explainer_reads_the_same_attention_on_both_paths():

@@ -142,22 +142,29 @@ def test_the_focal_check_reads_the_implied_essential_matrix():
     assert not any("focal lengths do not fit" in w for w in est.pose.warnings)
 
 
+def poselib_with_focal(seed: int, factor: float):
+    """PoseLib's record on a general pair whose focal lengths are scaled by ``factor`` (no
+    focal sensitivity), the scaled matches and its (rotation, translation) errors in deg."""
+    from dataclasses import replace
+
+    m, R, t = make_pair("general", n=400, seed=seed)
+    Kw = K.copy()
+    Kw[:2, :2] *= factor
+    wrong = replace(m, K0=Kw, K1=Kw)
+    rec = PoseEstimator(methods=("poselib",), focal_sensitivity=False).estimate(wrong)
+    rec = rec.methods["poselib"]
+    T = np.r_[np.c_[R, t], [[0, 0, 0, 1]]]
+    rot, tr = (float(v[0]) for v in relative_pose_error(rec.T_0to1[None], T[None]))
+    return rec, wrong, rot, tr
+
+
 def test_a_wrong_focal_length_widens_sigma_instead_of_a_tight_wrong_pose():
     """Before: with both focal lengths x2 PoseLib's pose was 'ok', 138 deg off in translation
     with sigma 4.5 deg (a confident wrong answer, > 3 sigma). The matches explain the pose
     as well at f / 2 and 2 f: the spread of those solves is in the sigma."""
-    from dataclasses import replace
-
     from strl_pyg.inference.evidence import focal_sensitivity
 
-    m, R, t = make_pair("general", n=400, seed=1)
-    Kw = K.copy()
-    Kw[:2, :2] *= 2
-    wrong = replace(m, K0=Kw, K1=Kw)
-    est = PoseEstimator(methods=("poselib",), focal_sensitivity=False).estimate(wrong)
-    rec = est.methods["poselib"]
-    T = np.r_[np.c_[R, t], [[0, 0, 0, 1]]]
-    rot, tr = (float(v[0]) for v in relative_pose_error(rec.T_0to1[None], T[None]))
+    rec, wrong, rot, tr = poselib_with_focal(seed=1, factor=2.0)
     assert rec.status == "ok" and tr > 90 and tr > 3 * rec.sigma["translation_deg"]
     wide = focal_sensitivity(rec, wrong, 1.0)
     now = PoseEstimator(methods=("poselib",)).estimate(wrong).pose
@@ -171,18 +178,9 @@ def test_half_the_focal_length_is_inside_the_default_range():
     """On real pairs a focal length x0.5 left 36 confident wrong poses of 211 with the range
     sqrt(2) each way (it does not reach the true focal length), none outside the turntable
     capture with 2: the solve at 2 f is the true K's."""
-    from dataclasses import replace
-
     from strl_pyg.inference.evidence import focal_sensitivity
 
-    m, R, t = make_pair("general", n=400, seed=7)
-    Kw = K.copy()
-    Kw[:2, :2] *= 0.5
-    wrong = replace(m, K0=Kw, K1=Kw)
-    rec = PoseEstimator(methods=("poselib",), focal_sensitivity=False).estimate(wrong)
-    rec = rec.methods["poselib"]
-    T = np.r_[np.c_[R, t], [[0, 0, 0, 1]]]
-    rot, tr = (float(v[0]) for v in relative_pose_error(rec.T_0to1[None], T[None]))
+    rec, wrong, rot, tr = poselib_with_focal(seed=7, factor=0.5)
     assert rec.status == "ok" and tr > 10  # 14.5 deg off in translation
     narrow = focal_sensitivity(rec, wrong, 1.0, factor=math.sqrt(2))  # before: confident wrong
     assert tr > 3 * narrow.sigma["translation_deg"]
