@@ -80,9 +80,8 @@ def score_pairs(pairs, model, progress: bool = True) -> dict[str, list]:
     import bench_pose as bp
 
     from strl_pyg.estimation.classical import estimate_relative_pose
-    from strl_pyg.inference import PoseEstimator
     from strl_pyg.inference import METHODS as REGISTRY
-    from strl_pyg.inference import POINT_POOR_MAX_POINTS
+    from strl_pyg.inference import POINT_POOR_MAX_POINTS, PoseEstimator
 
     lines_only = ("vp", "vp_checked")
     without = tuple(m for m in REGISTRY if m not in lines_only and REGISTRY[m].available())
@@ -188,9 +187,9 @@ def fit(cache: Path, n: int) -> tuple[float, int, str]:
     import bench_pose as bp
 
     from strl_pyg.estimation import line_refine as L
-    from strl_pyg.inference import PoseEstimator
-    from strl_pyg.inference.methods import vanishing_point as LM
+    from strl_pyg.inference import EstimatorConfig, PoseEstimator
     from strl_pyg.inference.methods import context as M
+    from strl_pyg.inference.methods import vanishing_point as LM
     from strl_pyg.inference.support import check_support
 
     pairs = ae.point_poor_pairs(cache, n, seed0=CALIBRATION_SEED)
@@ -213,7 +212,8 @@ def fit(cache: Path, n: int) -> tuple[float, int, str]:
                 checker.angle_deg, checker.support_slack = ang, slack
                 worst = []
                 for m, T, known in base:
-                    rec = check_support(checker(m, M.MethodContext(results=dict(known))), m)
+                    ctx = M.MethodContext(EstimatorConfig(), results=dict(known))
+                    rec = check_support(checker(m, ctx), m)
                     worst.append(max(bp.errors(rec.T_0to1, T)) if rec.status == "ok"
                                  else 180.0)
                 grid[ang, slack] = _auc(np.array(worst))
@@ -265,8 +265,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from strl_pyg.estimation import line_refine as L
     from strl_pyg.frontend import FrontendConfig
-    from strl_pyg.inference.methods import vanishing_point as LM
     from strl_pyg.inference import POINT_POOR_MAX_POINTS
+    from strl_pyg.inference.methods import vanishing_point as LM
     from strl_pyg.metrics.stats import median_ratio_interval
     from strl_pyg.model.strl_pose import StrLPose
 

@@ -29,7 +29,8 @@ import torch
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.geometry import Pose, normalize_points
 
-__all__ = ["BaselineResult", "BASELINE_METHODS", "MIN_POINTS", "estimate_relative_pose",
+__all__ = ["BaselineResult", "BASELINE_METHODS", "OPENCV", "POSELIB", "preferred_solver",
+           "MIN_POINTS", "estimate_relative_pose",
            "mean_focal", "normalised_matches", "normalisation_scope", "have_poselib",
            "fundamental_matrix", "MIN_POINTS_FUNDAMENTAL"]
 
@@ -37,8 +38,12 @@ __all__ = ["BaselineResult", "BASELINE_METHODS", "MIN_POINTS", "estimate_relativ
 #: 7; MAGSAC's final fit uses 8).
 MIN_POINTS_FUNDAMENTAL = 8
 
+#: The two solvers' names (:func:`estimate_relative_pose`'s ``method``; the inference methods
+#: of the same names).
+OPENCV, POSELIB = "opencv", "poselib"
+
 #: Methods accepted by :func:`estimate_relative_pose`.
-BASELINE_METHODS = ("opencv", "poselib")
+BASELINE_METHODS = (OPENCV, POSELIB)
 
 #: Five correspondences determine an essential matrix (up to a finite set).
 MIN_POINTS = 5
@@ -83,7 +88,7 @@ def _failed(n: int, method: str, time_ms: float, **info: Any) -> BaselineResult:
 
 def estimate_relative_pose(
     matches: PairMatches,
-    method: str = "opencv",
+    method: str = OPENCV,
     threshold_px: float = 1.0,
     confidence: float = 0.9999,
     max_iterations: int = 10000,
@@ -118,7 +123,7 @@ def estimate_relative_pose(
         raise ValueError(f"Expected threshold_px > 0 (got {threshold_px})")
     if not (0 < confidence < 1):
         raise ValueError(f"Expected 0 < confidence < 1 (got {confidence})")
-    if method == "poselib":
+    if method == POSELIB:
         try:
             import poselib
         except ImportError as err:
@@ -159,6 +164,11 @@ def have_poselib() -> bool:
     except ImportError:
         return False
     return True
+
+
+def preferred_solver() -> str:
+    """The classical solver the package starts from: PoseLib where installed, else OpenCV."""
+    return POSELIB if have_poselib() else OPENCV
 
 
 def mean_focal(matches: PairMatches) -> float:
@@ -275,7 +285,7 @@ def _opencv(matches, threshold_px, confidence, max_iterations, seed,
     except cv2.error:  # OpenCV 5's USAC asserts on some degenerate samples: no model found
         E, mask = None, None
     if E is None or E.shape[0] < 3 or mask is None:
-        return _failed(n, "opencv", (time.perf_counter() - start) * 1e3)
+        return _failed(n, OPENCV, (time.perf_counter() - start) * 1e3)
     best = None
     # A minimal solver may return several stacked 3x3 solutions; keep the one whose
     # decomposition has the most points in front of both cameras.
@@ -286,8 +296,8 @@ def _opencv(matches, threshold_px, confidence, max_iterations, seed,
     elapsed = (time.perf_counter() - start) * 1e3
     count, R, t, m = best
     if count == 0:
-        return _failed(n, "opencv", elapsed)
-    return BaselineResult(_unit_pose(R, t), m.reshape(-1) > 0, elapsed, "opencv", True,
+        return _failed(n, OPENCV, elapsed)
+    return BaselineResult(_unit_pose(R, t), m.reshape(-1) > 0, elapsed, OPENCV, True,
                           {"ransac_inliers": int(mask.sum())})
 
 
@@ -319,6 +329,6 @@ def poselib_normalised(x0: np.ndarray, x1: np.ndarray, threshold: float, poselib
     inliers = np.asarray(info.get("inliers", []), dtype=bool).reshape(-1)
     t = np.asarray(pose.t, dtype=np.float64)
     if inliers.size != n or inliers.sum() < MIN_POINTS or np.linalg.norm(t) < 1e-12:
-        return _failed(n, "poselib", elapsed)
+        return _failed(n, POSELIB, elapsed)
     extra = {k: v for k, v in info.items() if k != "inliers" and np.isscalar(v)}
-    return BaselineResult(_unit_pose(pose.R, t), inliers, elapsed, "poselib", True, extra)
+    return BaselineResult(_unit_pose(pose.R, t), inliers, elapsed, POSELIB, True, extra)

@@ -30,6 +30,8 @@ import torch
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.estimation.classical import (
     MIN_POINTS,
+    OPENCV,
+    POSELIB,
     BaselineResult,
     _failed,
     estimate_relative_pose,
@@ -59,7 +61,7 @@ def msac_cost(pose: Pose, x0: torch.Tensor, x1: torch.Tensor, threshold: float) 
 def guided_estimate(
     matches: PairMatches,
     weights: Any,
-    method: str = "poselib",
+    method: str = POSELIB,
     threshold_px: float = 1.0,
     keep: float = 0.6,
     min_keep: int = 24,
@@ -122,7 +124,7 @@ def guided_estimate(
         if res.success:
             res.info["point_index"] = top  # the matches this hypothesis was solved from
             candidates.append(("top", res))
-    if method == "opencv" and n >= MIN_POINTS:
+    if method == OPENCV and n >= MIN_POINTS:
         res = _opencv_prosac(matches, order, threshold_px, seed)
         if res is not None:
             candidates.append(("prosac", res))

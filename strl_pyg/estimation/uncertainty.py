@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.estimation.classical import estimate_relative_pose
+from strl_pyg.estimation.classical import POSELIB, estimate_relative_pose
 from strl_pyg.geometry import Pose
 from strl_pyg.utils.threads import available_cores, shared_pool
 
@@ -78,7 +78,7 @@ def cap_covariance(cov: np.ndarray) -> tuple[np.ndarray, bool]:
     return cov, capped
 
 
-def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = "poselib",
+def bootstrap_covariance(matches: PairMatches, pose: Pose, method: str = POSELIB,
                          n: int = 8, threshold_px: float = 1.0, seed: int = 0,
                          workers: int | None = None) -> np.ndarray | None:
     """The covariance of :func:`bootstrap_resamples` (``None`` with fewer than
@@ -93,7 +93,7 @@ def _solve_resamples(matches: PairMatches, draws: list, method: str, threshold_p
     threads; resample ``b`` is solved with seed ``seed + b + 1``."""
     n = len(draws)
     fast = template = None
-    if method == "poselib" and matches.has_intrinsics:
+    if method == POSELIB and matches.has_intrinsics:
         # the pair normalised once, the resamples' rows taken from it (normalising is per
         # point, so this is the same input as normalising each resample)
         import poselib
@@ -141,7 +141,7 @@ def _solve_resamples(matches: PairMatches, draws: list, method: str, threshold_p
     return results
 
 
-def bootstrap_resamples(matches: PairMatches, pose: Pose, method: str = "poselib",
+def bootstrap_resamples(matches: PairMatches, pose: Pose, method: str = POSELIB,
                         n: int = 8, threshold_px: float = 1.0, seed: int = 0,
                         workers: int | None = None) -> Bootstrap | None:
     """Covariance ``[5, 5]`` (float64) of the robust estimate ``pose`` of ``matches``, from

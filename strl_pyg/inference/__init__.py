@@ -4,9 +4,8 @@ the support check (:mod:`.support`), the input checks (:mod:`.checks`), the netw
 graph (:mod:`.network`), the records (:mod:`.record`) and the lazy recommended path
 (:mod:`.recommended`).
 
-Every name of this face is read after :mod:`.estimator` has registered the built-in methods, so
-``from strl_pyg.inference import METHODS`` (or ``EstimatorConfig``, ``methods_needed``, ...)
-sees them; importing :mod:`.registry` directly gives the registry as it stands.
+The registry (:data:`METHODS`) holds the built-in methods from its first read, whichever module
+reads it; methods registered later follow them.
 """
 
 from __future__ import annotations
@@ -35,7 +34,6 @@ _EXPORTS = {
     "POINT_POOR_MAX_POINTS": "strl_pyg.inference.methods.context",
     "recommended_order": "strl_pyg.inference.policy",
     "METHODS": "strl_pyg.inference.registry",
-    "FunctionMethod": "strl_pyg.inference.registry",
     "PoseEstimator": "strl_pyg.inference.estimator",
     "register_method": "strl_pyg.inference.registry",
     "MethodFn": "strl_pyg.inference.methods.context",
@@ -56,7 +54,7 @@ _EXPORTS = {
     "BAD_INTRINSICS": "strl_pyg.inference.checks",
     "NO_INTRINSICS": "strl_pyg.inference.pair",
     "EstimatorConfig": "strl_pyg.inference.config",
-    "CheckpointSettings": "strl_pyg.inference.config",
+    "CheckpointSettings": "strl_pyg.inference.settings",
     "check_device": "strl_pyg.inference.checks",
 }
 
@@ -72,7 +70,6 @@ _DERIVED = ("SUPPORT_CHECKED", "BOOTSTRAPPED", "NETWORK_METHODS", "DEPENDENCIES"
 def __getattr__(name: str):
     if name.startswith("_"):
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    import strl_pyg.inference.estimator  # noqa: F401  (registers the built-in methods)
     import strl_pyg.inference.registry
 
     if name in _DERIVED:

@@ -7,10 +7,10 @@ from __future__ import annotations
 from typing import Any
 
 from strl_pyg.estimation.uncertainty import MAX_SIGMA_DEG, cap_covariance
-from strl_pyg.inference.config import CheckpointSettings
 from strl_pyg.inference.policy import measured_with_missing_poselib
 from strl_pyg.inference.record import MethodResult
 from strl_pyg.inference.registry import METHODS
+from strl_pyg.inference.settings import CheckpointSettings
 
 __all__ = ["calibrate", "shipped_header"]
 

@@ -45,7 +45,7 @@ from strl_pyg.data.matches import PairMatches
 from strl_pyg.estimation.classical import normalisation_scope
 from strl_pyg.inference.calibration import calibrate, shipped_header
 from strl_pyg.inference.checks import BAD_INTRINSICS, input_warnings
-from strl_pyg.inference.config import CheckpointSettings, EstimatorConfig
+from strl_pyg.inference.config import EstimatorConfig
 from strl_pyg.inference.evidence import (
     apply_configuration,
     apply_multiple_motions,
@@ -54,8 +54,8 @@ from strl_pyg.inference.evidence import (
     learned_pose_evidence,
     pair_geometry,
 )
-from strl_pyg.inference.methods import builtin_methods
 from strl_pyg.inference.methods.context import MethodContext
+from strl_pyg.inference.methods.regression import Regression
 from strl_pyg.inference.pair import (
     PairRun,
     attach_fundamental,
@@ -70,6 +70,7 @@ from strl_pyg.inference.policy import (
 )
 from strl_pyg.inference.record import MethodResult, PoseEstimate
 from strl_pyg.inference.registry import (
+    CLASSICAL,
     METHODS,
     RECOMMENDED,
     PoseMethod,
@@ -77,18 +78,13 @@ from strl_pyg.inference.registry import (
     classical_method,
     methods_needed,
     network_free_methods,
-    register_method,
 )
+from strl_pyg.inference.settings import CheckpointSettings
 from strl_pyg.inference.support import (
     check_support,
 )
 
 __all__ = ["PoseEstimator"]
-
-
-# the built-in methods, in the order they run
-for _method in builtin_methods():
-    register_method(_method)
 
 
 # ----------------------------------------------------------------------------- estimator
@@ -391,7 +387,7 @@ class PoseEstimator:
                         "the matches carry none: attach them (PairMatches(..., image0=, "
                         "image1=) or load_external_matches(..., image0=, image1=))")
         for dep in spec.depends_on:
-            dep = classical_method() if dep == "classical" else dep
+            dep = classical_method() if dep == CLASSICAL else dep
             if dep in ctx.results and ctx.results[dep].status == "skipped":
                 return f"it reads {dep}, which was skipped"
         return None
@@ -445,8 +441,9 @@ class PoseEstimator:
         return self._recommended(self._pair(matches), more)
 
     def _support(self, res: MethodResult, matches: PairMatches) -> MethodResult:
-        # checked: the registry's support_checked methods
-        return check_support(res, matches, self.config.threshold_px, *self.config.support)
+        method = METHODS.get(res.method)
+        return check_support(res, matches, self.config.threshold_px, *self.config.support,
+                             checked=method is None or method.support_checked)
 
     def _recommend(self, results: dict[str, MethodResult], warnings: list[str],
                    matches: PairMatches, geometry: Any = None) -> PoseEstimate:
@@ -468,7 +465,7 @@ class PoseEstimator:
         fallback = None  # (record, notes so far) of the first "unreliable" pose
         for m in order:
             r = results[m]
-            if r.status in ("ok", "unreliable") and m == "regression" and unsupported:
+            if r.status in ("ok", "unreliable") and m == Regression.name and unsupported:
                 notes.append("regression not used: the matches support no solver's pose")
                 continue
             if r.status == "ok" and not METHODS[m].support_checked:

@@ -38,7 +38,12 @@ import numpy as np
 import torch
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.estimation.classical import fundamental_matrix, normalised_matches
+from strl_pyg.estimation.classical import (
+    OPENCV,
+    fundamental_matrix,
+    normalised_matches,
+    preferred_solver,
+)
 from strl_pyg.estimation.two_view import TwoViewGeometry, classify_two_view, planar_candidates
 from strl_pyg.inference.record import MethodResult, PoseEstimate
 from strl_pyg.inference.support import check_support
@@ -132,7 +137,7 @@ def focal_sensitivity(pose: MethodResult, matches: PairMatches, threshold_px: fl
     if pose.status != "ok" or pose.covariance is None or not matches.has_intrinsics \
             or pose.T_0to1 is None or len(np.asarray(pose.covariance)) != 5:
         return pose
-    solver = "opencv" if pose.method == "opencv" else _solver()
+    solver = OPENCV if pose.method == OPENCV else preferred_solver()
     T = np.asarray(pose.T_0to1, dtype=np.float64)
     n_given = int(_pose_inliers(T, matches, threshold_px).sum())  # the pose's own support
     R_ref = torch.as_tensor(T[:3, :3])
@@ -173,12 +178,6 @@ def _pose_inliers(T: np.ndarray, matches: PairMatches, threshold_px: float) -> n
     return epipolar_residuals(matches, T)[0] < threshold_px
 
 
-def _solver() -> str:
-    from strl_pyg.estimation.classical import have_poselib
-
-    return "poselib" if have_poselib() else "opencv"
-
-
 def apply_multiple_motions(estimate: PoseEstimate, geo: TwoViewGeometry | None,
                            matches: PairMatches, threshold_px: float,
                            seed: int = 0) -> PoseEstimate:
@@ -203,7 +202,7 @@ def apply_multiple_motions(estimate: PoseEstimate, geo: TwoViewGeometry | None,
         return estimate
     others = replace(matches, points0=matches.points0[rest], points1=matches.points1[rest],
                      point_scores=None, lines0=None, lines1=None, line_scores=None)
-    second = estimate_relative_pose(others, _solver(), threshold_px, seed=seed)
+    second = estimate_relative_pose(others, preferred_solver(), threshold_px, seed=seed)
     n2 = int(second.inliers.sum()) if second.success else 0
     if n2 < max(MULTIPLE_MIN_INLIERS, MULTIPLE_SHARE * n1):
         return estimate

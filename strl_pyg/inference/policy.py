@@ -11,22 +11,25 @@ from __future__ import annotations
 
 from typing import Any
 
-from strl_pyg.inference.config import CheckpointSettings
+from strl_pyg.inference.methods.classical import OpenCV, PoseLib
 from strl_pyg.inference.methods.context import POINT_POOR_MAX_POINTS
+from strl_pyg.inference.methods.regression import Regression
+from strl_pyg.inference.methods.vanishing_point import VanishingPoint
 from strl_pyg.inference.registry import METHODS
+from strl_pyg.inference.settings import CheckpointSettings
 
 __all__ = ["RECOMMENDED_ORDER", "POINT_POOR_ORDER", "POSELIB_MISSING", "recommended_order",
            "stored_order", "measured_with_missing_poselib"]
 
 #: Which method fills the recommended pose: the first ``"ok"`` one (unavailable ones skipped).
-RECOMMENDED_ORDER: tuple[str, ...] = ("poselib", "opencv", "regression")
+RECOMMENDED_ORDER: tuple[str, ...] = (PoseLib.name, OpenCV.name, Regression.name)
 #: Where a pair has at most :data:`POINT_POOR_MAX_POINTS` point matches, these methods come
 #: before the recommended order. Fitted on the point-poor calibration split of
 #: ``benchmarks/studies/bench_vanishing.py --sets calibration`` (100 generated pairs of other
 #: seeds than the evaluation's, <= 30 point and >= 20 line matches; the bound 30 is that split's
 #: definition, not a fit): the recommended pose with ``vp`` first beats PoseLib beyond the
 #: paired-bootstrap noise, without it it does not (``benchmarks/studies/results_vanishing.md``).
-POINT_POOR_ORDER: tuple[str, ...] = ("vp",)
+POINT_POOR_ORDER: tuple[str, ...] = (VanishingPoint.name,)
 
 
 def recommended_order(model: Any, num_points: int | None = None) -> tuple[str, ...]:
@@ -39,12 +42,12 @@ def recommended_order(model: Any, num_points: int | None = None) -> tuple[str, .
     order = stored_order(model) or RECOMMENDED_ORDER
     if num_points is not None and num_points <= POINT_POOR_MAX_POINTS:
         order = POINT_POOR_ORDER + tuple(m for m in order if m not in POINT_POOR_ORDER)
-    if "poselib" in order and not METHODS["poselib"].available():
+    if PoseLib.name in order and not METHODS[PoseLib.name].available():
         # measured with PoseLib, which fused and guided also start from: without it those are
         # other, unmeasured methods, so OpenCV (the remaining classical default) takes its place
-        i = order.index("poselib")
-        order = tuple(m for m in order[:i] if m != "opencv") + ("opencv",) + tuple(
-            m for m in order[i + 1:] if m != "opencv")
+        i, opencv = order.index(PoseLib.name), OpenCV.name
+        order = tuple(m for m in order[:i] if m != opencv) + (opencv,) + tuple(
+            m for m in order[i + 1:] if m != opencv)
     return order
 
 
@@ -63,4 +66,4 @@ def stored_order(model: Any) -> tuple[str, ...]:
 
 
 def measured_with_missing_poselib(model: Any) -> bool:
-    return "poselib" in stored_order(model) and not METHODS["poselib"].available()
+    return PoseLib.name in stored_order(model) and not METHODS[PoseLib.name].available()

@@ -74,6 +74,9 @@ class MethodResult:
         unsupported: the support check refused the pose (its matches do not support it:
             :func:`~strl_pyg.inference.support.check_support`); ``info["unsupported"]`` in
             the JSON record.
+        support_checked: whether the matches' support decides this pose
+            (:func:`~strl_pyg.inference.support.check_support`'s default; ``False`` for the
+            regression, whose pose is learned, not fitted to the matches).
         raised: the exception's type name where the method raised (``status == "failed"``);
             ``info["raised"]`` in the JSON record.
     """
@@ -93,6 +96,7 @@ class MethodResult:
     bad_intrinsics: bool = False
     unsupported: bool = False
     raised: str | None = None
+    support_checked: bool = True
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:

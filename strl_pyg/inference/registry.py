@@ -2,9 +2,10 @@
 registration order; the method is its own record), the tables derived from it and the check
 of method names.
 
-It imports nothing of :mod:`strl_pyg.inference` but the record, so every module of the
-folder (the configuration, the support check, the estimator) can read it: the methods
-themselves are registered by :mod:`strl_pyg.inference.estimator`.
+Its first entries are the built-in methods (:func:`strl_pyg.inference.methods.builtin_methods`),
+put there here, in the registry's own definition: importing a module registers nothing, and the
+registry reads the same whichever module reads it first. The methods do not read it (what a
+method is, :class:`~strl_pyg.inference.methods.base.PoseMethod`, lives below it).
 """
 
 from __future__ import annotations
@@ -12,92 +13,23 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from strl_pyg.estimation.classical import BASELINE_METHODS, MIN_POINTS
+from strl_pyg.estimation.classical import BASELINE_METHODS, MIN_POINTS, OPENCV, POSELIB
+from strl_pyg.inference.methods.base import CLASSICAL, FunctionMethod, PoseMethod
+from strl_pyg.inference.methods.builtin import builtin_methods
+from strl_pyg.inference.methods.context import MethodFn
 
-__all__ = ["RECOMMENDED", "PoseMethod", "FunctionMethod", "DESCRIPTION", "METHODS",
+__all__ = ["RECOMMENDED", "METHODS",
            "register_method", "methods_where",
            "methods_needed", "network_free_methods", "classical_method",
            "checked_method_names"]
-
-#: A method: ``fn(matches, context) -> MethodResult`` (:mod:`strl_pyg.inference.methods`).
-MethodFn = Callable[..., Any]
 
 #: ``methods="recommended"``: the recommended pose with only the methods it needs
 #: (:meth:`PoseEstimator.estimate`; ``strl-pose predict``'s default); not a method name.
 RECOMMENDED = "recommended"
 
-
-class PoseMethod:
-    """A pose method, the way :class:`~strl_pyg.inference.PoseEstimator` runs it: called with
-    one pair's checked matches and the pair's :class:`~strl_pyg.inference.methods.MethodContext`,
-    it returns one :class:`~strl_pyg.inference.MethodResult`. What it needs and how its result
-    is treated are class attributes, its description (:data:`DESCRIPTION`: ``name``, ``label``,
-    ``min_points``, ``needs_intrinsics``, ``reads_lines``, ``uses_network``, ``depends_on``,
-    ``support_checked``, ``bootstrapped``, ``classical_base``, ``needs_geometric_head``), and
-    :meth:`available` says whether it is installed. Register one with
-    ``register_method(MyMethod())``; the built-in ones are in
-    :mod:`strl_pyg.inference.methods`, a module per concept."""
-
-    name: str = ""
-    label: str = ""
-    min_points: int = MIN_POINTS
-    needs_intrinsics: bool = True
-    reads_lines: bool = False
-    uses_network: bool = False
-    depends_on: tuple[str, ...] = ()
-    support_checked: bool = True
-    bootstrapped: bool = False
-    classical_base: bool = False
-    needs_geometric_head: bool = False
-
-    def available(self) -> bool:
-        return True
-
-    def __call__(self, matches: Any, ctx: Any) -> Any:
-        raise NotImplementedError(f"{type(self).__name__} runs no pose method (define "
-                                  "__call__(matches, ctx) -> MethodResult)")
-
-    def __repr__(self) -> str:
-        return f"{type(self).__name__}(name={self.name!r})"
-
-
-#: The attributes that describe a method (:class:`PoseMethod`'s class attributes).
-DESCRIPTION = ("label", "min_points", "needs_intrinsics", "reads_lines", "uses_network",
-               "depends_on", "support_checked", "bootstrapped", "classical_base",
-               "needs_geometric_head")
-
-
-class FunctionMethod(PoseMethod):
-    """A function ``fn(matches, context) -> MethodResult`` as a :class:`PoseMethod`, with its
-    description given as keywords (:data:`DESCRIPTION`) and ``available`` a callable."""
-
-    def __init__(self, name: str, fn: MethodFn, available: Callable[[], bool] | None = None,
-                 **description: Any) -> None:
-        unknown = sorted(set(description) - set(DESCRIPTION))
-        if unknown:
-            raise ValueError(f"Expected method attributes from {sorted(DESCRIPTION)} (got "
-                             f"{unknown})")
-        self.name, self.fn, self._available = name, fn, available or (lambda: True)
-        for key, value in description.items():
-            setattr(self, key, tuple(value) if key == "depends_on" else value)
-
-    @classmethod
-    def like(cls, method: PoseMethod, fn: MethodFn | None = None,
-             available: Callable[[], bool] | None = None) -> FunctionMethod:
-        """``method``'s name and description with another call and / or availability (tests
-        plant failures so)."""
-        return cls(method.name, fn or method, available or method.available,
-                   **{k: getattr(method, k) for k in DESCRIPTION})
-
-    def available(self) -> bool:
-        return bool(self._available())
-
-    def __call__(self, matches: Any, ctx: Any) -> Any:
-        return self.fn(matches, ctx)
-
-
-#: ``name -> PoseMethod`` (the method is its own record), run in this order.
-METHODS: dict[str, PoseMethod] = {}
+#: ``name -> PoseMethod`` (the method is its own record), run in this order: the built-in
+#: methods (:func:`~strl_pyg.inference.methods.builtin_methods`), then the registered ones.
+METHODS: dict[str, PoseMethod] = {method.name: method for method in builtin_methods()}
 
 
 def register_method(name: str | PoseMethod, fn: MethodFn | None = None, *,
@@ -167,7 +99,7 @@ def __getattr__(name: str) -> Any:
 
 def methods_needed(names: Any) -> tuple[str, ...]:
     """``names`` with the methods they depend on, in registration order (the order
-    :class:`PoseEstimator` runs them). A ``"classical"`` dependency is the classical solver
+    :class:`PoseEstimator` runs them). A :data:`CLASSICAL` dependency is the classical solver
     among ``names`` if there is one, else :func:`classical_method`."""
     classical = next((n for n in names if n in BASELINE_METHODS), None) or classical_method()
     want, todo = set(), list(names)
@@ -177,7 +109,7 @@ def methods_needed(names: Any) -> tuple[str, ...]:
             continue
         want.add(name)
         deps = METHODS[name].depends_on if name in METHODS else ()
-        todo.extend(classical if d == "classical" else d for d in deps)
+        todo.extend(classical if d == CLASSICAL else d for d in deps)
     return tuple(m for m in METHODS if m in want)
 
 
@@ -191,7 +123,7 @@ def network_free_methods() -> tuple[str, ...]:
 
 def classical_method() -> str:
     """The classical solver other methods start from: PoseLib if installed, else OpenCV."""
-    return "poselib" if METHODS["poselib"].available() else "opencv"
+    return POSELIB if METHODS[POSELIB].available() else OPENCV
 
 
 def checked_method_names(methods: Any) -> tuple[str, ...] | str:

@@ -14,7 +14,6 @@ from strl_pyg.estimation.classical import normalised_matches
 from strl_pyg.geometry import pose_sampson
 from strl_pyg.geometry.essential import triangulated_depths
 from strl_pyg.inference.record import MethodResult
-from strl_pyg.inference.registry import METHODS
 
 __all__ = ["MIN_INLIER_RATIO", "MIN_SUPPORT_INLIERS", "SUPPORT_BAND", "CHEIRALITY_MIN",
            "check_support"]
@@ -44,12 +43,11 @@ def check_support(res: MethodResult, matches: PairMatches, threshold_px: float =
     front of both cameras are fewer than ``min(min_inliers, n)`` or ``min_inlier_ratio``
     of the ``n`` point matches; as ``"unreliable"`` when fewer than
     ``min_in_front`` of the matches within the band lie in front of both cameras. With
-    ``checked=False`` ``res`` is returned unchanged; the default (``None``) is the method's
-    own ``PoseMethod.support_checked`` (false for the regression; true for a method the
-    registry does not know)."""
+    ``checked=False`` ``res`` is returned unchanged; the default (``None``) is the record's
+    own :attr:`~strl_pyg.inference.MethodResult.support_checked` (false for the regression's;
+    the estimator passes its method's ``PoseMethod.support_checked``)."""
     if checked is None:
-        spec = METHODS.get(res.method)
-        checked = spec is None or spec.support_checked
+        checked = res.support_checked
     n = matches.num_points
     if (res.status != "ok" or not checked or res.T_0to1 is None
             or n <= 0 or not matches.has_intrinsics):

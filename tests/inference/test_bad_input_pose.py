@@ -22,11 +22,11 @@ import pytest
 import torch
 
 from strl_pyg import cli
-from strl_pyg.inference.registry import FunctionMethod
 from strl_pyg.data import PairMatches
+from strl_pyg.inference import MethodResult
 from strl_pyg.inference import estimator as inference
 from strl_pyg.inference.estimator import PoseEstimator
-from strl_pyg.inference import MethodResult
+from strl_pyg.inference.methods import FunctionMethod
 from strl_pyg.metrics.two_view import relative_pose_error
 from strl_pyg.synthetic import generate_pair
 

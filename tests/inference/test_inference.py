@@ -19,14 +19,20 @@ from strl_pyg import cli
 from strl_pyg.data import PairMatches
 from strl_pyg.estimation.classical import BaselineResult
 from strl_pyg.geometry import Pose
+from strl_pyg.inference import (
+    METHODS,
+    MethodResult,
+    forward_pose,
+    policy,
+    prepare_graph,
+    register_method,
+)
 from strl_pyg.inference import estimator as inference
 from strl_pyg.inference import methods as pose_methods
-from strl_pyg.inference import policy
 from strl_pyg.inference.estimator import PoseEstimator
-from strl_pyg.inference import METHODS, MethodResult, forward_pose, prepare_graph
 from strl_pyg.metrics.two_view import relative_pose_error
-from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.model import StrLPoseConfig
+from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.synthetic import generate_pair
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -280,19 +286,19 @@ def test_a_new_method_is_one_registration(pair, monkeypatch, method_registry):
 
     # a method that is not support-checked (a learned one) is recommended only where the
     # matches support its pose: this one repeats OpenCV's
-    inference.register_method("guess", identity_guess, support_checked=False)
+    register_method("guess", identity_guess, support_checked=False)
     monkeypatch.setattr(policy, "RECOMMENDED_ORDER", ("guess", "opencv"))
     # a model without a measured order (the shipped one records its own)
     est = PoseEstimator(tiny(), methods=("opencv", "guess")).estimate(pair.matches)
     assert est.pose.method == "guess" and list(est.methods) == ["opencv", "guess"]
     with pytest.raises(ValueError, match="already registered"):
-        inference.register_method("guess", identity_guess)
+        register_method("guess", identity_guess)
 
 
 def test_an_unsupported_learned_pose_is_not_recommended(pair, monkeypatch, method_registry):
     """Before: a method without the support check (the network) filled the recommended pose
     with its own pose and status "ok" whatever the matches said."""
-    inference.register_method("guess", lambda m, c: MethodResult("guess", "ok", np.eye(4)),
+    register_method("guess", lambda m, c: MethodResult("guess", "ok", np.eye(4)),
                               support_checked=False)
     monkeypatch.setattr(policy, "RECOMMENDED_ORDER", ("guess",))
     est = PoseEstimator(tiny(), methods=("guess",)).estimate(pair.matches)
@@ -308,7 +314,7 @@ def test_the_method_registry_order():
                                       "guided", "vp", "vp_checked"]
     assert isinstance(registry.METHODS["fused"], pose_methods.Fused)
     assert [type(s).__name__ for s in registry.METHODS.values()] == [
-        "Regression", "Classical", "Classical", "Fused", "Geometric", "Guided", "VanishingPoint",
+        "Regression", "OpenCV", "PoseLib", "Fused", "Geometric", "Guided", "VanishingPoint",
         "VanishingPointChecked"]
 
 

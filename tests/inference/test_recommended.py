@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from strl_pyg.frontend import FrontendConfig, match_images
-from strl_pyg.inference.estimator import PoseEstimator
-from strl_pyg.inference.recommended import estimate_methods, estimate_recommended
 from strl_pyg.inference import methods_needed
-from strl_pyg.inference.registry import FunctionMethod
+from strl_pyg.inference.estimator import PoseEstimator
+from strl_pyg.inference.methods import FunctionMethod
+from strl_pyg.inference.recommended import estimate_methods, estimate_recommended
 from strl_pyg.synthetic import SceneConfig, generate_pair
 
 
@@ -152,7 +152,7 @@ def test_the_recommended_path_runs_each_method_at_most_once(model, pair, monkeyp
     """Before, every prefix of the order got a fresh PoseEstimator that re-ran the methods of
     the earlier prefixes (fused failing -> regression and opencv ran again for 'opencv')."""
     from strl_pyg.inference import METHODS
-    from strl_pyg.inference.registry import FunctionMethod
+    from strl_pyg.inference.methods import FunctionMethod
     from strl_pyg.inference.record import MethodResult
 
     calls: dict[str, int] = {}
@@ -244,8 +244,8 @@ def test_the_recommended_path_checks_a_point_poor_pair_once(model, monkeypatch):
 def test_recommended_is_a_methods_value_of_the_estimator(model, pair):
     """The recommended walk on given matches: the pose of the run of every method, with only
     the methods it needs; 'recommended' is no method name."""
-    from strl_pyg.inference.config import EstimatorConfig
     from strl_pyg.inference import RECOMMENDED, register_method
+    from strl_pyg.inference.config import EstimatorConfig
 
     m = match_images(pair.image0, pair.image1, pair.K, pair.K)
     lazy = PoseEstimator(model, methods=RECOMMENDED).estimate(m)
@@ -363,8 +363,9 @@ def torch_equal(a, b) -> bool:
 def test_decisions_read_typed_fields_not_info_keys(monkeypatch):
     """A method that raises is ``failed`` with ``raised`` set (and ``info["raised"]`` in the
     JSON record); the recommended pose names it, whatever its message says."""
-    from strl_pyg.inference.registry import METHODS, FunctionMethod
+    from strl_pyg.inference.methods import FunctionMethod
     from strl_pyg.inference.record import MethodResult
+    from strl_pyg.inference.registry import METHODS
 
     def boom(matches, ctx):
         raise RuntimeError("unsupported and raised are words, not decisions")

@@ -19,7 +19,7 @@ def toy(method_registry):
     def identity(matches, ctx):
         return MethodResult("toy", "ok", np.eye(4))
 
-    est_mod.register_method("toy", identity, label="a toy that says identity",
+    face.register_method("toy", identity, label="a toy that says identity",
                             depends_on=("classical",))
     return "toy"
 
@@ -53,7 +53,7 @@ def test_derived_tables_follow_the_specs():
     assert "regression" not in face.SUPPORT_CHECKED and "vp" in face.SUPPORT_CHECKED
     assert all(specs[m].reads_lines for m in face.NETWORK_METHODS)
     with pytest.raises(ValueError, match="Expected method attributes from"):
-        est_mod.register_method("x", lambda m, c: None, lable="typo")
+        face.register_method("x", lambda m, c: None, lable="typo")
 
 
 def test_a_classical_only_estimate_reads_the_calibration_without_building_the_network():
@@ -94,7 +94,7 @@ def test_one_name_per_regime_and_per_bound():
 
 def test_a_pose_method_class_registers_with_its_own_spec(method_registry, tmp_path):
     from strl_pyg.inference import PoseEstimator
-    from strl_pyg.inference.registry import PoseMethod
+    from strl_pyg.inference.methods import PoseMethod
 
     class Identity(PoseMethod):
         name = "identity"
@@ -107,7 +107,7 @@ def test_a_pose_method_class_registers_with_its_own_spec(method_registry, tmp_pa
             assert "opencv" in ctx.results or "poselib" in ctx.results  # ran after its base
             return MethodResult(self.name, "ok", np.eye(4))
 
-    est_mod.register_method(Identity())
+    face.register_method(Identity())
     spec = method_registry.METHODS["identity"]
     assert spec.label == "says identity" and spec.depends_on == ("classical",)
     assert not spec.needs_intrinsics and not spec.support_checked and spec.available()
@@ -117,21 +117,20 @@ def test_a_pose_method_class_registers_with_its_own_spec(method_registry, tmp_pa
     assert rec.status == "ok", (rec.status, rec.warnings)
     np.testing.assert_array_equal(rec.T_0to1, np.eye(4))
     with pytest.raises(ValueError, match="already registered"):
-        est_mod.register_method(Identity())
+        face.register_method(Identity())
     with pytest.raises(ValueError, match="Expected a PoseMethod alone"):
-        est_mod.register_method(Identity(), label="x")
+        face.register_method(Identity(), label="x")
     with pytest.raises(ValueError, match="Expected a PoseMethod with a name"):
-        est_mod.register_method(PoseMethod())
+        face.register_method(PoseMethod())
     with pytest.raises(NotImplementedError, match="runs no pose method"):
         PoseMethod()(pair.matches, None)
     with pytest.raises(TypeError, match="Expected fn"):
-        est_mod.register_method("nothing", None)
+        face.register_method("nothing", None)
 
 
 def test_the_built_in_methods_are_classes_with_their_needs():
     from strl_pyg.estimation.classical import have_poselib
-    from strl_pyg.inference.methods import VanishingPointChecked
-    from strl_pyg.inference.methods import Classical, Regression
+    from strl_pyg.inference.methods import Classical, Regression, VanishingPointChecked
 
     specs = est_mod.METHODS
     assert isinstance(specs["regression"], Regression)
@@ -140,7 +139,7 @@ def test_the_built_in_methods_are_classes_with_their_needs():
     assert specs["poselib"].available() == have_poselib() and specs["opencv"].available()
     assert specs["vp_checked"].angle_deg == VanishingPointChecked.angle_deg
     with pytest.raises(ValueError, match="Expected a classical solver"):
-        Classical("colmap")
+        Classical.of("colmap")
 
 
 def test_calibration_and_bad_intrinsics_are_typed_on_the_record():
@@ -226,3 +225,30 @@ def test_a_classical_base_is_the_solver_of_the_run():
     assert vc.calibrated == cv.calibrated  # the record it takes, with its calibration
     assert sum("not calibrated" in w for w in vc.warnings) == sum(
         "not calibrated" in w for w in cv.warnings)
+
+
+def test_the_registry_fills_itself_without_the_estimator():
+    """Before: the built-in methods were registered by importing the estimator, so the registry
+    read alone (``strl_pyg.inference.registry.METHODS``) was empty. Now it holds them from its
+    first read, and importing a module registers nothing."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from strl_pyg.inference.registry import METHODS; "
+            "names = list(METHODS); "
+            "assert 'strl_pyg.inference.estimator' not in sys.modules, 'estimator imported'; "
+            "import strl_pyg.inference.estimator; assert list(METHODS) == names; print(names)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr[-500:]
+    assert out.stdout.split() == ["['regression',", "'opencv',", "'poselib',", "'fused',",
+                                  "'geometric',", "'guided',", "'vp',", "'vp_checked']"]
+
+
+def test_method_names_come_from_the_classes():
+    from strl_pyg.inference import methods, policy, registry
+
+    assert [type(m).name for m in registry.METHODS.values()] == list(registry.METHODS)
+    assert policy.RECOMMENDED_ORDER == (methods.PoseLib.name, methods.OpenCV.name,
+                                        methods.Regression.name)
+    assert methods.Classical.of("opencv").label == "OpenCV MAGSAC"

@@ -5,6 +5,7 @@ path (a wrong path was accepted and every network method failed with an Attribut
 from __future__ import annotations
 
 import numpy as np
+import torch
 import pytest
 
 from strl_pyg.data.matches import PairMatches
@@ -143,16 +144,23 @@ def test_the_gate_refuses_a_planted_wrong_pose_on_few_points(method):
 
 def test_check_support_leaves_a_regression_record_as_it_is_by_default(held_out_pair):
     """Before: check_support's default checked=True failed the regression's record, which the
-    estimator never checks."""
+    estimator never checks. The default is the record's own ``support_checked``, which the
+    regression method sets to false on its records."""
+    from strl_pyg.inference import PoseEstimator
     from strl_pyg.inference.record import MethodResult
     from strl_pyg.inference.support import check_support
+    from strl_pyg.model import StrLPose, StrLPoseConfig
 
     m = held_out_pair.matches
+    torch.manual_seed(0)
+    model = StrLPose(StrLPoseConfig(hidden=16, layers=1, heads=2, patch_features=1))
+    own = PoseEstimator(model, methods="regression", bootstrap=0).estimate(m).methods
+    assert own["regression"].support_checked is False
     wrong = np.eye(4)
     wrong[:3, 3] = [0.0, 1.0, 0.0]
-    reg = check_support(MethodResult("regression", "ok", wrong), m)
+    reg = check_support(MethodResult("regression", "ok", wrong, support_checked=False), m)
     assert reg.status == "ok" and "support_inliers" not in reg.info
-    assert check_support(MethodResult("regression", "ok", wrong), m, checked=True).status \
-        == "failed"
+    assert check_support(MethodResult("regression", "ok", wrong, support_checked=False), m,
+                         checked=True).status == "failed"
     assert check_support(MethodResult("poselib", "ok", wrong), m).status == "failed"
 

@@ -1,12 +1,12 @@
 """The pose methods :class:`~strl_pyg.inference.PoseEstimator` runs, one module per concept,
 one small class each (:class:`~strl_pyg.inference.registry.PoseMethod`: its class attributes
 are its description), and the context they share (:mod:`.context`);
-:mod:`strl_pyg.inference.estimator` registers them in :data:`METHODS
-<strl_pyg.inference.registry.METHODS>`, in this order:
+they are the first entries of :data:`METHODS <strl_pyg.inference.registry.METHODS>`
+(:func:`builtin_methods`, read by the registry itself), in this order:
 
 * ``regression`` (:mod:`.regression`): the network's pose head (resampled graph, as in
   training).
-* ``opencv``, ``poselib`` (:mod:`.classical`): the classical essential-matrix solvers
+* ``opencv``, ``poselib`` (:mod:`.classical`: :class:`OpenCV`, :class:`PoseLib`): the classical essential-matrix solvers
   (:mod:`strl_pyg.estimation.classical`).
 * ``fused`` (:mod:`.fused`): the network and the first ``"ok"`` classical pose combined in
   information form (:func:`~strl_pyg.estimation.pose_fusion.fuse_poses`).
@@ -24,8 +24,9 @@ optimistic for RANSAC estimates), the fused one from the information-form fusion
 
 from __future__ import annotations
 
+from strl_pyg.inference.methods.base import CLASSICAL, DESCRIPTION, FunctionMethod, PoseMethod
 from strl_pyg.inference.methods.builtin import builtin_methods
-from strl_pyg.inference.methods.classical import Classical
+from strl_pyg.inference.methods.classical import Classical, OpenCV, PoseLib
 from strl_pyg.inference.methods.fused import Fused
 from strl_pyg.inference.methods.geometric import Geometric, Guided
 from strl_pyg.inference.methods.regression import Regression, swap_term
@@ -36,7 +37,7 @@ from strl_pyg.inference.methods.vanishing_point import (
     VanishingPointChecked,
 )
 
-__all__ = ["Regression", "Classical", "Geometric", "Guided", "Fused", "VanishingPoint",
+__all__ = ["Regression", "Classical", "OpenCV", "PoseLib", "Geometric", "Guided", "Fused", "VanishingPoint",
            "VanishingPointChecked", "VP_CHECK_ANGLE_DEG", "VP_CHECK_SUPPORT_SLACK", "swap_term",
-           "builtin_methods"]
+           "builtin_methods", "PoseMethod", "FunctionMethod", "DESCRIPTION", "CLASSICAL"]
 

@@ -6,31 +6,30 @@ from __future__ import annotations
 import time
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.estimation.classical import have_poselib
+from strl_pyg.estimation.classical import OPENCV, POSELIB, have_poselib
 from strl_pyg.estimation.uncertainty import bootstrap_resamples
+from strl_pyg.inference.methods.base import PoseMethod
 from strl_pyg.inference.methods.context import MethodContext, _add_bootstrap, _solve
 from strl_pyg.inference.record import MethodResult
-from strl_pyg.inference.registry import PoseMethod
 
-__all__ = ["Classical"]
+__all__ = ["Classical", "OpenCV", "PoseLib"]
 
 
 class Classical(PoseMethod):
-    """A classical essential-matrix solver (:mod:`strl_pyg.estimation.classical`):
-    ``Classical("opencv")`` (OpenCV MAGSAC) or ``Classical("poselib")`` (PoseLib LO-RANSAC,
-    where installed), with the first-order covariance of its inliers and the bootstrap."""
+    """A classical essential-matrix solver (:mod:`strl_pyg.estimation.classical`), with the
+    first-order covariance of its inliers and the bootstrap: :class:`OpenCV` (MAGSAC) and
+    :class:`PoseLib` (LO-RANSAC, where installed); ``Classical.of(name)`` is the one of that
+    name."""
 
     bootstrapped = True
-    LABELS = {"opencv": "OpenCV MAGSAC", "poselib": "PoseLib"}
 
-    def __init__(self, solver: str) -> None:
-        if solver not in self.LABELS:
-            raise ValueError(f"Expected a classical solver in {sorted(self.LABELS)} "
-                             f"(got {solver!r})")
-        self.name, self.label = solver, self.LABELS[solver]
-
-    def available(self) -> bool:
-        return self.name != "poselib" or have_poselib()
+    @staticmethod
+    def of(name: str) -> Classical:
+        """The classical method called ``name`` (``"opencv"`` or ``"poselib"``)."""
+        for cls in (OpenCV, PoseLib):
+            if cls.name == name:
+                return cls()
+        raise ValueError(f"Expected a classical solver in {[OPENCV, POSELIB]} (got {name!r})")
 
     def __call__(self, matches: PairMatches, ctx: MethodContext) -> MethodResult:
         name = self.name
@@ -61,3 +60,20 @@ class Classical(PoseMethod):
         else:
             boot = None
         return _add_bootstrap(rec, boot, ctx.config.bootstrap, "first-order")
+
+
+class OpenCV(Classical):
+    """``opencv``: OpenCV's MAGSAC essential matrix (always installed)."""
+
+    name = OPENCV
+    label = "OpenCV MAGSAC"
+
+
+class PoseLib(Classical):
+    """``poselib``: PoseLib's LO-RANSAC with non-linear refinement (optional dependency)."""
+
+    name = POSELIB
+    label = "PoseLib"
+
+    def available(self) -> bool:
+        return have_poselib()

@@ -8,17 +8,25 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.estimation.classical import estimate_relative_pose, have_poselib
+from strl_pyg.estimation.classical import (
+    OPENCV,
+    POSELIB,
+    estimate_relative_pose,
+    preferred_solver,
+)
 from strl_pyg.estimation.uncertainty import FAR_ROTATION_DEG, FAR_TRANSLATION_DEG, MIN_BOOTSTRAP
-from strl_pyg.inference.config import CheckpointSettings, EstimatorConfig
 from strl_pyg.inference.network import network_pose
 from strl_pyg.inference.record import MethodResult
+from strl_pyg.inference.settings import CheckpointSettings
+
+if TYPE_CHECKING:
+    from strl_pyg.inference.config import EstimatorConfig
 
 __all__ = ["MethodContext", "MethodFn", "DATA_CHECK_MIN_POINTS", "POINT_POOR_MAX_POINTS",
            "classical_base", "with_covariance"]
@@ -34,7 +42,7 @@ class MethodContext:
     per solver, its bootstrap, the network's full forward pass, the lines' vanishing
     directions)."""
 
-    config: EstimatorConfig = field(default_factory=EstimatorConfig)
+    config: EstimatorConfig
     load_model: Callable[[], torch.nn.Module] | None = field(default=None, repr=False)
     results: dict[str, MethodResult] = field(default_factory=dict)
     #: what the checkpoint says (calibration, fusion inflation); None: read from ``model``
@@ -86,10 +94,9 @@ def _solve(name: str, matches: PairMatches, ctx: MethodContext) -> Any:
 
 def classical_base(ctx: MethodContext) -> str:
     """The classical solver a method reads: the one the run holds a result of (PoseLib first),
-    else PoseLib where installed, else OpenCV; a method's ``"classical"`` dependency is that
+    else PoseLib where installed, else OpenCV; a method's :data:`~strl_pyg.inference.registry.CLASSICAL` dependency is that
     solver (:func:`~strl_pyg.inference.registry.methods_needed`)."""
-    return next((c for c in ("poselib", "opencv") if c in ctx.results),
-                "poselib" if have_poselib() else "opencv")
+    return next((c for c in (POSELIB, OPENCV) if c in ctx.results), preferred_solver())
 
 
 #: The point-poor regime, one bound for everything that depends on it: at or below this many

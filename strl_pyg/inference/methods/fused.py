@@ -6,11 +6,12 @@ from __future__ import annotations
 import time
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.inference.config import CheckpointSettings
-from strl_pyg.inference.methods.context import MethodContext, _add_bootstrap, classical_base
-from strl_pyg.inference.methods.regression import swap_term
+from strl_pyg.estimation.classical import OPENCV, POSELIB
+from strl_pyg.inference.methods.base import CLASSICAL, PoseMethod
+from strl_pyg.inference.methods.context import MethodContext, _add_bootstrap
+from strl_pyg.inference.methods.regression import Regression, swap_term
 from strl_pyg.inference.record import MethodResult
-from strl_pyg.inference.registry import PoseMethod
+from strl_pyg.inference.settings import CheckpointSettings
 
 __all__ = ["Fused"]
 
@@ -25,16 +26,16 @@ class Fused(PoseMethod):
     reads_lines = True
     bootstrapped = True
     classical_base = True
-    depends_on = ("regression", "classical")
+    depends_on = (Regression.name, CLASSICAL)
 
     def __call__(self, matches: PairMatches, ctx: MethodContext) -> MethodResult:
         from strl_pyg.estimation.pose_fusion import fuse_poses
 
-        net = ctx.results.get("regression")
-        cls = next((ctx.results[c] for c in ("poselib", "opencv")
+        net = ctx.results.get(Regression.name)
+        cls = next((ctx.results[c] for c in (POSELIB, OPENCV)
                     if c in ctx.results and ctx.results[c].status == "ok"), None)
         if net is None or net.status != "ok" or cls is None:
-            return MethodResult("fused", "failed", warnings=[
+            return MethodResult(self.name, "failed", warnings=[
                 "fused needs an 'ok' regression and an 'ok' classical estimate (poselib or "
                 "opencv)"])
         start = time.perf_counter()
@@ -42,19 +43,19 @@ class Fused(PoseMethod):
         # held-out calibration pairs by benchmarks/bench_pose.py --calibrate: the smallest that
         # keeps the 95 % upper bound of the median change against the classical pose <= +5 %)
         settings = ctx.settings if ctx.settings is not None else CheckpointSettings.of(ctx.model)
-        scale = settings.calibration.get("regression", 1.0) * settings.fusion_inflation
+        scale = settings.calibration.get(Regression.name, 1.0) * settings.fusion_inflation
         f = fuse_poses(net.raw, None, cls.raw, matches, threshold_px=ctx.config.threshold_px,
                        network_scale=scale, network_extra=swap_term(net))
         ms = (time.perf_counter() - start) * 1e3 + net.time_ms + cls.time_ms
         if f.source == "network":
-            return MethodResult("fused", "failed", time_ms=ms, raw=f, warnings=[
+            return MethodResult(self.name, "failed", time_ms=ms, raw=f, warnings=[
                 f"fused: too few {cls.method} inliers for a covariance ({f.info['num_inliers']})"])
         gate = f.info.get("gate", {})
         info = {"classical": cls.method, "network_weight": f.weights,
                 "sign_disagreement": f.info["sign_disagreement"], "used": f.source,
                 "gate_d2": gate.get("d2"), "network_variance_scale": scale}
         warnings = [] if f.source == "fused" else [f"fused: {gate.get('reason')}"]
-        rec = MethodResult("fused", "ok", f.pose, f.covariance.numpy(),
+        rec = MethodResult(self.name, "ok", f.pose, f.covariance.numpy(),
                            warnings, time_ms=ms, num_inliers=f.info["num_inliers"], info=info,
                            raw=f)
         # the fused pose stays near the classical one and moves with it when the matches change:

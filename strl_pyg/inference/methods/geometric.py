@@ -9,6 +9,7 @@ import torch
 
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.estimation.uncertainty import bootstrap_resamples
+from strl_pyg.inference.methods.base import CLASSICAL, PoseMethod
 from strl_pyg.inference.methods.context import (
     MethodContext,
     _add_bootstrap,
@@ -18,7 +19,6 @@ from strl_pyg.inference.methods.context import (
     with_covariance,
 )
 from strl_pyg.inference.record import MethodResult
-from strl_pyg.inference.registry import PoseMethod
 
 __all__ = ["Geometric", "Guided"]
 
@@ -37,7 +37,7 @@ class Geometric(PoseMethod):
         from strl_pyg.geometry import Pose
         from strl_pyg.geometry.essential import DEGENERATE, refine_pose
 
-        bad = _no_head("geometric", ctx)
+        bad = _no_head(self.name, ctx)
         if bad is not None:
             return bad
         out, ms = _full_forward(matches, ctx)
@@ -46,7 +46,7 @@ class Geometric(PoseMethod):
         if status != 0:
             why = "degenerate weighted solve (too few effective matches or rank-deficient)" \
                 if status == DEGENERATE else "no intrinsics: the weighted solve needs K0, K1"
-            return MethodResult("geometric", "degenerate" if status == DEGENERATE else "failed",
+            return MethodResult(self.name, "degenerate" if status == DEGENERATE else "failed",
                                 time_ms=ms, warnings=[f"geometric: {why}"], raw=out)
         start = time.perf_counter()
         w = torch.sigmoid(geo.point_logits.double().cpu())
@@ -55,7 +55,7 @@ class Geometric(PoseMethod):
                            iterations=10, tau=ctx.config.threshold_px / focal)
         T = Pose(R[0], t[0])
         ms += (time.perf_counter() - start) * 1e3
-        return with_covariance("geometric", T, matches, ctx.config.threshold_px, time_ms=ms,
+        return with_covariance(self.name, T, matches, ctx.config.threshold_px, time_ms=ms,
                                 info={"mean_weight": float(w.mean())}, raw=out)
 
 
@@ -69,13 +69,13 @@ class Guided(PoseMethod):
     reads_lines = True
     bootstrapped = True
     classical_base = True
-    depends_on = ("classical",)
+    depends_on = (CLASSICAL,)
     needs_geometric_head = True
 
     def __call__(self, matches: PairMatches, ctx: MethodContext) -> MethodResult:
         from strl_pyg.estimation.guided import guided_estimate
 
-        bad = _no_head("guided", ctx)
+        bad = _no_head(self.name, ctx)
         if bad is not None:
             return bad
         base = classical_base(ctx)
@@ -87,10 +87,10 @@ class Guided(PoseMethod):
                               classical=classical)
         ms += res.time_ms
         if not res.success:
-            return MethodResult("guided", "failed", time_ms=ms, raw=res,
+            return MethodResult(self.name, "failed", time_ms=ms, raw=res,
                                 warnings=[f"guided {base}: no hypothesis found"])
         info = {"base": base, "candidate": res.info["candidate"], "refined": res.info["refined"]}
-        rec = with_covariance("guided", res.pose, matches,
+        rec = with_covariance(self.name, res.pose, matches,
                                ctx.config.threshold_px, time_ms=ms, info=info, raw=res)
         boot, n_boot, resampled = None, ctx.config.bootstrap, None
         if rec.covariance is not None and n_boot:

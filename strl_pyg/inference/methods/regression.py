@@ -10,12 +10,12 @@ import numpy as np
 import torch
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.estimation.classical import have_poselib
+from strl_pyg.estimation.classical import preferred_solver
 from strl_pyg.estimation.uncertainty import data_covariance, swap_covariance
+from strl_pyg.inference.methods.base import PoseMethod
 from strl_pyg.inference.methods.context import DATA_CHECK_MIN_POINTS, MethodContext, _solve
 from strl_pyg.inference.network import network_pose
 from strl_pyg.inference.record import MethodResult
-from strl_pyg.inference.registry import PoseMethod
 
 __all__ = ["Regression", "swap_term"]
 
@@ -33,8 +33,7 @@ class Regression(PoseMethod):
 
     def __call__(self, matches: PairMatches, ctx: MethodContext) -> MethodResult:
         from strl_pyg.estimation.pose_fusion import network_covariance
-        from strl_pyg.geometry import tangent_basis
-        from strl_pyg.geometry import Pose
+        from strl_pyg.geometry import Pose, tangent_basis
 
         model = ctx.model
         start = time.perf_counter()
@@ -45,8 +44,9 @@ class Regression(PoseMethod):
         q, t, lv = (x[0].detach().cpu().double() for x in (out.quaternion, out.translation,
                                                            out.log_var))
         if not all(bool(torch.isfinite(x).all()) for x in (q, t, lv)) or float(t.norm()) < 1e-12:
-            return MethodResult("regression", "failed", time_ms=ms, raw=out,
-                                warnings=["the network returned a non-finite or zero pose"])
+            return MethodResult(self.name, "failed", time_ms=ms, raw=out,
+                                warnings=["the network returned a non-finite or zero pose"],
+                                support_checked=self.support_checked)
         cov = network_covariance(q, t, lv, tangent_basis(t)).numpy()
         info = {"quaternion": q, "translation": t, "log_var": lv,
                 "sigma_components": torch.exp(0.5 * lv),
@@ -87,8 +87,8 @@ class Regression(PoseMethod):
                 cov = cov + data_covariance(*found)
                 info["data_disagreement_deg"] = {"rotation": math.degrees(found[0]),
                                                  "translation": math.degrees(found[1])}
-        return MethodResult("regression", "ok", pose, cov, warnings, time_ms=ms,
-                            info=info, raw=out)
+        return MethodResult(self.name, "ok", pose, cov, warnings, time_ms=ms, info=info, raw=out,
+                            support_checked=self.support_checked)
 
 
 #: Fewest distinct point matches for the regression's data check (a 5-dof pose needs 5; the
@@ -107,7 +107,7 @@ def _data_disagreement(matches: PairMatches, pose: Any,
     n = matches.num_distinct_points
     if n < DATA_CHECK_MIN_POINTS:
         return f"{n} distinct point matches (fewer than {DATA_CHECK_MIN_POINTS})"
-    name = "poselib" if have_poselib() else "opencv"
+    name = preferred_solver()
     res = _solve(name, matches, ctx)
     if not res.success:
         return f"{name} found no pose"

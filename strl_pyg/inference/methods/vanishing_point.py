@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from strl_pyg.data.matches import PairMatches
+from strl_pyg.inference.methods.base import CLASSICAL, PoseMethod
 from strl_pyg.inference.methods.classical import Classical
 from strl_pyg.inference.methods.context import (
     POINT_POOR_MAX_POINTS,
@@ -24,7 +25,6 @@ from strl_pyg.inference.methods.context import (
     with_covariance,
 )
 from strl_pyg.inference.record import MethodResult
-from strl_pyg.inference.registry import PoseMethod
 
 __all__ = ["VanishingPoint", "VanishingPointChecked", "VP_CHECK_ANGLE_DEG",
            "VP_CHECK_SUPPORT_SLACK"]
@@ -36,7 +36,7 @@ class VanishingPoint(PoseMethod):
     name = "vp"
     label = "vanishing-point rotation + 2-point translation"
     reads_lines = True
-    depends_on = ("classical",)
+    depends_on = (CLASSICAL,)
 
     def __call__(self, matches: PairMatches, ctx: MethodContext) -> MethodResult:
         """The vanishing-point rotation and 2-point translation
@@ -50,7 +50,7 @@ class VanishingPoint(PoseMethod):
 
         if matches.num_lines == 0:
             # the input lacks what vp reads: "skipped", as for a model without its pixels
-            return MethodResult("vp", "skipped", warnings=[
+            return MethodResult(self.name, "skipped", warnings=[
                 "vp needs line matches (got none: FrontendConfig(lines=True), or lines0/lines1)"])
         # the 5-point solver's supported pose is a second start of the joint refinement with the
         # lines: its record of this run when it ran before, else solved and support-checked here
@@ -64,16 +64,16 @@ class VanishingPoint(PoseMethod):
             cls = ctx.results.get(base) or ctx.vp_start
             if cls is None:
                 cls = ctx.vp_start = check_support(
-                    Classical(base)(matches, ctx), matches, ctx.config.threshold_px,
+                    Classical.of(base)(matches, ctx), matches, ctx.config.threshold_px,
                     *ctx.config.support)
             starts = [cls.T_0to1] if cls.status == "ok" else []
         res = vanishing_point_pose(matches, ctx.config.threshold_px, seed=ctx.config.seed,
                                    directions=_vanishing_directions(matches, ctx), starts=starts,
                                    line_sigma_px=sigma)
         if not res.success:
-            return MethodResult("vp", "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
+            return MethodResult(self.name, "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
                                 info=dict(res.info), warnings=[f"vp: {res.info['reason']}"])
-        rec = with_covariance("vp", res.pose, matches, ctx.config.threshold_px,
+        rec = with_covariance(self.name, res.pose, matches, ctx.config.threshold_px,
                                time_ms=res.time_ms, info=dict(res.info), raw=res)
         if rec.covariance is not None:  # the documented key (the CLI prints it)
             rec.info["covariance"] = "first-order"
@@ -109,7 +109,7 @@ def _result_of(name: str, matches: PairMatches, ctx: MethodContext) -> MethodRes
 
     res = ctx.results.get(name)
     if res is None:
-        res = (VanishingPoint() if name == "vp" else Classical(name))(matches, ctx)
+        res = (VanishingPoint() if name == VanishingPoint.name else Classical.of(name))(matches, ctx)
     if res.status == "ok" and "support_inliers" not in res.info:
         res = check_support(res, matches, ctx.config.threshold_px, min_inlier_ratio=0.0,
                             min_inliers=0, min_in_front=0.0)
@@ -123,7 +123,7 @@ class VanishingPointChecked(PoseMethod):
     name = "vp_checked"
     label = "PoseLib checked by the lines' vanishing direction"
     reads_lines = True
-    depends_on = ("classical",)  # and vp's result where it ran (else it runs vp itself)
+    depends_on = (CLASSICAL,)  # and vp's result where it ran (else it runs vp itself)
     angle_deg = VP_CHECK_ANGLE_DEG
     support_slack = VP_CHECK_SUPPORT_SLACK
 
@@ -144,11 +144,11 @@ class VanishingPointChecked(PoseMethod):
         def take(rec: MethodResult, reason: str) -> MethodResult:
             ms = (time.perf_counter() - start) * 1e3
             if rec.status != "ok":
-                return MethodResult("vp_checked", rec.status, time_ms=ms, info={**info,
+                return MethodResult(self.name, rec.status, time_ms=ms, info={**info,
                                     "reason": reason}, warnings=[f"vp_checked: {reason}"]
                                     + [w for w in rec.warnings if w not in reason],
                                     bad_intrinsics=rec.bad_intrinsics)
-            return MethodResult("vp_checked", "ok", rec.as_pose(), rec.covariance,
+            return MethodResult(self.name, "ok", rec.as_pose(), rec.covariance,
                                 list(rec.warnings), ms, rec.num_inliers,
                                 info={**info, "source": rec.method, "reason": reason,
                                       "covariance": rec.info.get("covariance"),
@@ -161,7 +161,7 @@ class VanishingPointChecked(PoseMethod):
                         f"{POINT_POOR_MAX_POINTS}): the {base} pose as it is")
         if matches.num_lines == 0:
             return take(cls, "no line matches to check the pose against")
-        vp = _result_of("vp", matches, ctx)
+        vp = _result_of(VanishingPoint.name, matches, ctx)
         if cls.status != "ok":
             return take(vp, f"{base} gave no supported pose" + (
                 "; vp's pose" if vp.status == "ok" else "; nor did vp"))
