@@ -311,7 +311,7 @@ def cmd_predict(args) -> int:
             raise UsageError(f"Expected a .png path for --explain (got '{args.explain}')")
     if not (np.isfinite(args.threshold_px) and args.threshold_px > 0):
         raise UsageError(f"Expected a positive --threshold-px (got {args.threshold_px})")
-    methods = "regression" if args.no_baseline else args.methods
+    methods = Regression.name if args.no_baseline else args.methods
     if methods.lower() in ("recommended", "all"):
         methods = methods.lower()
     _check_methods(methods)  # before the images and the model are read

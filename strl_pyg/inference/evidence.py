@@ -198,13 +198,14 @@ def apply_multiple_motions(estimate: PoseEstimate, geo: TwoViewGeometry | None,
     first = _pose_inliers(T, matches, threshold_px)
     rest = np.flatnonzero(~first)
     n1 = int(first.sum())
-    if len(rest) < max(MULTIPLE_MIN_INLIERS, 8):
+    need = max(MULTIPLE_MIN_INLIERS, MULTIPLE_SHARE * n1)
+    if len(rest) < max(need, 8):  # too few left out to hold a second motion that counts
         return estimate
     others = replace(matches, points0=matches.points0[rest], points1=matches.points1[rest],
                      point_scores=None, lines0=None, lines1=None, line_scores=None)
     second = estimate_relative_pose(others, preferred_solver(), threshold_px, seed=seed)
     n2 = int(second.inliers.sum()) if second.success else 0
-    if n2 < max(MULTIPLE_MIN_INLIERS, MULTIPLE_SHARE * n1):
+    if n2 < need:
         return estimate
     T2 = second.T_0to1.matrix().numpy()
     rot = _rot_deg(T[:3, :3], T2[:3, :3])

@@ -279,3 +279,30 @@ def test_a_few_still_border_matches_are_no_watermark():
     matches are outliers); and a pair that barely moves anywhere is no watermark either."""
     est = PoseEstimator(methods=("poselib",)).estimate(_stamped(300, 20))
     assert est.configuration == "general" and est.pose.status == "ok"
+
+
+def test_no_second_motion_is_searched_where_too_few_matches_are_left_out(monkeypatch):
+    """The second-motion solve needs MULTIPLE_SHARE of the pose's inliers among the matches
+    the pose leaves out; where fewer are left out it cannot find one, so it is not run (on
+    KITTI it was a third of the default predict's time after the front end). Where enough are
+    left out it runs, and two motions are still found."""
+    from strl_pyg.estimation import classical
+    from strl_pyg.inference import evidence
+
+    calls = []
+    real = classical.estimate_relative_pose
+
+    def counted(matches, *a, **k):
+        calls.append(matches.num_points)
+        return real(matches, *a, **k)
+
+    monkeypatch.setattr(classical, "estimate_relative_pose", counted)
+    m, _ = _two_motions(300, 40)  # 40 left out: more than MULTIPLE_MIN_INLIERS, < 0.4 x 300
+    est = PoseEstimator(methods=("poselib",), bootstrap=0, focal_sensitivity=False).estimate(m)
+    assert est.configuration == "general" and est.pose.status == "ok"
+    assert len(calls) == 0  # (the method's own solve does not go through this name)
+    n1 = est.geometry.inliers_E
+    assert m.num_points - n1 < evidence.MULTIPLE_SHARE * n1
+    m, _ = _two_motions(300, 280)
+    est = PoseEstimator(methods=("poselib",), bootstrap=0, focal_sensitivity=False).estimate(m)
+    assert est.configuration == "multiple" and len(calls) == 1
