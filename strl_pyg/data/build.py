@@ -95,10 +95,13 @@ def sample_patches(image: Tensor, xy: Tensor, patch_size: int = 1) -> Tensor:
     n = xy.shape[0]
     if n == 0:
         return image.new_zeros(0, c * patch_size * patch_size)
-    r = patch_size // 2
-    off = torch.arange(-r, r + 1, dtype=xy.dtype, device=xy.device)
-    oy, ox = torch.meshgrid(off, off, indexing="ij")
-    pts = xy[:, None, :] + torch.stack([ox, oy], dim=-1).reshape(1, -1, 2)  # [N, p*p, 2]
+    if patch_size == 1:
+        pts = xy[:, None, :]  # [N, 1, 2]
+    else:
+        r = patch_size // 2
+        off = torch.arange(-r, r + 1, dtype=xy.dtype, device=xy.device)
+        oy, ox = torch.meshgrid(off, off, indexing="ij")
+        pts = xy[:, None, :] + torch.stack([ox, oy], dim=-1).reshape(1, -1, 2)  # [N, p*p, 2]
     out = sample_bilinear(image.unsqueeze(0), pts.reshape(1, -1, 2), padding="border")
     return out[0].view(c, n, -1).permute(1, 0, 2).reshape(n, c * patch_size * patch_size)
 
@@ -206,15 +209,21 @@ def build_pair_graph(
         keys_.ENDPOINT: [ln.reshape(-1, 2) for ln in lines],
     }
     data = PairGraph()
+    point, endpoint = data[keys_.POINT], data[keys_.ENDPOINT]
+    n_points = matches.num_points
+    for i, (pos_key, patch_key) in enumerate(((keys_.POS0, keys_.PATCH0),
+                                              (keys_.POS1, keys_.PATCH1))):
+        # both node types in one call per image (every feature is the node's own)
+        xy = torch.cat([coords[keys_.POINT][i], coords[keys_.ENDPOINT][i]])
+        pos = normalize_coords(xy, sizes[i], Ks[i] if use_K else None)
+        point[pos_key], endpoint[pos_key] = pos[:n_points], pos[n_points:]
+        if images is not None:
+            patch = sample_patches(images[i], xy, patch_size)
+            point[patch_key], endpoint[patch_key] = patch[:n_points], patch[n_points:]
     for node_type, (xy0, xy1) in coords.items():
         store = data[node_type]
         store.num_nodes = xy0.shape[0]
         store[keys_.KPTS0], store[keys_.KPTS1] = xy0, xy1
-        for i, (xy, key) in enumerate(((xy0, keys_.POS0), (xy1, keys_.POS1))):
-            store[key] = normalize_coords(xy, sizes[i], Ks[i] if use_K else None)
-        if images is not None:
-            store[keys_.PATCH0] = sample_patches(images[0], xy0, patch_size)
-            store[keys_.PATCH1] = sample_patches(images[1], xy1, patch_size)
     if matches.point_scores is not None:
         data[keys_.POINT][keys_.SCORE] = torch.from_numpy(matches.point_scores).float()
     if matches.line_scores is not None:

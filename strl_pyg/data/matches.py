@@ -6,6 +6,7 @@ Coordinates are **pixels** with OpenCV's convention: the centre of the top-left 
 
 from __future__ import annotations
 
+import copy
 import json
 import os
 from dataclasses import dataclass, field, fields
@@ -232,10 +233,14 @@ class PairMatches:
         """Returns a copy keeping the points and lines at the given indices (repeats allowed).
         Point row indices stored in ``info`` (the front end's ``"fundamental_inliers"``) are
         re-indexed to the kept rows."""
+        kwargs = {f.name: getattr(self, f.name) for f in fields(self)}
+        kwargs.update(self._selected(point_index, line_index))
+        return PairMatches(**kwargs)
+
+    def _selected(self, point_index: Any, line_index: Any) -> dict[str, Any]:
         pi = slice(None) if point_index is None else np.asarray(point_index, dtype=np.int64)
         li = slice(None) if line_index is None else np.asarray(line_index, dtype=np.int64)
-        kwargs = {f.name: getattr(self, f.name) for f in fields(self)}
-        kwargs.update(
+        return dict(
             points0=self.points0[pi],
             points1=self.points1[pi],
             lines0=self.lines0[li],
@@ -244,7 +249,21 @@ class PairMatches:
             line_scores=None if self.line_scores is None else self.line_scores[li],
             info=_reindexed_info(self.info, pi, self.num_points),
         )
-        return PairMatches(**kwargs)
+
+    def _derived(self, point_index: Any = None, line_index: Any = None,
+                 **changes: Any) -> PairMatches:
+        """:meth:`select` and / or fields replaced, without checking again what these
+        validated matches already passed: for the package's own derivations whose result is
+        valid by construction (rows of these matches, at least one of them; images converted
+        from these). Checked input goes through the constructor."""
+        out = copy.copy(self)
+        if point_index is not None or line_index is not None:
+            changes = {**self._selected(point_index, line_index), **changes}
+        for name, value in changes.items():
+            setattr(out, name, value)
+        if out.num_points == 0 and out.num_lines == 0:
+            raise ValueError("Expected at least one point or line match (got none)")
+        return out
 
     def swapped(self) -> PairMatches:
         """The same pair seen from image 1: every ``0`` field exchanged with its ``1`` field

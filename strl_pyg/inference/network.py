@@ -9,7 +9,6 @@ fixed-size resampling (seeded, so a pair always gets the same graph); the forwar
 from __future__ import annotations
 
 import copy
-from dataclasses import replace
 from typing import Any
 
 import cv2
@@ -49,17 +48,22 @@ def prepare_matches(matches: PairMatches, model: torch.nn.Module) -> tuple[PairM
                          "(got none)")
     md = _metadata(model)
     channels = md["patch_channels"]
-    return replace(matches, image0=_convert_image(matches.image0, channels),
-                   image1=_convert_image(matches.image1, channels)), md["patch_size"] or 1
+    return matches._derived(image0=_convert_image(matches.image0, channels),
+                            image1=_convert_image(matches.image1, channels)), \
+        md["patch_size"] or 1
 
 
-def prepare_graph(matches: PairMatches, model: torch.nn.Module, seed: int = 0,
-                  resample: Any = "model"):
+def prepare_graph(matches: PairMatches, model: torch.nn.Module, seed: int | None = 0,
+                  resample: Any = "model", reference: bool = False):
     """The model's input graph of one pair: :func:`prepare_matches`, then
     :func:`~strl_pyg.data.build_pair_graph`, then :class:`~strl_pyg.data.FixedSizeResample`
-    to ``resample`` (``(points, lines)``, ``None`` = none, ``"model"`` = the checkpoint's)."""
+    to ``resample`` (``(points, lines)``, ``None`` = none, ``"model"`` = the checkpoint's).
+
+    The graph is built on the resampled rows only (the same indices, drawn from the same
+    generator, so the same graph as building every match and resampling the graph: every node
+    feature is the node's own); ``reference=True`` takes that longer way."""
     from strl_pyg.data.build import build_pair_graph
-    from strl_pyg.data.transforms import FixedSizeResample
+    from strl_pyg.data.transforms import FixedSizeResample, resample_indices
 
     # every network method (regression, the geometric head, guided, fused through regression)
     # comes through here, so this one check is what refuses descriptor-matched lines
@@ -70,12 +74,22 @@ def prepare_graph(matches: PairMatches, model: torch.nn.Module, seed: int = 0,
             "correspondences; match with FrontendConfig(line_matcher='epipolar') or use the "
             "line solvers (vp, vp_checked)")
     m, p = prepare_matches(matches, model)
-    data = build_pair_graph(m, patch_size=p, keep_images=model.config.visual == "cnn")
+    keep_images = model.config.visual == "cnn"
     if isinstance(resample, str) and resample == "model":
         resample = _metadata(model)["resample"]
-    if resample is not None:
-        data = FixedSizeResample(int(resample[0]), int(resample[1]), seed=seed)(data)
-    return data
+    if resample is None:
+        return build_pair_graph(m, patch_size=p, keep_images=keep_images)
+    n_points, n_lines = int(resample[0]), int(resample[1])
+    if not reference:
+        # FixedSizeResample's draws, in its order (points, then lines), on the matches' rows
+        generator = None if seed is None else torch.Generator().manual_seed(seed)
+        pi = resample_indices(m.num_points, n_points, generator)
+        li = resample_indices(m.num_lines, n_lines, generator)
+        if pi.numel() or li.numel():
+            return build_pair_graph(m._derived(pi.numpy(), li.numpy()), patch_size=p,
+                                    keep_images=keep_images)
+    data = build_pair_graph(m, patch_size=p, keep_images=keep_images)
+    return FixedSizeResample(n_points, n_lines, seed=seed)(data)
 
 
 def _model_dtype(model: torch.nn.Module) -> tuple[torch.dtype, torch.device]:
