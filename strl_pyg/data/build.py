@@ -201,13 +201,9 @@ def build_pair_graph(
 
     nl = matches.num_lines
     lines = [torch.from_numpy(matches.lines0).float(), torch.from_numpy(matches.lines1).float()]
-    coords = {
-        keys_.POINT: [
-            torch.from_numpy(matches.points0).float(),
-            torch.from_numpy(matches.points1).float(),
-        ],
-        keys_.ENDPOINT: [ln.reshape(-1, 2) for ln in lines],
-    }
+    coords = {keys_.POINT: [torch.from_numpy(matches.points0).float(),
+                            torch.from_numpy(matches.points1).float()],
+              keys_.ENDPOINT: [ln.reshape(-1, 2) for ln in lines]}
     data = PairGraph()
     point, endpoint = data[keys_.POINT], data[keys_.ENDPOINT]
     n_points = matches.num_points

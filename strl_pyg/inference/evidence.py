@@ -47,6 +47,7 @@ from strl_pyg.estimation.classical import (
 from strl_pyg.estimation.two_view import TwoViewGeometry, classify_two_view, planar_candidates
 from strl_pyg.inference.record import MethodResult, PoseEstimate
 from strl_pyg.inference.support import check_support
+from strl_pyg.utils.threads import available_cores, shared_pool
 
 __all__ = ["LEARNED_SUPPORT_SHARE", "FOCAL_MIN_INLIERS", "PLANAR_AGREE_DEG",
            "FOCAL_RANGE_FACTOR", "FOCAL_VERIFIED_SHARE", "pair_geometry", "focal_consistency",
@@ -144,12 +145,20 @@ def focal_sensitivity(pose: MethodResult, matches: PairMatches, threshold_px: fl
     t_ref = torch.as_tensor(T[:3, 3] / max(np.linalg.norm(T[:3, 3]), 1e-300))
     basis = tangent_basis(t_ref)
     deltas, counts = [], []
-    for s in (1.0 / factor, factor):
+
+    def solve(s: float):
         K0, K1 = (np.asarray(K, dtype=np.float64).copy() for K in (matches.K0, matches.K1))
         K0[:2, :2] *= s
         K1[:2, :2] *= s
-        alt = estimate_relative_pose(replace(matches, K0=K0, K1=K1), solver, threshold_px,
-                                     seed=seed)
+        return estimate_relative_pose(matches._derived(K0=K0, K1=K1), solver, threshold_px,
+                                      seed=seed)
+
+    if available_cores() > 1:  # the solver releases the GIL: the two solves side by side
+        wide = shared_pool("focal", 1).submit(solve, factor)
+        solved = [solve(1.0 / factor), wide.result()]
+    else:
+        solved = [solve(1.0 / factor), solve(factor)]
+    for alt in solved:
         counts.append(int(alt.inliers.sum()) if alt.success else 0)
         if alt.success:
             P = alt.T_0to1 if isinstance(alt.T_0to1, Pose) else Pose.from_matrix(alt.T_0to1)

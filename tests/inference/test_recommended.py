@@ -213,10 +213,14 @@ def test_a_pair_is_normalised_once_on_the_default_path(model, pair, monkeypatch)
 
 def _outliers_checked(est) -> bool:
     """Whether the MULTIPLE check had enough of the pose's outliers to solve them."""
-    from strl_pyg.inference.evidence import MULTIPLE_MIN_INLIERS
+    from strl_pyg.inference.evidence import MULTIPLE_MIN_INLIERS, MULTIPLE_SHARE
 
     inl = est.pose.inliers
-    return inl is not None and int((~np.asarray(inl, bool)).sum()) >= MULTIPLE_MIN_INLIERS
+    if inl is None:
+        return False
+    inl = np.asarray(inl, bool)
+    need = max(MULTIPLE_MIN_INLIERS, MULTIPLE_SHARE * int(inl.sum()), 8)
+    return int((~inl).sum()) >= need
 
 
 def test_the_recommended_path_checks_a_point_poor_pair_once(model, monkeypatch):
