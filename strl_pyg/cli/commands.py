@@ -41,20 +41,19 @@ from strl_pyg.cli.predict import (
     pose_errors,
     predict_pair,
 )
-from strl_pyg.utils import OneLineArgumentParser
 from strl_pyg.cli.readers import (
     DEMO_SEED,
     MATCHER_PRESETS,
     MAX_SIDE,
-    check_input_file,
-    load_model,
     bootstrap_count,
+    check_input_file,
     frontend_config,
+    load_model,
     non_negative_int,
     read_pair,
 )
-from strl_pyg.utils import UsageError
 from strl_pyg.synthetic.config import LINE_SCENE_KINDS
+from strl_pyg.utils import OneLineArgumentParser, UsageError
 
 __all__ = ["main", "check_train_files", "build_parser"]
 
@@ -154,6 +153,18 @@ def fundamental_inliers(matches) -> np.ndarray | None:
 
     found = fundamental_matrix(matches)
     return None if found is None else found[1]
+
+
+def cmd_methods(args) -> int:
+    """The registered pose methods as a Markdown table (docs/methods.md holds the built-in
+    ones'), and those not installed here."""
+    from strl_pyg.inference.registry import METHODS, methods_table
+
+    print(methods_table())
+    missing = [n for n, m in METHODS.items() if not m.available()]
+    if missing:
+        print(f"not installed here: {', '.join(missing)}")
+    return 0
 
 
 def cmd_train(args, parser, argv: list[str] | None = None) -> int:
@@ -279,6 +290,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--bootstrap", type=bootstrap_count, default=8, metavar="N",
                    help="resamples behind the PoseLib/OpenCV covariance (default 8, the "
                         "calibrated setting; 0: first-order covariance only, faster)")
+    sub.add_parser("methods", help="the pose methods predict --methods takes, with what each "
+                                   "needs (installed packages' methods included)")
     p = sub.add_parser("train", help="train a model (see examples/train.py)")
     add_train_arguments(p)
     sub.add_parser("evaluate", help="evaluate a checkpoint (see examples/evaluate.py)",
@@ -320,6 +333,8 @@ def _dispatch(argv: list[str]) -> int:
     args = parser.parse_args(argv)
     if args.command == "train":
         return cmd_train(args, parser, argv)
+    if args.command == "methods":
+        return cmd_methods(args)
     if args.command == "bench":
         from strl_pyg.cli.bench import cmd_bench
 

@@ -18,7 +18,7 @@ from strl_pyg.inference.methods.base import CLASSICAL, FunctionMethod, PoseMetho
 from strl_pyg.inference.methods.builtin import builtin_methods
 from strl_pyg.inference.methods.context import MethodFn
 
-__all__ = ["RECOMMENDED", "METHODS",
+__all__ = ["RECOMMENDED", "METHODS", "ENTRY_POINT_GROUP", "methods_table",
            "register_method", "methods_where",
            "methods_needed", "network_free_methods", "classical_method",
            "checked_method_names"]
@@ -28,8 +28,36 @@ __all__ = ["RECOMMENDED", "METHODS",
 RECOMMENDED = "recommended"
 
 #: ``name -> PoseMethod`` (the method is its own record), run in this order: the built-in
-#: methods (:func:`~strl_pyg.inference.methods.builtin_methods`), then the registered ones.
+#: methods (:func:`~strl_pyg.inference.methods.builtin_methods`), the installed packages'
+#: (:data:`ENTRY_POINT_GROUP`), then the ones registered at run time.
 METHODS: dict[str, PoseMethod] = {method.name: method for method in builtin_methods()}
+
+#: The entry-point group through which an installed package adds pose methods: in its
+#: ``pyproject.toml``, ``[project.entry-points."strl-pyg.methods"]`` ``mysolver =
+#: "mypackage.mysolver:MySolver"`` (a :class:`PoseMethod` class or instance); the registry
+#: holds it from its definition, so ``strl-pose predict --methods mysolver`` runs it.
+ENTRY_POINT_GROUP = "strl-pyg.methods"
+
+
+def _installed_methods() -> list[PoseMethod]:
+    """The methods installed packages declare (:data:`ENTRY_POINT_GROUP`); one that does not
+    load is left out with a one-line warning naming it."""
+    import warnings
+    from importlib.metadata import entry_points
+
+    out = []
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            obj = ep.load()
+            method = obj() if isinstance(obj, type) else obj
+            if not isinstance(method, PoseMethod) or not method.name:
+                raise TypeError(f"expected a PoseMethod with a name, got {obj!r}")
+        except Exception as err:  # a third party's plugin must not break the package
+            warnings.warn(f"pose method entry point {ep.name!r} ({ep.value}) not loaded: "
+                          f"{type(err).__name__}: {err}", stacklevel=2)
+            continue
+        out.append(method)
+    return out
 
 
 def register_method(name: str | PoseMethod, fn: MethodFn | None = None, *,
@@ -62,6 +90,18 @@ def register_method(name: str | PoseMethod, fn: MethodFn | None = None, *,
     METHODS[name] = FunctionMethod(name, fn, available, min_points=min_points,
                                    needs_intrinsics=needs_intrinsics,
                                    **{"label": name, **description})
+
+
+def methods_table(names: Any = None) -> str:
+    """The registered methods (``names``: these only) as a Markdown table: name, what it is
+    (``summary``, else ``label``), what it needs (:meth:`PoseMethod.needs`). docs/methods.md
+    holds the built-in methods' table; ``strl-pose methods`` prints this one."""
+    rows = ["| name | what it is | needs |", "|---|---|---|"]
+    for name, method in METHODS.items():
+        if names is None or name in names:
+            what = method.summary or method.label or name
+            rows.append(f"| `{name}` | {what} | {method.needs()} |")
+    return "\n".join(rows)
 
 
 def _check_new(name: str, replace_existing: bool) -> None:
@@ -153,3 +193,7 @@ def checked_method_names(methods: Any) -> tuple[str, ...] | str:
     if missing:
         raise ValueError(f"Expected installed methods (got {missing}: not importable here)")
     return names
+
+
+for _method in _installed_methods():
+    register_method(_method)

@@ -22,6 +22,7 @@ class PoseMethod:
     one pair's checked matches and the pair's :class:`~strl_pyg.inference.methods.MethodContext`,
     it returns one :class:`~strl_pyg.inference.MethodResult`. What it needs and how its result
     is treated are class attributes, its description (:data:`DESCRIPTION`: ``name``, ``label``,
+    ``summary`` (a sentence for the methods table), ``requires`` (an optional package),
     ``min_points``, ``needs_intrinsics``, ``reads_lines``, ``uses_network``, ``depends_on``,
     ``support_checked``, ``bootstrapped``, ``classical_base``, ``needs_geometric_head``), and
     :meth:`available` says whether it is installed. Register one with
@@ -30,6 +31,8 @@ class PoseMethod:
 
     name: str = ""
     label: str = ""
+    summary: str = ""
+    requires: str = ""
     min_points: int = MIN_POINTS
     needs_intrinsics: bool = True
     reads_lines: bool = False
@@ -43,6 +46,20 @@ class PoseMethod:
     def available(self) -> bool:
         return True
 
+    def needs(self) -> str:
+        """What it needs, in words, from its attributes (the methods table's third column)."""
+        out = [f"{self.requires} installed"] if self.requires else []
+        if self.needs_geometric_head:
+            out.append("a model with the geometric head")
+        elif self.uses_network:
+            out.append("the model")
+        out.append("intrinsics" if self.needs_intrinsics else "no intrinsics")
+        if self.reads_lines:
+            out.append("reads the line matches")
+        out.append(f">= {self.min_points} point matches")
+        deps = ["the classical pose" if d == CLASSICAL else f"`{d}`" for d in self.depends_on]
+        return ", ".join(out + deps)
+
     def __call__(self, matches: Any, ctx: Any) -> Any:
         raise NotImplementedError(f"{type(self).__name__} runs no pose method (define "
                                   "__call__(matches, ctx) -> MethodResult)")
@@ -52,7 +69,7 @@ class PoseMethod:
 
 
 #: The attributes that describe a method (:class:`PoseMethod`'s class attributes).
-DESCRIPTION = ("label", "min_points", "needs_intrinsics", "reads_lines", "uses_network",
+DESCRIPTION = ("label", "summary", "requires", "min_points", "needs_intrinsics", "reads_lines", "uses_network",
                "depends_on", "support_checked", "bootstrapped", "classical_base",
                "needs_geometric_head")
 

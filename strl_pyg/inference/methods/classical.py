@@ -67,6 +67,7 @@ class OpenCV(Classical):
 
     name = OPENCV
     label = "OpenCV MAGSAC"
+    summary = "OpenCV's USAC_MAGSAC essential matrix, then `recoverPose`"
 
 
 class PoseLib(Classical):
@@ -74,6 +75,8 @@ class PoseLib(Classical):
 
     name = POSELIB
     label = "PoseLib"
+    summary = "PoseLib's LO-RANSAC essential matrix with non-linear refinement"
+    requires = "PoseLib"
 
     def available(self) -> bool:
         return have_poselib()

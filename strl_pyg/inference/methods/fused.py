@@ -22,6 +22,8 @@ class Fused(PoseMethod):
 
     name = "fused"
     label = "network + classical, information form"
+    summary = ("the network's regression fused with the classical pose in information form, "
+               "gated by their agreement")
     uses_network = True
     reads_lines = True
     bootstrapped = True

@@ -28,6 +28,8 @@ class Geometric(PoseMethod):
 
     name = "geometric"
     label = "the network's weighted eight-point"
+    summary = ("the network's geometric head: inlier weights, a weighted eight-point solve, "
+               "refinement")
     uses_network = True
     reads_lines = True
     needs_geometric_head = True
@@ -65,6 +67,7 @@ class Guided(PoseMethod):
 
     name = "guided"
     label = "network-guided classical solve"
+    summary = "the classical solver guided by the geometric head's inlier weights"
     uses_network = True
     reads_lines = True
     bootstrapped = True

@@ -26,6 +26,8 @@ class Regression(PoseMethod):
 
     name = "regression"
     label = "the network's pose head"
+    summary = ("the paper's network: pose and per-component variance regressed from pooled "
+               "features")
     needs_intrinsics = False
     uses_network = True
     reads_lines = True

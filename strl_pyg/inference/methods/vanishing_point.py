@@ -35,6 +35,9 @@ class VanishingPoint(PoseMethod):
 
     name = "vp"
     label = "vanishing-point rotation + 2-point translation"
+    summary = ("the matched lines' vanishing-point rotation, a 2-point translation RANSAC over "
+               "the points, refined on points and lines; first in the recommended order where "
+               "a pair has at most 30 point matches")
     reads_lines = True
     depends_on = (CLASSICAL,)
 
@@ -122,6 +125,8 @@ class VanishingPointChecked(PoseMethod):
 
     name = "vp_checked"
     label = "PoseLib checked by the lines' vanishing direction"
+    summary = ("the classical pose, replaced by `vp`'s where the points are few and the lines' "
+               "strongest vanishing direction contradicts its rotation (opt-in)")
     reads_lines = True
     depends_on = (CLASSICAL,)  # and vp's result where it ran (else it runs vp itself)
     angle_deg = VP_CHECK_ANGLE_DEG
