@@ -219,8 +219,12 @@ def apply_multiple_motions(estimate: PoseEstimate, geo: TwoViewGeometry | None,
     T2 = second.T_0to1.matrix().numpy()
     rot = _rot_deg(T[:3, :3], T2[:3, :3])
     trans = _angle_deg(T[:3, 3], T2[:3, 3])
-    if rot <= MULTIPLE_APART_DEG and trans <= 3 * MULTIPLE_APART_DEG:
-        return estimate  # the same motion, its matches just outside the threshold
+    if rot <= MULTIPLE_APART_DEG and (trans <= 3 * MULTIPLE_APART_DEG
+                                      or geo.configuration == "rotation"):
+        # the same motion, its matches just outside the threshold; or a pure rotation, whose
+        # translation direction the matches do not determine (two halves of the matches
+        # then fit two directions equally badly)
+        return estimate
     estimate.geometry = geo = replace(geo, configuration="multiple", second_motion_inliers=n2)
     info = {**pose.info, "second_motion_T_0to1": T2, "second_motion_inliers": n2}
     estimate.pose = replace(pose, info=info).unreliable([
