@@ -7,7 +7,13 @@ The classifier compares the rotation's inliers (2-D transfer error) with the ess
 matrix's (1-D Sampson error) at one threshold, so at a noise near that threshold a rotation
 counts fewer inliers than an essential matrix with any translation::
 
-    python benchmarks/studies/study_rotation_noise.py --out benchmarks/studies/results_rotation_noise.md
+    python benchmarks/studies/study_rotation_noise.py --real outputs/bench_status_cache \\
+        --out benchmarks/studies/results_rotation_noise.md
+
+``--real CACHE`` also counts, on the real_scenes pairs whose matches ``bench_status.py`` cached
+there, how many a looser rule would call rotations (the rotation's inliers counted at 1.25 px,
+the square root of the chi-square ratio of two to one degree of freedom at 95 %), and in how
+many of those PoseLib's pose is within 5 deg: the right poses the looser rule would refuse.
 """
 
 from __future__ import annotations
@@ -47,10 +53,51 @@ def pure_rotation(seed: int, sigma: float, n: int = 400):
     return PairMatches(x0[keep], x1[keep], K0=K, K1=K, image_size0=SIZE, image_size1=SIZE)
 
 
+def real_pairs_table(cache: Path) -> list[str]:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    import bench_matches as bm
+    import bench_pose as bp
+    import bench_status as bs
+
+    from strl_pyg.datasets.posed import REAL_SCENES_SPLIT
+    from strl_pyg.estimation import two_view as tv
+    from strl_pyg.estimation.classical import estimate_relative_pose, normalised_matches
+
+    rows = []
+    for split in ("val", "train"):
+        for pair in bm.scene_pairs(REAL_SCENES_SPLIT[split], per_gap=6):
+            key = "status_" + pair[0].replace("/", "_")
+            if not any(cache.rglob(f"{key}*")):
+                continue  # only the pairs bench_status.py matched
+            m = bs.matches_of(pair, cache)
+            if m is None:
+                continue
+            m = m.deduplicated().matches
+            x0, x1, f = (a.numpy() if hasattr(a, "numpy") else a for a in normalised_matches(m))
+            g = tv.classify_two_view(x0, x1, f, 1.0, 0, m.points0, m.points1)
+            loose = int(tv.rotation_only(x0, x1, f, 1.25)[1].sum())
+            pl = estimate_relative_pose(m, "poselib", 1.0, seed=0)
+            err = max(bp.errors(pl.T_0to1.matrix().numpy(), pair[5])) if pl.success else 180
+            rows.append((g.inliers_R / max(g.inliers_E, g.inliers_H, 1),
+                         loose / max(g.inliers_E, g.inliers_H, 1), err))
+    out = ["", f"Real pairs (matches cached by `bench_status.py`): {len(rows)}.", "",
+           "| rotation's share of the top model's inliers >= | pairs called rotations, 1 px "
+           "(PoseLib within 5 deg) | pairs called rotations, 1.25 px (PoseLib within 5 deg) |",
+           "|---|---|---|"]
+    for c in (0.6, 0.7, 0.8, 0.9):
+        a = [e for r, _, e in rows if r >= c]
+        b = [e for _, r, e in rows if r >= c]
+        out.append(f"| {c:g} | {len(a)} ({sum(e <= 5 for e in a)}) | {len(b)} "
+                   f"({sum(e <= 5 for e in b)}) |")
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--out", default=None)
+    ap.add_argument("--real", default=None, metavar="CACHE",
+                    help="also the real pairs whose matches bench_status.py cached here")
     args = ap.parse_args()
     from strl_pyg.inference import PoseEstimator
 
@@ -70,6 +117,8 @@ def main() -> None:
         other = args.seeds - counts["rotation_only"] - counts["ok"] - counts["unreliable"]
         lines.append(f"| {sigma:g} | {counts['rotation_only']} | {counts['ok']} | {wide} | "
                      f"{counts['unreliable']} | {other} |")
+    if args.real:
+        lines += real_pairs_table(Path(args.real))
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out:
