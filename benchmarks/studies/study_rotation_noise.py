@@ -103,7 +103,7 @@ def main() -> None:
 
     est = PoseEstimator(methods=("poselib",))
     lines = ["# A pure rotation under match noise (`benchmarks/studies/study_rotation_noise.py`)",
-             "", banner(), "", __doc__.split("\n\n")[1].replace("\n", " "), "",
+             "", banner(), "", __doc__.split("\n\n")[1].replace("\n", " ").replace("::", "."), "",
              f"{args.seeds} pairs per noise level.", "",
              "| noise sigma (px) | rotation_only | ok | of them translation sigma >= 90 deg | "
              "unreliable | other |", "|---|---|---|---|---|---|"]
