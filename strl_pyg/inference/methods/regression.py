@@ -113,11 +113,7 @@ def _data_disagreement(matches: PairMatches, pose: Any,
     res = _solve(name, matches, ctx)
     if not res.success:
         return f"{name} found no pose"
-    R0, t0 = pose.R.double(), pose.t.double() / pose.t.double().norm()
-    R, t = res.pose.R.double(), res.pose.t.double() / res.pose.t.double().norm()
-    cos_r = ((torch.trace(R0.T @ R) - 1) / 2).clamp(-1, 1)
-    cos_t = (t0 @ t).clamp(-1, 1)
-    return float(torch.arccos(cos_r)), float(torch.arccos(cos_t))
+    return _angles_rad(pose.R, pose.t, res.pose.R, res.pose.t)
 
 
 def swap_term(regression: MethodResult) -> np.ndarray | None:
@@ -143,7 +139,16 @@ def _swap_disagreement(model: torch.nn.Module, matches: PairMatches, ctx: Method
             and float(tb.norm()) > 1e-12):
         return None
     inv = Pose.from_quaternion(qb, tb).inv()
-    R_inv, t_inv = inv.R, inv.t
-    cos_r = ((torch.trace(pose.R.T @ R_inv) - 1) / 2).clamp(-1, 1)
-    cos_t = (pose.t @ t_inv / (pose.t.norm() * t_inv.norm())).clamp(-1, 1)
-    return float(torch.arccos(cos_r)), float(torch.arccos(cos_t))
+    return _angles_rad(pose.R, pose.t, inv.R, inv.t)
+
+
+def _angles_rad(R0: torch.Tensor, t0: torch.Tensor, R1: torch.Tensor,
+                t1: torch.Tensor) -> tuple[float, float]:
+    """The rotation angle between ``R0`` and ``R1`` (:func:`~strl_pyg.geometry.rotation_angle_deg`)
+    and the angle between the translation directions, in radians."""
+    from strl_pyg.geometry.pose import rotation_angle_deg
+
+    t0, t1 = t0.double(), t1.double()
+    cos_t = (t0 @ t1 / (t0.norm() * t1.norm())).clamp(-1, 1)
+    angle = float(rotation_angle_deg(R0.double().T @ R1.double()))
+    return math.radians(angle), float(torch.arccos(cos_t))
