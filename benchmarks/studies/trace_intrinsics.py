@@ -36,7 +36,9 @@ def _is_K(obj, ref: np.ndarray) -> bool:
     return bool(np.allclose(obj[:2] / obj[0, 0], ref[:2] / ref[0, 0], rtol=2e-2, atol=2e-2))
 
 
-def _holds_K(obj, ref: np.ndarray, depth: int = 0) -> bool:
+def _holds_K(obj, ref: np.ndarray, depth: int = 0, objects: bool = True) -> bool:
+    """``obj`` is K or holds it one level down (``objects``: also as an attribute, e.g. a
+    ``PairMatches``' ``K0``)."""
     if _is_K(obj, ref):
         return True
     if depth > 0:
@@ -45,7 +47,7 @@ def _holds_K(obj, ref: np.ndarray, depth: int = 0) -> bool:
         return any(_holds_K(o, ref, 1) for o in obj[:8])
     if isinstance(obj, dict):
         return any(_holds_K(o, ref, 1) for o in list(obj.values())[:16])
-    return any(_is_K(getattr(obj, a, None), ref) for a in ("K0", "K1", "K"))
+    return objects and any(_is_K(getattr(obj, a, None), ref) for a in ("K0", "K1", "K"))
 
 
 def trace(argv: list[str], ref: np.ndarray) -> tuple[list, collections.Counter]:
@@ -54,7 +56,7 @@ def trace(argv: list[str], ref: np.ndarray) -> tuple[list, collections.Counter]:
     from strl_pyg.cli import main
 
     package = str(Path(sys.modules["strl_pyg"].__file__).parent)
-    seen: list[tuple[str, str]] = []
+    seen: list[tuple[str, str, bool]] = []
     checks: collections.Counter = collections.Counter()
 
     def hook(frame, event, arg):
@@ -67,7 +69,8 @@ def trace(argv: list[str], ref: np.ndarray) -> tuple[list, collections.Counter]:
         args = [frame.f_locals.get(v) for v in code.co_varnames[:n]]
         if any(_holds_K(a, ref) for a in args):
             module = Path(code.co_filename).relative_to(Path(package).parent).with_suffix("")
-            seen.append((".".join(module.parts), code.co_name))
+            bare = any(_holds_K(a, ref, objects=False) for a in args)
+            seen.append((".".join(module.parts), code.co_name, bare))
             if code.co_name in CHECKS:
                 checks[code.co_name] += 1
 
@@ -86,15 +89,20 @@ def report(seen: list, checks: collections.Counter) -> str:
     modules: dict[str, list[str]] = {}
     moves = 0
     last = None
-    for module, fn in seen:
+    bare = set()
+    for module, fn, itself in seen:
         if module != last:
             moves += 1
             last = module
         fns = modules.setdefault(module, [])
         if fn not in fns:
             fns.append(fn)
-    lines = [f"modules handed K: {len(modules)}; moves between modules: {moves}; calls: "
-             f"{len(seen)}; checks: " + ", ".join(f"{c} x{checks[c]}" for c in CHECKS), ""]
+        if itself:
+            bare.add(module)
+    lines = [f"modules handed K: {len(modules)} ({len(bare)} handed K itself, the others the "
+             f"matches that hold it); moves between modules: {moves}; calls: {len(seen)}; "
+             "checks: " + ", ".join(f"{c} x{checks[c]}" for c in CHECKS), "",
+             "handed K itself: " + ", ".join(m for m in modules if m in bare), ""]
     for module, fns in modules.items():
         shown = ", ".join(fns[:8]) + (f", ... (+{len(fns) - 8})" if len(fns) > 8 else "")
         lines.append(f"- {module}: {shown}")
