@@ -2,7 +2,8 @@
 
 A camera that only rotates by ``R`` sees image 0 warped by ``H = K R K^-1`` (no parallax, no
 translation to find). For frames spread over each real_scenes scene (``--per-scene``), one
-rotation each (angle cycling through ``ANGLES_DEG``, axis drawn from a seeded generator), the
+rotation each (angle cycling through ``ANGLES_DEG``, axis drawn from a generator seeded by the
+frame's id, so the same in every split), the
 photograph and its warp are matched by the default front end and given to ``PoseEstimator()``
 (its default order, bootstrap and checks) and to PoseLib called directly.
 
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import json
 import sys
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -51,7 +53,7 @@ def warped_pairs(split: str, per_scene: int, root: Path = bm.DATA):
     scenes = (REAL_SCENES_SPLIT["val"] + REAL_SCENES_SPLIT["train"] if split == "all"
               else REAL_SCENES_SPLIT[split])
     out = []
-    for s, scene in enumerate(scenes):
+    for scene in scenes:
         folder = root / "real_scenes" / scene
         if not (folder / "cameras.json").is_file():
             continue
@@ -60,7 +62,7 @@ def warped_pairs(split: str, per_scene: int, root: Path = bm.DATA):
                                         .astype(int))):
             angle = ANGLES_DEG[k % len(ANGLES_DEG)]
             out.append((f"{scene}/{i}", folder / ims[i]["file"], np.array(ims[i]["K"], float),
-                        rotation(1000 * s + int(i), angle), angle))
+                        rotation(zlib.crc32(f"{scene}/{i}".encode()), angle), angle))
     return out
 
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import collections
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -75,12 +76,14 @@ def trace(argv: list[str], ref: np.ndarray) -> tuple[list, collections.Counter]:
                 checks[code.co_name] += 1
 
     sys.setprofile(hook)
+    threading.setprofile(hook)  # the focal solves run in a worker thread
     try:
         code = main(argv)
     except SystemExit as err:
         code = err.code
     finally:
         sys.setprofile(None)
+        threading.setprofile(None)
     print(f"strl-pose exit code {code}", file=sys.stderr)
     return seen, checks
 

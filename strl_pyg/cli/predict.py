@@ -311,7 +311,12 @@ def cmd_predict(args) -> int:
             raise UsageError(f"Expected a .png path for --explain (got '{args.explain}')")
     if not (np.isfinite(args.threshold_px) and args.threshold_px > 0):
         raise UsageError(f"Expected a positive --threshold-px (got {args.threshold_px})")
-    methods = Regression.name if args.no_baseline else args.methods
+    if args.no_baseline:
+        from strl_pyg.inference.methods import Regression
+
+        methods = Regression.name
+    else:
+        methods = args.methods
     if methods.lower() in ("recommended", "all"):
         methods = methods.lower()
     _check_methods(methods)  # before the images and the model are read

@@ -256,6 +256,9 @@ class PairMatches:
         validated matches already passed: for the package's own derivations whose result is
         valid by construction (rows of these matches, at least one of them; images converted
         from these). Checked input goes through the constructor."""
+        unknown = sorted(set(changes) - {f.name for f in fields(self)})
+        if unknown:
+            raise TypeError(f"Expected PairMatches fields (got {unknown})")
         out = copy.copy(self)
         if point_index is not None or line_index is not None:
             changes = {**self._selected(point_index, line_index), **changes}

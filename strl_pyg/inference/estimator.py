@@ -24,7 +24,7 @@ The folder's modules: the records (:mod:`~strl_pyg.inference.record`), the input
 (:mod:`~strl_pyg.inference.checks`), the network's graph and forward
 (:mod:`~strl_pyg.inference.network`), the method classes (:mod:`~strl_pyg.inference.methods`,
 :mod:`~strl_pyg.inference.methods.vanishing_point`) and their registry (:mod:`~strl_pyg.inference.registry`:
-``register_method(MyMethod())``, a :class:`~strl_pyg.inference.registry.PoseMethod`), one
+``register_method(MyMethod())``, a :class:`~strl_pyg.inference.methods.base.PoseMethod`), one
 pair's run (:mod:`~strl_pyg.inference.pair`), the calibration
 (:mod:`~strl_pyg.inference.calibration`), the recommended order
 (:mod:`~strl_pyg.inference.policy`), the evidence for a pose (:mod:`~strl_pyg.inference.evidence`)

@@ -193,7 +193,9 @@ def apply_multiple_motions(estimate: PoseEstimate, geo: TwoViewGeometry | None,
     """COLMAP's MULTIPLE: where the matches that the recommended pose leaves out hold a second
     rigid motion (PoseLib, else OpenCV, on them) with at least :data:`MULTIPLE_MIN_INLIERS`
     inliers and :data:`MULTIPLE_SHARE` of the pose's own, away from the pose (more than
-    :data:`MULTIPLE_APART_DEG` in rotation or three times that in translation direction),
+    :data:`MULTIPLE_APART_DEG` in rotation or three times that in translation direction; in
+    translation direction alone only where the pair shows parallax, not for a pure rotation,
+    whose translation the matches do not determine),
     the pair shows two motions (a turntable's room and object, a moving car) and which one is
     "the" relative pose is the user's call: the configuration is ``"multiple"`` and the pose
     ``"unreliable"``, with both poses' support in the reason (the second pose in

@@ -89,6 +89,8 @@ def prepare_graph(matches: PairMatches, model: torch.nn.Module, seed: int | None
             return build_pair_graph(m._derived(pi.numpy(), li.numpy()), patch_size=p,
                                     keep_images=keep_images)
     data = build_pair_graph(m, patch_size=p, keep_images=keep_images)
+    if not reference:  # nothing drawn (targets 0, or nothing to draw): the empty graph, no redraw
+        return FixedSizeResample(n_points, n_lines, seed=0)(data)
     return FixedSizeResample(n_points, n_lines, seed=seed)(data)
 
 

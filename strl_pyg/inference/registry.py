@@ -41,7 +41,12 @@ ENTRY_POINT_GROUP = "strl-pyg.methods"
 
 def _installed_methods() -> list[PoseMethod]:
     """The methods installed packages declare (:data:`ENTRY_POINT_GROUP`); one that does not
-    load is left out with a one-line warning naming it."""
+    load, or whose name is taken (a built-in's, another plugin's, ``"recommended"``), is left
+    out with a one-line warning naming it. A plugin module is imported while
+    :mod:`strl_pyg.inference` loads: it may import what a method is and returns
+    (:mod:`strl_pyg.inference.methods`, :mod:`strl_pyg.inference.record`) and the lower
+    floors (:mod:`strl_pyg.estimation`, :mod:`strl_pyg.geometry`, :mod:`strl_pyg.data`),
+    not the estimator or its configuration, and registers nothing itself."""
     import warnings
     from importlib.metadata import entry_points
 
@@ -50,8 +55,12 @@ def _installed_methods() -> list[PoseMethod]:
         try:
             obj = ep.load()
             method = obj() if isinstance(obj, type) else obj
-            if not isinstance(method, PoseMethod) or not method.name:
+            if not isinstance(method, PoseMethod) or not isinstance(method.name, str) \
+                    or not method.name:
                 raise TypeError(f"expected a PoseMethod with a name, got {obj!r}")
+            _check_new(method.name, replace_existing=False)
+            if any(m.name == method.name for m in out):
+                raise ValueError(f"another plugin already took the name {method.name!r}")
         except Exception as err:  # a third party's plugin must not break the package
             warnings.warn(f"pose method entry point {ep.name!r} ({ep.value}) not loaded: "
                           f"{type(err).__name__}: {err}", stacklevel=2)

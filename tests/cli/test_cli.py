@@ -519,6 +519,18 @@ def test_predict_on_a_match_file_runs_the_recommended_methods_only(tmp_path, hel
 
 
 
+def test_predict_no_baseline_runs_the_regression_alone(tmp_path, held_out_pair, capsys):
+    """``--no-baseline`` raised a NameError (the regression's name read from a class the
+    command line had not imported)."""
+    import json
+
+    path = held_out_pair.matches.save(tmp_path / "m.npz")
+    cli_main(["predict", "--matches", str(path), "--no-baseline", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert list(out["methods"]) == ["regression"]
+    assert out["methods"]["regression"]["status"] == "ok"
+
+
 def test_the_command_line_runs_as_a_module():
     """``python -m strl_pyg.cli`` was 'No module named strl_pyg.cli.__main__'."""
     proc = subprocess.run([sys.executable, "-m", "strl_pyg.cli", "predict", "--help"],

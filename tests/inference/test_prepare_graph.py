@@ -68,8 +68,13 @@ def test_without_lines_and_with_the_global_generator(pair, models):
 def test_the_derived_matches_are_not_the_callers(pair):
     """The rows' copy shares no array it changes with the caller's matches, and keeps the
     one rule a selection can break: at least one match."""
+    before = pair.points0.copy()
     sub = pair._derived(np.array([0, 0, 1]), np.array([], dtype=np.int64))
     assert sub.num_points == 3 and sub.num_lines == 0 and pair.num_lines > 0
     np.testing.assert_array_equal(sub.points0[:2], pair.points0[[0, 0]])
+    sub.points0 += 5.0  # the rows are the copy's own
+    np.testing.assert_array_equal(pair.points0, before)
+    with pytest.raises(TypeError, match="Expected PairMatches fields"):
+        pair._derived(K_0=None)
     with pytest.raises(ValueError, match="at least one point or line match"):
         pair._derived(np.array([], dtype=np.int64), np.array([], dtype=np.int64))

@@ -329,17 +329,35 @@ def test_a_new_solver_is_one_module(tmp_path):
     assert any("none of the recommended methods" in w for w in record["pose"]["warnings"])
 
 
-def test_a_plugin_that_does_not_load_is_named_and_left_out(monkeypatch):
+def test_a_plugin_that_does_not_load_or_takes_a_name_is_named_and_left_out(monkeypatch):
+    """A broken plugin, one named like a built-in, a second plugin of a taken name: each left
+    out with a warning naming it (before, a taken name raised while the registry loaded, so
+    the package did not import); the valid one is kept."""
     from importlib import metadata
 
     from strl_pyg.inference import registry
+    from strl_pyg.inference.methods import PoseMethod
 
-    class Broken:
-        name, value = "broken", "nowhere:Nothing"
+    def plugin(name):
+        return type(f"Plugin_{name}", (PoseMethod,), {"name": name})
+
+    class Entry:
+        def __init__(self, name, obj=None, error=None):
+            self.name, self.value, self.obj, self.error = name, f"pkg:{name}", obj, error
 
         def load(self):
-            raise ImportError("No module named 'nowhere'")
+            if self.error:
+                raise self.error
+            return self.obj
 
-    monkeypatch.setattr(metadata, "entry_points", lambda group: [Broken()])
-    with pytest.warns(UserWarning, match="'broken' .*not loaded: ImportError"):
-        assert registry._installed_methods() == []
+    entries = [Entry("broken", error=ImportError("No module named 'nowhere'")),
+               Entry("opencv", plugin("opencv")), Entry("mine", plugin("mine")),
+               Entry("mine_again", plugin("mine")), Entry("nameless", plugin(""))]
+    monkeypatch.setattr(metadata, "entry_points", lambda group: entries)
+    with pytest.warns(UserWarning) as record:
+        kept = registry._installed_methods()
+    assert [m.name for m in kept] == ["mine"]
+    text = " | ".join(str(w.message) for w in record)
+    for name in ("broken", "opencv", "mine_again", "nameless"):
+        assert f"'{name}'" in text, text
+    assert "already registered" in text and "another plugin" in text

@@ -1,5 +1,5 @@
 """The pose methods :class:`~strl_pyg.inference.PoseEstimator` runs, one module per concept,
-one small class each (:class:`~strl_pyg.inference.registry.PoseMethod`: its class attributes
+one small class each (:class:`~strl_pyg.inference.methods.base.PoseMethod`: its class attributes
 are its description), and the context they share (:mod:`.context`);
 they are the first entries of :data:`METHODS <strl_pyg.inference.registry.METHODS>`
 (:func:`builtin_methods`, read by the registry itself), in this order:

@@ -23,7 +23,7 @@ class PoseMethod:
     it returns one :class:`~strl_pyg.inference.MethodResult`. What it needs and how its result
     is treated are class attributes, its description (:data:`DESCRIPTION`: ``name``, ``label``,
     ``summary`` (a sentence for the methods table), ``requires`` (an optional package),
-    ``min_points``, ``needs_intrinsics``, ``reads_lines``, ``uses_network``, ``depends_on``,
+    ``needs_lines`` (skipped without line matches), ``min_points``, ``needs_intrinsics``, ``reads_lines``, ``uses_network``, ``depends_on``,
     ``support_checked``, ``bootstrapped``, ``classical_base``, ``needs_geometric_head``), and
     :meth:`available` says whether it is installed. Register one with
     ``register_method(MyMethod())``; the built-in ones are in
@@ -36,6 +36,7 @@ class PoseMethod:
     min_points: int = MIN_POINTS
     needs_intrinsics: bool = True
     reads_lines: bool = False
+    needs_lines: bool = False
     uses_network: bool = False
     depends_on: tuple[str, ...] = ()
     support_checked: bool = True
@@ -54,8 +55,10 @@ class PoseMethod:
         elif self.uses_network:
             out.append("the model")
         out.append("intrinsics" if self.needs_intrinsics else "no intrinsics")
-        if self.reads_lines:
-            out.append("reads the line matches")
+        if self.needs_lines:
+            out.append("line matches")
+        elif self.reads_lines:
+            out.append("reads the line matches where there are any")
         out.append(f">= {self.min_points} point matches")
         deps = ["the classical pose" if d == CLASSICAL else f"`{d}`" for d in self.depends_on]
         return ", ".join(out + deps)
@@ -69,7 +72,8 @@ class PoseMethod:
 
 
 #: The attributes that describe a method (:class:`PoseMethod`'s class attributes).
-DESCRIPTION = ("label", "summary", "requires", "min_points", "needs_intrinsics", "reads_lines", "uses_network",
+DESCRIPTION = ("label", "summary", "requires", "min_points", "needs_intrinsics", "reads_lines",
+               "needs_lines", "uses_network",
                "depends_on", "support_checked", "bootstrapped", "classical_base",
                "needs_geometric_head")
 

@@ -94,7 +94,7 @@ def _solve(name: str, matches: PairMatches, ctx: MethodContext) -> Any:
 
 def classical_base(ctx: MethodContext) -> str:
     """The classical solver a method reads: the one the run holds a result of (PoseLib first),
-    else PoseLib where installed, else OpenCV; a method's :data:`~strl_pyg.inference.registry.CLASSICAL` dependency is that
+    else PoseLib where installed, else OpenCV; a method's :data:`~strl_pyg.inference.methods.base.CLASSICAL` dependency is that
     solver (:func:`~strl_pyg.inference.registry.methods_needed`)."""
     return next((c for c in (POSELIB, OPENCV) if c in ctx.results), preferred_solver())
 

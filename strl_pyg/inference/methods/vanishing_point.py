@@ -34,6 +34,7 @@ class VanishingPoint(PoseMethod):
     """The lines' vanishing-point rotation and a 2-point translation."""
 
     name = "vp"
+    needs_lines = True
     label = "vanishing-point rotation + 2-point translation"
     summary = ("the matched lines' vanishing-point rotation, a 2-point translation RANSAC over "
                "the points, refined on points and lines; first in the recommended order where "
