@@ -68,6 +68,10 @@ MALLOC_NOTE = (
 POINT_POOR_SEED = 2_100_000
 
 
+#: Runs of the millisecond stages (the graph builds; a tenth of it for the batch-16 forward).
+QUICK_REPEAT = 200
+
+
 def _median_ms(fn, repeat: int) -> tuple[float, object]:
     out = fn()  # warm-up
     times = []
@@ -174,9 +178,12 @@ def _stages(img0, img1, K, model, repeat: int) -> dict[str, float]:
         lambda: fe.match_lines(s0, s1, g0, g1, F, cfg, guide=guide), repeat)
     t["front end: match_images"], m = _median_ms(
         lambda: fe.match_images(img0, img1, K, K, cfg), repeat)
-    t["graph: resampled"], g_small = _median_ms(lambda: prepare_graph(m, model, 0), repeat)
+    # the graph stages take about a millisecond: a median of a few runs is mostly noise, so
+    # they (and the batch-16 forward they are compared with) get many more runs
+    quick = max(repeat, QUICK_REPEAT)
+    t["graph: resampled"], g_small = _median_ms(lambda: prepare_graph(m, model, 0), quick)
     t["graph: full"], g_full = _median_ms(lambda: prepare_graph(m, model, 0, resample=None),
-                                          repeat)
+                                          quick)
     t["network: forward (resampled)"], _ = _median_ms(lambda: forward_pose(model, g_small),
                                                       repeat)
     t["network: forward (full, geometric head)"], _ = _median_ms(
@@ -187,9 +194,9 @@ def _stages(img0, img1, K, model, repeat: int) -> dict[str, float]:
 
     b16 = Collater(None)([g_small] * 16)
     with torch.inference_mode():
-        t["network: model(graph), batch 1 (resampled)"], _ = _median_ms(lambda: model(g_small),
-                                                                       repeat)
-        ms16, _ = _median_ms(lambda: model(b16), max(1, repeat // 2))
+        t["network: model(graph), batch 1 (resampled)"], _ = _median_ms(
+            lambda: model(g_small), max(repeat, QUICK_REPEAT // 10))
+        ms16, _ = _median_ms(lambda: model(b16), max(repeat, QUICK_REPEAT // 10))
     t["network: model(graph), batch 16, per pair (resampled)"] = ms16 / 16
     est_all = PoseEstimator(model)
     runs = [est_all.estimate(m) for _ in range(max(repeat, 1) + 1)][1:]
@@ -235,7 +242,9 @@ def main() -> None:
              f"cv2 threads {cv2.getNumThreads()}, torch threads {torch.get_num_threads()}",
              "malloc: " + ", ".join(f"{k}={os.environ.get(k, 'unset')}" for k in MALLOC_ENV),
              "", MALLOC_NOTE, "",
-             "Medians of the repeats after one warm-up, ms. Ratios: to the baseline of the same "
+             "Medians of the repeats after one warm-up, ms (the graph builds: at least "
+             f"{QUICK_REPEAT} runs; the batch-1 and batch-16 forwards: at least "
+             f"{QUICK_REPEAT // 10}). Ratios: to the baseline of the same "
              "pair in this run. Targets (issue 'The learned path at CPU speed'): the network "
              "path (front end with lines, graph, forward, PoseLib, fused) <= 1.0x, the default "
              "predict <= 0.8x. The figures before that issue's work: "

@@ -5,6 +5,7 @@ pair without intrinsics (:func:`attach_fundamental`)."""
 
 from __future__ import annotations
 
+from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -132,7 +133,16 @@ class PairRun:
     problems: list[str]  # intrinsics_problems, found once
     ctx: MethodContext
     memo: dict = field(default_factory=dict)
-    geometry: Any = None  # the two-view configuration (strl_pyg.inference.evidence), once
+    #: the two-view configuration (strl_pyg.inference.evidence), or the Future computing it
+    #: beside the methods (:attr:`geometry` waits for it)
+    pending_geometry: Any = None
+
+    @property
+    def geometry(self) -> Any:
+        """The pair's two-view configuration (``None`` where it was not computed)."""
+        if isinstance(self.pending_geometry, Future):
+            self.pending_geometry = self.pending_geometry.result()
+        return self.pending_geometry
 
     def add_lines(self, lined: PairMatches) -> None:
         """Joins the line matches of ``lined`` (these point matches with lines added, e.g. by

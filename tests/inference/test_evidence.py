@@ -335,3 +335,18 @@ def test_a_real_pure_rotation_is_not_called_two_motions(shared_data):
 
 def _rot_err_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip((np.trace(Ra.T @ Rb) - 1) / 2, -1, 1))))
+
+
+def test_the_configuration_computed_beside_the_methods_is_the_inline_one(monkeypatch):
+    """With a second core the pair's two-view configuration is computed in a worker thread
+    while the methods run; the estimate is the one computed in line (one core)."""
+    from strl_pyg.inference import estimator
+
+    m, _, _ = make_pair("general", n=300, noise=0.5, seed=3)
+    records = []
+    for cores in (1, 2):
+        monkeypatch.setattr(estimator, "available_cores", lambda c=cores: c)
+        est = PoseEstimator(methods=("poselib", "opencv"), bootstrap=8).estimate(m)
+        records.append(json.dumps(est.to_dict(), sort_keys=True, default=str))
+    assert records[0] == records[1]
+    assert json.loads(records[0])["two_view"]["configuration"] == "general"
