@@ -347,6 +347,14 @@ def test_the_configuration_computed_beside_the_methods_is_the_inline_one(monkeyp
     for cores in (1, 2):
         monkeypatch.setattr(estimator, "available_cores", lambda c=cores: c)
         est = PoseEstimator(methods=("poselib", "opencv"), bootstrap=8).estimate(m)
-        records.append(json.dumps(est.to_dict(), sort_keys=True, default=str))
+        records.append(_without_times(est.to_dict()))
     assert records[0] == records[1]
-    assert json.loads(records[0])["two_view"]["configuration"] == "general"
+    assert records[0]["two_view"]["configuration"] == "general"
+
+
+def _without_times(d):
+    if isinstance(d, dict):
+        return {k: _without_times(v) for k, v in d.items() if k != "time_ms"}
+    if isinstance(d, list):
+        return [_without_times(v) for v in d]
+    return d
