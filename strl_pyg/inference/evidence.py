@@ -355,10 +355,42 @@ def apply_configuration(estimate: PoseEstimate, geo: TwoViewGeometry | None,
             warn = [f"planar scene: {len(others)} other decomposition(s) of the plane's "
                     "homography also put the matches in front of both cameras and the matches "
                     "cannot rule them out (info['planar_candidates'])"]
-        estimate.pose = replace(pose, info=info, warnings=pose.warnings + warn)
+        estimate.pose = _with_planar_spread(replace(pose, info=info,
+                                                    warnings=pose.warnings + warn), cands)
         return estimate
     estimate.pose = replace(pose, info=info)
     return estimate
+
+
+def _with_planar_spread(pose: MethodResult, cands: list) -> MethodResult:
+    """``pose`` with the plane's ambiguity in its covariance: the decompositions of the
+    plane's homography that the matches cannot tell apart (``cands``, all in front of both
+    cameras) are as likely as the pose (an essential matrix of a plane is poorly determined),
+    so the second moment of the pose and them about the pose (in the pose's tangent space) is
+    added; the added RMS angles in ``info["planar_added_sigma_deg"]``. A plane fixes its
+    rotation better than its translation, so mostly the translation's sigma widens."""
+    from strl_pyg.estimation.pose_fusion import pose_to_tangent
+    from strl_pyg.estimation.uncertainty import cap_covariance
+    from strl_pyg.geometry import Pose, tangent_basis
+
+    if pose.covariance is None or len(np.asarray(pose.covariance)) != 5 or not cands:
+        return pose
+    T = np.asarray(pose.T_0to1, dtype=np.float64)
+    t_ref = T[:3, 3] / max(np.linalg.norm(T[:3, 3]), 1e-300)
+    R_ref, t_ref = torch.as_tensor(T[:3, :3]), torch.as_tensor(t_ref)
+    basis = tangent_basis(t_ref)
+    deltas = [pose_to_tangent(Pose(torch.as_tensor(np.asarray(Rc, dtype=np.float64)),
+                                   torch.as_tensor(np.asarray(tc, dtype=np.float64).reshape(3))),
+                              R_ref, t_ref, basis).numpy() for Rc, tc in cands]
+    D = np.stack(deltas)
+    term = D.T @ D / (len(D) + 1)
+    cov, capped = cap_covariance(np.asarray(pose.covariance, dtype=np.float64) + term)
+    info = {**pose.info, "planar_added_sigma_deg": [
+        float(np.degrees(np.sqrt(np.trace(term[:3, :3])))),
+        float(np.degrees(np.sqrt(np.trace(term[3:, 3:]))))]}
+    if capped:
+        info["sigma_capped"] = True
+    return replace(pose, covariance=cov, info=info)
 
 
 def _rot_deg(A: np.ndarray, B: np.ndarray) -> float:
