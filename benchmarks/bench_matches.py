@@ -51,15 +51,23 @@ MAX_ROT_DEG = 60.0
 
 
 # ----------------------------------------------------------------------------- pairs
+def scene_frames(scene: str, root: Path = DATA):
+    """``(folder, images)`` of a real_scenes scene (``cameras.json``'s ``images``), or
+    ``None`` where the scene is not there."""
+    folder = root / "real_scenes" / scene
+    if not (folder / "cameras.json").is_file():
+        return None
+    return folder, json.loads((folder / "cameras.json").read_text())["images"]
+
+
 def scene_pairs(scenes=VAL_SCENES, gaps=GAPS, per_gap: int = 6, root: Path = DATA):
     """``(pair id, path0, path1, K0, K1, T_0to1, gap)`` of each scene: ``per_gap`` pairs per
     gap with first frames spread evenly over the capture, true rotation <= 60 deg."""
     out = []
     for scene in scenes:
-        folder = root / "real_scenes" / scene
-        if not (folder / "cameras.json").is_file():
+        if (found := scene_frames(scene, root)) is None:
             continue
-        ims = json.loads((folder / "cameras.json").read_text())["images"]
+        folder, ims = found
         for g in gaps:
             if len(ims) <= g:
                 continue

@@ -1,5 +1,9 @@
 """Pure rotations made from real photographs: does the recommended pose say ``rotation_only``?
 
+``bench_two_view.py`` warps KITTI, dino and the validation scenes the same way for its
+configuration table; this one takes every real_scenes scene, the training scenes included,
+and reports the recommended pose's status alone.
+
 A camera that only rotates by ``R`` sees image 0 warped by ``H = K R K^-1`` (no parallax, no
 translation to find). For frames spread over each real_scenes scene (``--per-scene``), one
 rotation each (angle cycling through ``ANGLES_DEG``, axis drawn from a generator seeded by the
@@ -39,11 +43,9 @@ RIGHT_DEG = 5.0
 
 def rotation(axis_seed: int, angle_deg: float) -> np.ndarray:
     """A rotation by ``angle_deg`` about an axis drawn uniformly on the sphere (seeded)."""
-    import cv2
+    import bench_two_view as btv
 
-    axis = np.random.default_rng(axis_seed).normal(size=3)
-    axis /= np.linalg.norm(axis)
-    return cv2.Rodrigues(axis * np.radians(angle_deg))[0]
+    return btv._rot(np.random.default_rng(axis_seed).normal(size=3), angle_deg)
 
 
 def warped_pairs(split: str, per_scene: int, root: Path = bm.DATA):
@@ -54,10 +56,9 @@ def warped_pairs(split: str, per_scene: int, root: Path = bm.DATA):
               else REAL_SCENES_SPLIT[split])
     out = []
     for scene in scenes:
-        folder = root / "real_scenes" / scene
-        if not (folder / "cameras.json").is_file():
+        if (found := bm.scene_frames(scene, root)) is None:
             continue
-        ims = json.loads((folder / "cameras.json").read_text())["images"]
+        folder, ims = found
         for k, i in enumerate(np.unique(np.linspace(0, len(ims) - 1, per_scene).round()
                                         .astype(int))):
             angle = ANGLES_DEG[k % len(ANGLES_DEG)]

@@ -82,6 +82,20 @@ def matches_of(pair, cache: Path):
         return None
 
 
+def cached_pairs(split: str, cache: Path, per_gap: int = 6):
+    """``(pair, matches)`` of the ``split`` scenes' pairs (``bench_matches.scene_pairs``)
+    whose matches this benchmark already matched and cached under ``cache``, deduplicated:
+    for studies that reuse them without matching anything."""
+    from strl_pyg.datasets.posed import REAL_SCENES_SPLIT
+
+    for pair in bm.scene_pairs(REAL_SCENES_SPLIT[split], per_gap=per_gap):
+        if not any(cache.rglob("status_" + pair[0].replace("/", "_") + "*")):
+            continue
+        m = matches_of(pair, cache)
+        if m is not None:
+            yield pair, m.deduplicated().matches
+
+
 def measure(est, m, T, pid: str, gap, variant: str) -> dict:
     from strl_pyg.estimation.classical import estimate_relative_pose
 
@@ -112,9 +126,8 @@ def measure(est, m, T, pid: str, gap, variant: str) -> dict:
 
 
 def run(args) -> int:
-    from strl_pyg.inference import PoseEstimator
-
     from strl_pyg.datasets.posed import REAL_SCENES_SPLIT
+    from strl_pyg.inference import PoseEstimator
 
     scenes = REAL_SCENES_SPLIT[args.scenes]
     pairs = bm.scene_pairs(scenes, per_gap=args.per_gap)

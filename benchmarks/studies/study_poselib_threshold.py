@@ -19,7 +19,6 @@ import numpy as np
 from tqdm.auto import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-import bench_matches as bm  # noqa: E402
 import bench_pose as bp  # noqa: E402
 import bench_status as bs  # noqa: E402
 from strl_bench_common import banner  # noqa: E402
@@ -32,7 +31,6 @@ def main() -> None:
     ap.add_argument("--cache", default="outputs/bench_status_cache")
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
-    from strl_pyg.datasets.posed import REAL_SCENES_SPLIT
     from strl_pyg.estimation.classical import estimate_relative_pose
     from strl_pyg.metrics.two_view import pose_auc
 
@@ -43,13 +41,7 @@ def main() -> None:
              "|---|---|" + "---|" * len(THRESHOLDS)]
     for split in ("train", "val"):
         errs = {t: [] for t in THRESHOLDS}
-        for pair in tqdm(bm.scene_pairs(REAL_SCENES_SPLIT[split], per_gap=6), desc=split):
-            if not any(cache.rglob("status_" + pair[0].replace("/", "_") + "*")):
-                continue  # only the pairs bench_status.py matched
-            m = bs.matches_of(pair, cache)
-            if m is None:
-                continue
-            m = m.deduplicated().matches
+        for pair, m in tqdm(list(bs.cached_pairs(split, cache)), desc=split):
             for t in THRESHOLDS:
                 res = estimate_relative_pose(m, "poselib", t, seed=0)
                 errs[t].append(max(bp.errors(res.T_0to1.matrix().numpy(), pair[5]))

@@ -55,24 +55,15 @@ def pure_rotation(seed: int, sigma: float, n: int = 400):
 
 def real_pairs_table(cache: Path) -> list[str]:
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    import bench_matches as bm
     import bench_pose as bp
     import bench_status as bs
 
-    from strl_pyg.datasets.posed import REAL_SCENES_SPLIT
     from strl_pyg.estimation import two_view as tv
     from strl_pyg.estimation.classical import estimate_relative_pose, normalised_matches
 
     rows = []
     for split in ("val", "train"):
-        for pair in bm.scene_pairs(REAL_SCENES_SPLIT[split], per_gap=6):
-            key = "status_" + pair[0].replace("/", "_")
-            if not any(cache.rglob(f"{key}*")):
-                continue  # only the pairs bench_status.py matched
-            m = bs.matches_of(pair, cache)
-            if m is None:
-                continue
-            m = m.deduplicated().matches
+        for pair, m in bs.cached_pairs(split, cache):
             x0, x1, f = (a.numpy() if hasattr(a, "numpy") else a for a in normalised_matches(m))
             g = tv.classify_two_view(x0, x1, f, 1.0, 0, m.points0, m.points1)
             loose = int(tv.rotation_only(x0, x1, f, 1.25)[1].sum())

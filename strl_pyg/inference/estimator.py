@@ -33,7 +33,6 @@ and this module, :class:`PoseEstimator`.
 
 from __future__ import annotations
 
-import contextvars
 import os
 from collections.abc import Callable
 from dataclasses import replace
@@ -43,7 +42,7 @@ import numpy as np
 import torch
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.estimation.classical import normalisation_scope, normalised_matches
+from strl_pyg.estimation.classical import normalisation_scope
 from strl_pyg.inference.calibration import calibrate, shipped_header
 from strl_pyg.inference.checks import BAD_INTRINSICS, input_warnings
 from strl_pyg.inference.config import EstimatorConfig
@@ -53,7 +52,6 @@ from strl_pyg.inference.evidence import (
     apply_watermark,
     focal_sensitivity,
     learned_pose_evidence,
-    pair_geometry,
 )
 from strl_pyg.inference.methods.context import MethodContext
 from strl_pyg.inference.methods.regression import Regression
@@ -62,6 +60,7 @@ from strl_pyg.inference.pair import (
     attach_fundamental,
     checked_pair,
     pair_rules,
+    start_geometry,
     unique_in_order,
 )
 from strl_pyg.inference.policy import (
@@ -84,7 +83,6 @@ from strl_pyg.inference.settings import CheckpointSettings
 from strl_pyg.inference.support import (
     check_support,
 )
-from strl_pyg.utils.threads import available_cores, shared_pool
 
 __all__ = ["PoseEstimator"]
 
@@ -251,21 +249,9 @@ class PoseEstimator:
         methods too, also when no network method runs; the network itself is built only
         when a method needs it."""
         checked, warnings, rows, degenerate, problems = checked_pair(matches)
-        geometry, memo = None, {}
-        if degenerate is None and not problems and checked.has_intrinsics:
-            # the configuration (and, for information only, the implied essential matrix's
-            # singular values: evidence module), from the same checked matches; read only once
-            # the methods have run, so computed beside them where there is a second core (the
-            # classical solve is single-threaded; OpenCV's random state is per thread)
-            def configuration():
-                with normalisation_scope(memo):
-                    return pair_geometry(checked, self.config.threshold_px, self.config.seed)
-
-            with normalisation_scope(memo):  # once, here: the methods and it read the memo
-                normalised_matches(checked)
-            geometry = shared_pool("pair", 1).submit(contextvars.copy_context().run,
-                                                     configuration) \
-                if available_cores() > 1 else configuration()
+        memo: dict = {}
+        geometry = None if degenerate is not None or problems or not checked.has_intrinsics \
+            else start_geometry(checked, memo, self.config.threshold_px, self.config.seed)
         ctx = MethodContext(self.config, load_model=lambda: self.model, settings=self.settings)
         return PairRun(checked, warnings, rows, degenerate, problems, ctx, memo, geometry)
 

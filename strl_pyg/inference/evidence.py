@@ -131,9 +131,6 @@ def focal_sensitivity(pose: MethodResult, matches: PairMatches, threshold_px: fl
     docstring); ``info["focal"]`` says which (``"verified"`` or ``"not verified"``), with the
     inlier counts and the added RMS angles."""
     from strl_pyg.estimation.classical import estimate_relative_pose
-    from strl_pyg.estimation.pose_fusion import pose_to_tangent
-    from strl_pyg.estimation.uncertainty import cap_covariance
-    from strl_pyg.geometry import Pose, tangent_basis
 
     if pose.status != "ok" or pose.covariance is None or not matches.has_intrinsics \
             or pose.T_0to1 is None or len(np.asarray(pose.covariance)) != 5:
@@ -141,10 +138,6 @@ def focal_sensitivity(pose: MethodResult, matches: PairMatches, threshold_px: fl
     solver = OPENCV if pose.method == OPENCV else preferred_solver()
     T = np.asarray(pose.T_0to1, dtype=np.float64)
     n_given = int(_pose_inliers(T, matches, threshold_px).sum())  # the pose's own support
-    R_ref = torch.as_tensor(T[:3, :3])
-    t_ref = torch.as_tensor(T[:3, 3] / max(np.linalg.norm(T[:3, 3]), 1e-300))
-    basis = tangent_basis(t_ref)
-    deltas, counts = [], []
 
     def solve(s: float):
         K0, K1 = (np.asarray(K, dtype=np.float64).copy() for K in (matches.K0, matches.K1))
@@ -158,26 +151,16 @@ def focal_sensitivity(pose: MethodResult, matches: PairMatches, threshold_px: fl
         solved = [solve(1.0 / factor), wide.result()]
     else:
         solved = [solve(1.0 / factor), solve(factor)]
-    for alt in solved:
-        counts.append(int(alt.inliers.sum()) if alt.success else 0)
-        if alt.success:
-            P = alt.T_0to1 if isinstance(alt.T_0to1, Pose) else Pose.from_matrix(alt.T_0to1)
-            deltas.append(pose_to_tangent(Pose(P.R.double(), P.t.double()), R_ref, t_ref,
-                                          basis).numpy())
+    counts = [int(alt.inliers.sum()) if alt.success else 0 for alt in solved]
     verified = n_given > 0 and all(c <= FOCAL_VERIFIED_SHARE * n_given for c in counts)
-    info = {**pose.info, "focal": {"verdict": "verified" if verified else "not verified",
-                                   "inliers_given": n_given, "inliers_scaled": counts,
-                                   "factor": factor}}
-    if verified or not deltas:
-        return replace(pose, info=info)
-    D = np.stack(deltas)
-    term = D.T @ D / len(D)
-    cov, capped = cap_covariance(np.asarray(pose.covariance, dtype=np.float64) + term)
-    info["focal"]["added_sigma_deg"] = [float(np.degrees(np.sqrt(np.trace(term[:3, :3])))),
-                                        float(np.degrees(np.sqrt(np.trace(term[3:, 3:]))))]
-    if capped:
-        info["sigma_capped"] = True
-    return replace(pose, covariance=cov, info=info)
+    focal = {"verdict": "verified" if verified else "not verified", "inliers_given": n_given,
+             "inliers_scaled": counts, "factor": factor}
+    poses = [alt.T_0to1.matrix().numpy() for alt in solved if alt.success]
+    if verified or not poses:
+        return replace(pose, info={**pose.info, "focal": focal})
+    # the scaled solves as a two-point spread about the pose: their mean second moment
+    pose, added = _with_spread(pose, poses, len(poses))
+    return replace(pose, info={**pose.info, "focal": {**focal, "added_sigma_deg": added}})
 
 
 def _pose_inliers(T: np.ndarray, matches: PairMatches, threshold_px: float) -> np.ndarray:
@@ -369,28 +352,37 @@ def _with_planar_spread(pose: MethodResult, cands: list) -> MethodResult:
     so the second moment of the pose and them about the pose (in the pose's tangent space) is
     added; the added RMS angles in ``info["planar_added_sigma_deg"]``. A plane fixes its
     rotation better than its translation, so mostly the translation's sigma widens."""
+    if pose.covariance is None or len(np.asarray(pose.covariance)) != 5 or not cands:
+        return pose
+    poses = []
+    for Rc, tc in cands:
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = Rc, np.asarray(tc, dtype=np.float64).reshape(3)
+        poses.append(T)
+    pose, added = _with_spread(pose, poses, len(poses) + 1)
+    return replace(pose, info={**pose.info, "planar_added_sigma_deg": added})
+
+
+def _with_spread(pose: MethodResult, others: list, n: int) -> tuple[MethodResult, list]:
+    """``pose`` with ``sum(d d^T) / n`` added to its covariance (capped), ``d`` each pose of
+    ``others`` (``[4, 4]``) in the pose's tangent space; and the added RMS rotation and
+    translation angles (deg)."""
     from strl_pyg.estimation.pose_fusion import pose_to_tangent
     from strl_pyg.estimation.uncertainty import cap_covariance
     from strl_pyg.geometry import Pose, tangent_basis
 
-    if pose.covariance is None or len(np.asarray(pose.covariance)) != 5 or not cands:
-        return pose
     T = np.asarray(pose.T_0to1, dtype=np.float64)
-    t_ref = T[:3, 3] / max(np.linalg.norm(T[:3, 3]), 1e-300)
-    R_ref, t_ref = torch.as_tensor(T[:3, :3]), torch.as_tensor(t_ref)
+    R_ref = torch.as_tensor(T[:3, :3])
+    t_ref = torch.as_tensor(T[:3, 3] / max(np.linalg.norm(T[:3, 3]), 1e-300))
     basis = tangent_basis(t_ref)
-    deltas = [pose_to_tangent(Pose(torch.as_tensor(np.asarray(Rc, dtype=np.float64)),
-                                   torch.as_tensor(np.asarray(tc, dtype=np.float64).reshape(3))),
-                              R_ref, t_ref, basis).numpy() for Rc, tc in cands]
-    D = np.stack(deltas)
-    term = D.T @ D / (len(D) + 1)
+    D = np.stack([pose_to_tangent(Pose.from_matrix(torch.as_tensor(np.asarray(o, np.float64))),
+                                  R_ref, t_ref, basis).numpy() for o in others])
+    term = D.T @ D / n
     cov, capped = cap_covariance(np.asarray(pose.covariance, dtype=np.float64) + term)
-    info = {**pose.info, "planar_added_sigma_deg": [
-        float(np.degrees(np.sqrt(np.trace(term[:3, :3])))),
-        float(np.degrees(np.sqrt(np.trace(term[3:, 3:]))))]}
-    if capped:
-        info["sigma_capped"] = True
-    return replace(pose, covariance=cov, info=info)
+    added = [float(np.degrees(np.sqrt(np.trace(term[:3, :3])))),
+             float(np.degrees(np.sqrt(np.trace(term[3:, 3:]))))]
+    info = {**pose.info, "sigma_capped": True} if capped else pose.info
+    return replace(pose, covariance=cov, info=info), added
 
 
 def _rot_deg(A: np.ndarray, B: np.ndarray) -> float:

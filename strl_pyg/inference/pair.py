@@ -5,6 +5,7 @@ pair without intrinsics (:func:`attach_fundamental`)."""
 
 from __future__ import annotations
 
+import contextvars
 from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -28,6 +29,7 @@ from strl_pyg.inference.checks import (
 from strl_pyg.inference.methods.context import MethodContext
 from strl_pyg.inference.record import MethodResult, PoseEstimate
 from strl_pyg.inference.registry import METHODS
+from strl_pyg.utils.threads import available_cores, shared_pool
 
 __all__ = ["NO_INTRINSICS", "PairRun", "checked_pair", "pair_rules", "attach_fundamental",
            "spread_px", "unique_in_order"]
@@ -87,6 +89,27 @@ def checked_pair(matches: PairMatches) -> tuple[PairMatches, list[str], np.ndarr
     if degenerate is not None:
         warnings.append(degenerate)
     return matches, warnings, rows, degenerate, problems
+
+
+def start_geometry(checked: PairMatches, memo: dict, threshold_px: float,
+                   seed: int) -> Any:
+    """The pair's two-view configuration (:func:`~strl_pyg.inference.evidence.pair_geometry`),
+    or, where there is a second core, the Future computing it in a worker thread while the
+    methods run (:attr:`PairRun.geometry` waits for it: nothing reads it before the methods
+    have run; the classical solve is single-threaded; OpenCV's random state is per thread).
+    The pair is normalised first, here, into ``memo``: the methods and it read it there."""
+    from strl_pyg.estimation.classical import normalisation_scope, normalised_matches
+    from strl_pyg.inference.evidence import pair_geometry
+
+    def configuration():
+        with normalisation_scope(memo):
+            return pair_geometry(checked, threshold_px, seed)
+
+    with normalisation_scope(memo):
+        normalised_matches(checked)
+    if available_cores() > 1:
+        return shared_pool("pair", 1).submit(contextvars.copy_context().run, configuration)
+    return configuration()
 
 
 def pair_rules(results: dict[str, MethodResult], matches: PairMatches,

@@ -45,8 +45,8 @@ def estimate_recommended(model: Any, image0: np.ndarray, image1: np.ndarray, K0:
             (:class:`~strl_pyg.inference.config.EstimatorConfig` fields, or ``config=``); the
             methods run are the recommended ones.
     """
-    from strl_pyg.inference.estimator import PoseEstimator
     from strl_pyg.inference import RECOMMENDED
+    from strl_pyg.inference.estimator import PoseEstimator
 
     if "methods" in estimator_kw:
         raise ValueError("Expected no methods for estimate_recommended (got methods="

@@ -171,7 +171,8 @@ def network_free_methods() -> tuple[str, ...]:
 
 
 def classical_method() -> str:
-    """The classical solver other methods start from: PoseLib if installed, else OpenCV."""
+    """The classical solver other methods start from: PoseLib if its method is available (the
+    registry's say, which a caller may change), else OpenCV."""
     return POSELIB if METHODS[POSELIB].available() else OPENCV
 
 

@@ -340,12 +340,12 @@ def _rot_err_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
 def test_the_configuration_computed_beside_the_methods_is_the_inline_one(monkeypatch):
     """With a second core the pair's two-view configuration is computed in a worker thread
     while the methods run; the estimate is the one computed in line (one core)."""
-    from strl_pyg.inference import estimator
+    from strl_pyg.inference import pair
 
     m, _, _ = make_pair("general", n=300, noise=0.5, seed=3)
     records = []
     for cores in (1, 2):
-        monkeypatch.setattr(estimator, "available_cores", lambda c=cores: c)
+        monkeypatch.setattr(pair, "available_cores", lambda c=cores: c)
         est = PoseEstimator(methods=("poselib", "opencv"), bootstrap=8).estimate(m)
         records.append(_without_times(est.to_dict()))
     assert records[0] == records[1]

@@ -18,9 +18,9 @@ import pytest
 import torch
 
 from strl_pyg.training import TrainConfig, train
-from strl_pyg.training.skipped import load_skipped_step
 from strl_pyg.training.commandline import check_device
 from strl_pyg.training.loop import check_run_folder
+from strl_pyg.training.skipped import load_skipped_step
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -273,8 +273,8 @@ def test_resume_takes_what_the_command_line_left_out_from_the_run(tmp_path):
     import argparse
     from dataclasses import asdict, replace
 
-    from strl_pyg.training.config import add_train_arguments
     from strl_pyg.training.commandline import config_from_args, given_fields, settings_from_run
+    from strl_pyg.training.config import add_train_arguments
 
     out = tmp_path / "run"
     first = _cfg(out, steps=4, val_every=4, lr=5e-4)
@@ -336,8 +336,8 @@ def test_every_training_flag_names_a_config_field():
     import argparse
     from dataclasses import fields
 
-    from strl_pyg.training.config import add_train_arguments
     from strl_pyg.training.commandline import FLAG_FIELDS, given_fields
+    from strl_pyg.training.config import add_train_arguments
 
     ap = argparse.ArgumentParser()
     add_train_arguments(ap)
