@@ -107,7 +107,7 @@ def measure(est, m, T, pid: str, gap, variant: str) -> dict:
     row["poselib"] = max(bp.errors(pl.T_0to1.matrix().numpy(), T)) if pl.success else 180.0
     e = est.estimate(m)
     pose = e.pose
-    row.update(status=pose.status, method=pose.method)
+    row.update(status=pose.status, method=pose.method, num_inliers=pose.num_inliers)
     row["rec"] = max(bp.errors(pose.T_0to1, T)) if pose.status == "ok" else 180.0
     row["sigma"] = None if pose.sigma is None else [pose.sigma["rotation_deg"],
                                                     pose.sigma["translation_deg"]]

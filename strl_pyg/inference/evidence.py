@@ -53,7 +53,8 @@ __all__ = ["LEARNED_SUPPORT_SHARE", "FOCAL_MIN_INLIERS", "PLANAR_AGREE_DEG",
            "FOCAL_RANGE_FACTOR", "FOCAL_VERIFIED_SHARE", "pair_geometry", "focal_consistency",
            "focal_sensitivity", "apply_configuration", "learned_pose_evidence",
            "apply_multiple_motions", "MULTIPLE_MIN_INLIERS", "MULTIPLE_SHARE",
-           "MULTIPLE_APART_DEG", "apply_watermark", "WATERMARK_MIN_MATCHES",
+           "MULTIPLE_APART_DEG", "MULTIPLE_MOVING_RATIO", "MULTIPLE_MOVING_MIN_INLIERS",
+           "ray_turn_deg", "apply_watermark", "WATERMARK_MIN_MATCHES",
            "WATERMARK_STILL_PX", "WATERMARK_BORDER", "WATERMARK_MOVING_PX", "WATERMARK_SHARE"]
 
 #: The singular-value ratio (information only) is read from a fundamental matrix with at
@@ -75,6 +76,14 @@ MULTIPLE_MIN_INLIERS = 15
 MULTIPLE_SHARE = 0.4
 #: ... when it is this far (deg) from the pose in rotation, or 3x this in translation direction
 MULTIPLE_APART_DEG = 5.0
+#: A second motion whose matches move this many times as far as the pose's (the median angle
+#: between a match's two viewing rays) needs no share of the pose's inliers, only
+#: :data:`MULTIPLE_MOVING_MIN_INLIERS`: a pose carried by matches that barely move beside a
+#: group that does is a still background beside a moving object (a turntable's room, a parked
+#: camera and a passing car), whatever their counts (fitted on the real_scenes training
+#: scenes: benchmarks/studies/results_multiple_motions.md)
+MULTIPLE_MOVING_RATIO = 3.0
+MULTIPLE_MOVING_MIN_INLIERS = 25
 #: WATERMARK: this many of the pose's inliers ...
 WATERMARK_MIN_MATCHES = 15
 #: ... moving less than this (px) ...
@@ -170,19 +179,31 @@ def _pose_inliers(T: np.ndarray, matches: PairMatches, threshold_px: float) -> n
     return epipolar_residuals(matches, T)[0] < threshold_px
 
 
+def ray_turn_deg(matches: PairMatches) -> np.ndarray:
+    """Per point match, the angle (deg) between its two viewing rays, each in its own camera
+    (``K0^-1 x0`` and ``K1^-1 x1``): how far the match moves, independent of the lens."""
+    rays = []
+    for p, K in ((matches.points0, matches.K0), (matches.points1, matches.K1)):
+        x = np.c_[np.asarray(p, dtype=np.float64), np.ones(len(p))] @ \
+            np.linalg.inv(np.asarray(K, dtype=np.float64)).T
+        rays.append(x / np.linalg.norm(x, axis=1, keepdims=True))
+    return np.degrees(np.arccos(np.clip((rays[0] * rays[1]).sum(1), -1.0, 1.0)))
+
+
 def apply_multiple_motions(estimate: PoseEstimate, geo: TwoViewGeometry | None,
                            matches: PairMatches, threshold_px: float,
                            seed: int = 0) -> PoseEstimate:
     """COLMAP's MULTIPLE: where the matches that the recommended pose leaves out hold a second
-    rigid motion (PoseLib, else OpenCV, on them) with at least :data:`MULTIPLE_MIN_INLIERS`
-    inliers and :data:`MULTIPLE_SHARE` of the pose's own, away from the pose (more than
+    rigid motion (PoseLib, else OpenCV, on them) away from the pose (more than
     :data:`MULTIPLE_APART_DEG` in rotation or three times that in translation direction; in
     translation direction alone only where the pair shows parallax, not for a pure rotation,
-    whose translation the matches do not determine),
-    the pair shows two motions (a turntable's room and object, a moving car) and which one is
-    "the" relative pose is the user's call: the configuration is ``"multiple"`` and the pose
-    ``"unreliable"``, with both poses' support in the reason (the second pose in
-    ``info["second_motion_T_0to1"]``)."""
+    whose translation the matches do not determine) with at least :data:`MULTIPLE_MIN_INLIERS`
+    inliers and :data:`MULTIPLE_SHARE` of the pose's own, or with at least
+    :data:`MULTIPLE_MOVING_MIN_INLIERS` moving :data:`MULTIPLE_MOVING_RATIO` times as far as
+    the pose's (:func:`ray_turn_deg`): the pair shows two motions (a turntable's room and
+    object, a moving car) and which one is "the" relative pose is the user's call: the
+    configuration is ``"multiple"`` and the pose ``"unreliable"``, with both poses' support
+    in the reason (the second pose in ``info["second_motion_T_0to1"]``)."""
     from strl_pyg.estimation.classical import estimate_relative_pose
 
     pose = estimate.pose
@@ -193,13 +214,20 @@ def apply_multiple_motions(estimate: PoseEstimate, geo: TwoViewGeometry | None,
     rest = np.flatnonzero(~first)
     n1 = int(first.sum())
     need = max(MULTIPLE_MIN_INLIERS, MULTIPLE_SHARE * n1)
-    if len(rest) < max(need, 8):  # too few left out to hold a second motion that counts
-        return estimate
+    turn = ray_turn_deg(matches)
+    moving_at = MULTIPLE_MOVING_RATIO * float(np.median(turn[first])) if n1 else math.inf
+    # a moving second motion needs this many left-out matches that move that far
+    moving_possible = int((turn[rest] >= moving_at).sum()) >= MULTIPLE_MOVING_MIN_INLIERS
+    if len(rest) < max(need, 8) and not moving_possible:
+        return estimate  # too few left out to hold a second motion that counts
     others = replace(matches, points0=matches.points0[rest], points1=matches.points1[rest],
                      point_scores=None, lines0=None, lines1=None, line_scores=None)
     second = estimate_relative_pose(others, preferred_solver(), threshold_px, seed=seed)
-    n2 = int(second.inliers.sum()) if second.success else 0
-    if n2 < need:
+    inl2 = np.asarray(second.inliers, bool) if second.success else np.zeros(len(rest), bool)
+    n2 = int(inl2.sum())
+    moving = n2 >= MULTIPLE_MOVING_MIN_INLIERS and \
+        float(np.median(turn[rest][inl2])) >= moving_at
+    if n2 < need and not moving:
         return estimate
     T2 = second.T_0to1.matrix().numpy()
     rot = _rot_deg(T[:3, :3], T2[:3, :3])
@@ -212,11 +240,14 @@ def apply_multiple_motions(estimate: PoseEstimate, geo: TwoViewGeometry | None,
         return estimate
     estimate.geometry = geo = replace(geo, configuration="multiple", second_motion_inliers=n2)
     info = {**pose.info, "second_motion_T_0to1": T2, "second_motion_inliers": n2}
+    still = (f"; its matches move {float(np.median(turn[rest][inl2])):.2f} deg, the pose's "
+             f"{float(np.median(turn[first])):.2f} deg: a still background beside a moving "
+             "object" if n2 < need else "")
     estimate.pose = replace(pose, info=info).unreliable([
         f"two motions (COLMAP's MULTIPLE): {n2} of the {len(rest)} matches the pose leaves "
         f"out fit a second rigid motion ({rot:.1f} deg in rotation and {trans:.1f} deg in "
-        f"translation direction from the pose, which {n1} matches fit): e.g. a turntable's "
-        "room and object; which is the relative pose is yours to say "
+        f"translation direction from the pose, which {n1} matches fit{still}): e.g. a "
+        "turntable's room and object; which is the relative pose is yours to say "
         "(info['second_motion_T_0to1'])"])
     return estimate
 
