@@ -344,6 +344,26 @@ def test_no_second_motion_is_searched_where_too_few_matches_are_left_out(monkeyp
     assert est.configuration == "multiple" and len(calls) == 1
 
 
+def test_a_few_moving_left_out_matches_cost_no_second_solve(monkeypatch):
+    """A driving car's left-out matches move more than the road's (KITTI 06: 19-45 of them,
+    5-8 % of the pose's inliers); the moving branch solved them on 7 of 9 KITTI pairs, a
+    PoseLib run per pair for nothing. Below MULTIPLE_MOVING_SHARE of the pose's inliers it
+    does not run."""
+    from strl_pyg.estimation import classical
+    from strl_pyg.inference import evidence
+
+    calls = []
+    real = classical.estimate_relative_pose
+    monkeypatch.setattr(classical, "estimate_relative_pose",
+                        lambda m, *a, **k: calls.append(m.num_points) or real(m, *a, **k))
+    m, _ = _two_motions(600, 50, motions=ROOM_AND_OBJECT)
+    est = PoseEstimator(methods=("poselib",), bootstrap=0, focal_sensitivity=False).estimate(m)
+    assert est.configuration == "general" and est.pose.status == "ok" and calls == []
+    n1 = est.geometry.inliers_E  # enough left out for the minimum, too few for the share
+    assert evidence.MULTIPLE_MOVING_MIN_INLIERS <= m.num_points - n1 \
+        < evidence.MULTIPLE_MOVING_SHARE * n1
+
+
 def test_a_real_pure_rotation_is_not_called_two_motions(shared_data):
     """A photograph of robot_table and its warp by ``K R K^-1`` (2 deg): before, the matches
     the pose left out fit another translation direction (a pure rotation determines none),
