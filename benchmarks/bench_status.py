@@ -15,7 +15,8 @@ The report: per variant and gap, AUC@10 of both with the paired interval; right 
 by more than 10 deg and more than 3 sigma); and per rule (read from the reasons the refusals
 give) how many right and wrong poses it refused; the 2-sigma coverage per scene.
 
-    python benchmarks/bench_status.py run --scenes val --out benchmarks/results_real_scenes/status/val
+    python benchmarks/bench_status.py run --scenes val \\
+        --out benchmarks/results_real_scenes/status/val
     python benchmarks/bench_status.py report --out benchmarks/results_real_scenes/status/val
 """
 
@@ -245,7 +246,7 @@ def plot(rows, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(1, len(VARIANTS), figsize=(14, 3.6), sharey=True)
-    for a, v in zip(ax, VARIANTS):
+    for a, v in zip(ax, VARIANTS, strict=True):
         gs = [g for g in bm.GAPS if any(r["gap"] == g and r["variant"] == v for r in rows)]
         for key, label in (("rec", "recommended"), ("poselib", "PoseLib called directly")):
             a.plot(gs, [bm.auc([r[key] for r in rows if r["gap"] == g and r["variant"] == v],

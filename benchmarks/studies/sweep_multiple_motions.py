@@ -75,7 +75,8 @@ def main(argv=None) -> int:
              f"{len(rows)} pairs, PoseLib right (<= 5 deg) on {right}, wrong on "
              f"{len(rows) - right}. Flagged: a second motion among PoseLib's outliers with "
              "at least `minimum` inliers and `share` x PoseLib's.", "",
-             "| share | minimum | flagged | right refused | wrong refused |", "|---|---|---|---|---|"]
+             "| share | minimum | flagged | right refused | wrong refused |",
+             "|---|---|---|---|---|"]
     for share in (0.2, 0.3, 0.4, 0.5):
         for mn in (15, 25):
             fl = [r for r in rows if r["n2"] >= max(mn, share * r["n1"])]
@@ -88,7 +89,8 @@ def main(argv=None) -> int:
               "PoseLib's inliers (a turntable's room beside its object, a camera that stood "
               "still beside a moving car). Right / wrong: PoseLib's pose; `second right`: the "
               "second motion is within 5 deg.", "",
-              "| ratio | minimum | share | flagged | right refused | wrong refused | second right |",
+              "| ratio | minimum | share | flagged | right refused | wrong refused "
+              "| second right |",
               "|---|---|---|---|---|---|---|"]
     for ratio in (2.0, 3.0, 4.0, 6.0):
         for mn in (15, 25):

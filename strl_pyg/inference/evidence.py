@@ -53,7 +53,8 @@ __all__ = ["LEARNED_SUPPORT_SHARE", "FOCAL_MIN_INLIERS", "PLANAR_AGREE_DEG",
            "FOCAL_RANGE_FACTOR", "FOCAL_VERIFIED_SHARE", "pair_geometry", "focal_consistency",
            "focal_sensitivity", "apply_configuration", "learned_pose_evidence",
            "apply_multiple_motions", "MULTIPLE_MIN_INLIERS", "MULTIPLE_SHARE",
-           "MULTIPLE_APART_DEG", "MULTIPLE_MOVING_RATIO", "MULTIPLE_MOVING_MIN_INLIERS", "MULTIPLE_MOVING_SHARE",
+           "MULTIPLE_APART_DEG", "MULTIPLE_MOVING_RATIO", "MULTIPLE_MOVING_MIN_INLIERS",
+           "MULTIPLE_MOVING_SHARE",
            "ray_turn_deg", "apply_watermark", "WATERMARK_MIN_MATCHES",
            "WATERMARK_STILL_PX", "WATERMARK_BORDER", "WATERMARK_MOVING_PX", "WATERMARK_SHARE"]
 

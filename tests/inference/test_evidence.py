@@ -227,7 +227,7 @@ def _two_motions(n_a: int, n_b: int, seed: int = 0, motions=TWO_BODIES):
     away)."""
     rng = np.random.default_rng(seed)
     x0s, x1s = [], []
-    for (R, t), n in zip(motions, (n_a, n_b)):
+    for (R, t), n in zip(motions, (n_a, n_b), strict=True):
         d = rng.uniform(4.0, 12.0, size=n)
         X = np.c_[rng.uniform(-0.6, 0.6, size=(n, 2)), np.ones(n)] * d[:, None]
         x0, x1 = _project(X, np.eye(3), np.zeros(3), rng, 0.3), _project(X, R, t, rng, 0.3)
@@ -452,5 +452,6 @@ def test_ray_turn_is_the_rotation_angle_for_rays_across_its_axis():
     turn = ray_turn_deg(m)
     np.testing.assert_allclose(turn[:5], 7.0, atol=1e-6)
     cos_a = 0.4 / math.sqrt(1.16)  # the ray's angle a from the axis: cos(turn) =
+    # cos^2 a + sin^2 a cos 7
     expected = math.degrees(math.acos(cos_a**2 + (1 - cos_a**2) * math.cos(math.radians(7))))
-    assert turn[5] == pytest.approx(expected, abs=1e-6) and expected < 6.6  # cos^2 a + sin^2 a cos 7
+    assert turn[5] == pytest.approx(expected, abs=1e-6) and expected < 6.6
