@@ -362,7 +362,8 @@ def plot(summary: dict, fronts: list[str], path: Path) -> None:
         xs = [int(g) for g in gaps if f in summary[g]]
         ax[0].plot(xs, [summary[str(g)][f]["true"] for g in xs], "o-", label=f)
         ax[1].plot(xs, [summary[str(g)][f]["auc10"] for g in xs], "o-", label=f)
-    for a, t in zip(ax, ("median true inliers (Sampson < 2 px)", "PoseLib AUC@10 (%)")):
+    for a, t in zip(ax, ("median true inliers (Sampson < 2 px)", "PoseLib AUC@10 (%)"),
+                    strict=True):
         a.set_xscale("log", base=2)
         a.set_xlabel("frame gap g of pairs (i, i+g)")
         a.set_ylabel(t)

@@ -142,8 +142,8 @@ def _pairs(data: Path):
 
 def _stages(img0, img1, K, model, repeat: int) -> dict[str, float]:
     """Median ms of each stage of the predict path, called one by one."""
-    from strl_pyg.frontend.lines import candidate_pairs
     from strl_pyg.frontend import line_descriptor_scores
+    from strl_pyg.frontend.lines import candidate_pairs
     from strl_pyg.inference import PoseEstimator, forward_pose, prepare_graph
 
     cfg = fe.FrontendConfig()

@@ -19,7 +19,8 @@ gives nothing. The report: per split, the status counts, the rotation error of t
 answers with their translation sigma.
 
     python benchmarks/bench_pure_rotation.py run --out benchmarks/results_real_scenes/pure_rotation
-    python benchmarks/bench_pure_rotation.py report --out benchmarks/results_real_scenes/pure_rotation
+    python benchmarks/bench_pure_rotation.py report \\
+        --out benchmarks/results_real_scenes/pure_rotation
 """
 
 from __future__ import annotations

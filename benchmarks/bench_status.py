@@ -36,6 +36,9 @@ import bench_pose as bp  # noqa: E402
 from strl_bench_common import banner, run_report_parser  # noqa: E402
 
 VARIANTS = ("true", "f/2", "2f", "swap", "dup")
+#: pairs per scene and gap (``bench_matches.scene_pairs``): what ``run`` matches and caches,
+#: and what :func:`cached_pairs` reads back
+PER_GAP = 12
 RIGHT_DEG, WRONG_DEG = 5.0, 10.0
 
 #: A refusal's reason -> the rule that gave it (first match wins).
@@ -83,7 +86,7 @@ def matches_of(pair, cache: Path):
         return None
 
 
-def cached_pairs(split: str, cache: Path, per_gap: int = 6):
+def cached_pairs(split: str, cache: Path, per_gap: int = PER_GAP):
     """``(pair, matches)`` of the ``split`` scenes' pairs (``bench_matches.scene_pairs``)
     whose matches this benchmark already matched and cached under ``cache``, deduplicated:
     for studies that reuse them without matching anything."""
@@ -266,7 +269,7 @@ def plot(rows, path: Path) -> None:
 def main(argv=None) -> int:
     ap = run_report_parser(__doc__, "benchmarks/results_real_scenes/status/val")
     ap.add_argument("--scenes", choices=("val", "train"), default="val")
-    ap.add_argument("--per-gap", type=int, default=12)
+    ap.add_argument("--per-gap", type=int, default=PER_GAP)
     ap.add_argument("--focal-range", type=float, default=None,
                     help="the estimator's focal_range (default: EstimatorConfig's)")
     ap.add_argument("--cache", default="outputs/bench_status_cache")

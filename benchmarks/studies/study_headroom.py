@@ -162,7 +162,7 @@ def report(rows: list[dict], split: str) -> list[str]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenes", choices=("train", "val"), default="val")
-    ap.add_argument("--per-gap", type=int, default=12)
+    ap.add_argument("--per-gap", type=int, default=bs.PER_GAP)
     ap.add_argument("--cache", default="outputs/bench_status_cache")
     ap.add_argument("--out", default=None)
     ap.add_argument("--rows", default=None, help="also write each pair's figures (JSON lines)")

@@ -62,7 +62,7 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenes", choices=("train", "val"), default="train")
-    ap.add_argument("--per-gap", type=int, default=12)  # the pairs of bench_status.py
+    ap.add_argument("--per-gap", type=int, default=bs.PER_GAP)
     ap.add_argument("--cache", default="outputs/bench_status_cache")
     ap.add_argument("--out", default="benchmarks/studies/results_multiple_motions.md")
     ap.add_argument("--rows", default=None, help="also write each pair's figures (JSON lines)")

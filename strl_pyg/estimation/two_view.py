@@ -36,7 +36,7 @@ import cv2
 import numpy as np
 
 __all__ = ["CONFIGURATIONS", "H_RATIO", "ROTATION_RATIO", "MIN_INLIERS", "TwoViewGeometry",
-           "classify_two_view", "rotation_only", "planar_candidates"]
+           "classify_two_view", "rotation_only", "planar_candidates", "bearings"]
 
 CONFIGURATIONS = ("general", "planar", "rotation", "degenerate", "multiple", "watermark")
 #: A homography with at least this share of the essential matrix's inliers makes a pair
@@ -109,7 +109,8 @@ class TwoViewGeometry:
                 "second_motion_inliers": self.second_motion_inliers}
 
 
-def _bearings(x: np.ndarray) -> np.ndarray:
+def bearings(x: np.ndarray) -> np.ndarray:
+    """Unit viewing rays ``[N, 3]`` of normalised image points ``x`` ``[N, 2]``."""
     b = np.concatenate([x, np.ones((len(x), 1))], axis=1)
     return b / np.linalg.norm(b, axis=1, keepdims=True)
 
@@ -130,7 +131,7 @@ def _kabsch(a: np.ndarray, b: np.ndarray, w: np.ndarray | None = None) -> np.nda
 def _transfer_px(R: np.ndarray, x0: np.ndarray, x1: np.ndarray, focal: float) -> np.ndarray:
     """Symmetric transfer distance (px at ``focal``) of the matches under ``x1 ~ R x0``."""
     def err(Rm, a, b):
-        p = _bearings(a) @ Rm.T
+        p = bearings(a) @ Rm.T
         with np.errstate(divide="ignore", invalid="ignore"):
             q = p[:, :2] / p[:, 2:3]
         e = np.linalg.norm(q - b, axis=1)
@@ -149,7 +150,7 @@ def rotation_only(x0: np.ndarray, x1: np.ndarray, focal: float, threshold_px: fl
     mask = np.zeros(n, bool)
     if n < 2:
         return None, mask, None
-    b0, b1 = _bearings(x0), _bearings(x1)
+    b0, b1 = bearings(x0), bearings(x1)
     rng = np.random.default_rng(seed)
     i = rng.integers(0, n, size=(iterations, 2))
     i[:, 1] = (i[:, 0] + 1 + rng.integers(0, n - 1, size=iterations)) % n

@@ -23,12 +23,12 @@ only with ``"ok"``.
 The folder's modules: the records (:mod:`~strl_pyg.inference.record`), the input checks
 (:mod:`~strl_pyg.inference.checks`), the network's graph and forward
 (:mod:`~strl_pyg.inference.network`), the method classes (:mod:`~strl_pyg.inference.methods`,
-:mod:`~strl_pyg.inference.methods.vanishing_point`) and their registry (:mod:`~strl_pyg.inference.registry`:
-``register_method(MyMethod())``, a :class:`~strl_pyg.inference.methods.base.PoseMethod`), one
-pair's run (:mod:`~strl_pyg.inference.pair`), the calibration
-(:mod:`~strl_pyg.inference.calibration`), the recommended order
-(:mod:`~strl_pyg.inference.policy`), the evidence for a pose (:mod:`~strl_pyg.inference.evidence`)
-and this module, :class:`PoseEstimator`.
+:mod:`~strl_pyg.inference.methods.vanishing_point`) and their registry
+(:mod:`~strl_pyg.inference.registry`: ``register_method(MyMethod())``, a
+:class:`~strl_pyg.inference.methods.base.PoseMethod`), one pair's run
+(:mod:`~strl_pyg.inference.pair`), the calibration (:mod:`~strl_pyg.inference.calibration`),
+the recommended order (:mod:`~strl_pyg.inference.policy`), the evidence for a pose
+(:mod:`~strl_pyg.inference.evidence`) and this module, :class:`PoseEstimator`.
 """
 
 from __future__ import annotations
@@ -396,7 +396,8 @@ class PoseEstimator:
         :meth:`estimate` (``methods`` as there). ``K1`` defaults to ``K0`` (one camera). No
         matches at all gives status ``"degenerate"``. ``original``: where the images are a
         resized copy, the sizes and intrinsics the user gave (``{"size0", "size1", "K0",
-        "K1"}``, ``matches.info["original_frame"]``): the intrinsics warnings quote them. With :data:`RECOMMENDED`, the images
+        "K1"}``, ``matches.info["original_frame"]``): the intrinsics warnings quote them. With
+        :data:`RECOMMENDED`, the images
         are matched once: the points first, the line segments added to them (without
         detecting the points again) only when a method that reads lines is about to run and
         ``frontend_config.lines`` is on."""

@@ -44,7 +44,12 @@ from strl_pyg.estimation.classical import (
     normalised_matches,
     preferred_solver,
 )
-from strl_pyg.estimation.two_view import TwoViewGeometry, classify_two_view, planar_candidates
+from strl_pyg.estimation.two_view import (
+    TwoViewGeometry,
+    bearings,
+    classify_two_view,
+    planar_candidates,
+)
 from strl_pyg.inference.record import MethodResult, PoseEstimate
 from strl_pyg.inference.support import check_support
 from strl_pyg.utils.threads import available_cores, shared_pool
@@ -184,13 +189,11 @@ def _pose_inliers(T: np.ndarray, matches: PairMatches, threshold_px: float) -> n
 
 def ray_turn_deg(matches: PairMatches) -> np.ndarray:
     """Per point match, the angle (deg) between its two viewing rays, each in its own camera
-    (``K0^-1 x0`` and ``K1^-1 x1``): how far the match moves, independent of the lens."""
-    rays = []
-    for p, K in ((matches.points0, matches.K0), (matches.points1, matches.K1)):
-        x = np.c_[np.asarray(p, dtype=np.float64), np.ones(len(p))] @ \
-            np.linalg.inv(np.asarray(K, dtype=np.float64)).T
-        rays.append(x / np.linalg.norm(x, axis=1, keepdims=True))
-    return np.degrees(np.arccos(np.clip((rays[0] * rays[1]).sum(1), -1.0, 1.0)))
+    (``K0^-1 x0`` and ``K1^-1 x1``, :func:`~strl_pyg.estimation.classical.normalised_matches`):
+    how far the match moves, independent of the lens."""
+    x0, x1, _ = normalised_matches(matches)
+    cos = (bearings(x0.numpy()) * bearings(x1.numpy())).sum(1)
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
 
 def apply_multiple_motions(estimate: PoseEstimate, geo: TwoViewGeometry | None,

@@ -12,8 +12,8 @@ import pytest
 from strl_pyg import cli
 from strl_pyg.cli import main as cli_main
 from strl_pyg.geometry import Pose
-from strl_pyg.utils import UsageError
 from strl_pyg.metrics.two_view import rotation_error_deg
+from strl_pyg.utils import UsageError
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -26,8 +26,8 @@ def checkpoint(tmp_path_factory):
 
     if DEFAULT_WEIGHTS.is_file():
         return str(DEFAULT_WEIGHTS)
-    from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.model import StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose
 
     path = tmp_path_factory.mktemp("ckpt") / "tiny.pt"
     StrLPose(StrLPoseConfig(hidden=32, layers=1, heads=2, patch_features=1)).save(path)
@@ -148,8 +148,8 @@ def test_console_script_entry_point_help():
 
 
 def test_bench_prints_a_timing_table(tmp_path, capsys):
-    from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.model import StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose
 
     ckpt = tmp_path / "tiny.pt"
     StrLPose(StrLPoseConfig(hidden=32, layers=1, heads=2, patch_features=1)).save(ckpt)
@@ -365,8 +365,8 @@ def test_default_train_config_model_accepts_its_default_data():
     from torch_geometric.loader.dataloader import Collater
 
     from strl_pyg.model.strl_pose import StrLPose
-    from strl_pyg.training.config import DATA_CHANNELS, TrainConfig
     from strl_pyg.training import build_datasets
+    from strl_pyg.training.config import DATA_CHANNELS, TrainConfig
 
     cfg = replace(TrainConfig(), train_pairs=1, val_pairs=1)
     g = build_datasets(cfg)[0][0]
