@@ -34,5 +34,5 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
     from strl_pyg.data.build import build_pair_graph
     from strl_pyg.data.matches import PairMatches
     from strl_pyg.geometry import Pose
-    from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.model import ABLATIONS, PoseOutput, StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose

@@ -36,10 +36,18 @@ def pairs():
     return out
 
 
+#: record the focal-inclusive sigma where a record has one (``--sigma-with-focal``): the sigma
+#: an earlier version carried when the focal length's spread was added to the pose's own
+WITH_FOCAL = False
+
+
 def record(r) -> dict:
-    sigma = None if r.sigma is None else {k: None if v is None else round(v, 6)
-                                          for k, v in r.sigma.items()}
-    return {"method": r.method, "status": r.status, "sigma": sigma, "warnings": list(r.warnings),
+    sig = r.sigma
+    if WITH_FOCAL and getattr(r, "sigma_with_focal", None) is not None:
+        sig = r.sigma_with_focal
+    sigma = None if sig is None else {k: None if v is None else round(v, 6)
+                                      for k, v in sig.items()}
+    return {"method": r.method, "status": str(r.status), "sigma": sigma, "warnings": list(r.warnings),
             "T": None if r.T_0to1 is None else np.round(r.T_0to1, 9).tolist()}
 
 
@@ -76,7 +84,12 @@ def main(argv=None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True, help="the JSON dump to write")
     ap.add_argument("--compare", default=None, help="a dump to compare this one with")
+    ap.add_argument("--sigma-with-focal", action="store_true",
+                    help="record sigma_with_focal where a record has one (to compare with a "
+                         "version whose sigma held the focal length's spread)")
     args = ap.parse_args(argv)
+    global WITH_FOCAL
+    WITH_FOCAL = args.sigma_with_focal
     result = dump()
     Path(args.out).write_text(json.dumps(result, indent=1, sort_keys=True))
     records = sum(len(v["all"]) + 2 for v in result.values())

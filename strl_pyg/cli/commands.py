@@ -52,6 +52,7 @@ from strl_pyg.cli.readers import (
     non_negative_int,
     read_pair,
 )
+from strl_pyg.inference.status import Status
 from strl_pyg.synthetic.config import LINE_SCENE_KINDS
 from strl_pyg.utils import OneLineArgumentParser, UsageError
 
@@ -99,7 +100,7 @@ def cmd_demo(args) -> int:
     print(f"recommended pose: {est.status}" + (f", from {est.pose.method}" if est.pose.method
                                                else "")
           + "".join(f"\nwarning: {w}" for w in est.warnings))
-    if est.pose.sigma is not None and est.status == "ok":
+    if est.pose.sigma is not None and est.status == Status.OK:
         kind = est.pose.info.get("covariance", "network log-variance")
         print(f"recommended pose's sigma ({kind}): rotation "
               f"{est.pose.sigma['rotation_deg']:.3f} deg, translation direction "
@@ -164,6 +165,14 @@ def cmd_methods(args) -> int:
     missing = [n for n, m in METHODS.items() if not m.available()]
     if missing:
         print(f"not installed here: {', '.join(missing)}")
+    return 0
+
+
+def cmd_rules(args) -> int:
+    """The rules on a pose as a Markdown table (docs/rules.md holds the built-in ones')."""
+    from strl_pyg.inference.rules import rules_table
+
+    print(rules_table())
     return 0
 
 
@@ -292,6 +301,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "calibrated setting; 0: first-order covariance only, faster)")
     sub.add_parser("methods", help="the pose methods predict --methods takes, with what each "
                                    "needs (installed packages' methods included)")
+    sub.add_parser("rules", help="the rules that decide a pose's status and widen its sigma, "
+                                 "in the order they run (installed packages' rules included)")
     p = sub.add_parser("train", help="train a model (see examples/train.py)")
     add_train_arguments(p)
     sub.add_parser("evaluate", help="evaluate a checkpoint (see examples/evaluate.py)",
@@ -335,6 +346,8 @@ def _dispatch(argv: list[str]) -> int:
         return cmd_train(args, parser, argv)
     if args.command == "methods":
         return cmd_methods(args)
+    if args.command == "rules":
+        return cmd_rules(args)
     if args.command == "bench":
         from strl_pyg.cli.bench import cmd_bench
 

@@ -20,6 +20,7 @@ from strl_pyg.cli.readers import (
     load_model,
     read_pair,
 )
+from strl_pyg.inference.status import Status
 from strl_pyg.utils import UsageError
 
 __all__ = ["predict_pair", "cmd_predict", "EXIT_CODES", "STATUS_EXIT", "read_pairs_file",
@@ -133,18 +134,19 @@ EXIT_CODES = {0: "a pose: status 'ok'",
               141: "stdout closed early (e.g. '| head'): output stopped quietly"}
 
 
-STATUS_EXIT = {"ok": 0, "degenerate": 1, "failed": 1, "unreliable": 3, "rotation_only": 4}
+STATUS_EXIT = {Status.OK: 0, Status.DEGENERATE: 1, Status.FAILED: 1, Status.UNRELIABLE: 3,
+               Status.ROTATION_ONLY: 4}
 
 
 def _print_estimate(est, indent: str = "") -> None:
     """The recommended pose in words: status, method, uncertainty, warnings; then each
     method's own result."""
     pose = est.pose
-    if pose.status == "unreliable":
+    if pose.status == Status.UNRELIABLE:
         label = _label(pose.method)
         print(f"{indent}pose: unreliable, no pose given (see the warnings); {pose.method} "
               f"({label}) computed, not to use: {format_pose(pose.info['unreliable_T_0to1'])}")
-    elif pose.status == "ok":
+    elif pose.status == Status.OK:
         label = _label(pose.method)
         print(f"{indent}pose: ok, from {pose.method} ({label}): {format_pose(pose.T_0to1)}")
         if pose.sigma is not None:
@@ -154,7 +156,7 @@ def _print_estimate(est, indent: str = "") -> None:
             print(f"{indent}  sigma ({kind}, {cal}): "
                   f"rotation {pose.sigma['rotation_deg']:.3f} deg, "
                   f"translation direction {pose.sigma['translation_deg']:.3f} deg")
-    elif pose.status == "rotation_only":
+    elif pose.status == Status.ROTATION_ONLY:
         R = "; ".join(" ".join(f"{v:+.5f}" for v in row) for row in pose.rotation)
         sig = pose.sigma["rotation_deg"] if pose.sigma is not None else float("nan")
         print(f"{indent}pose: rotation_only (a pure rotation: no translation direction), "
@@ -178,8 +180,8 @@ def _print_estimate(est, indent: str = "") -> None:
         print(f"{indent}warning: {w}")
     print(f"{indent}methods:")
     for name, r in est.methods.items():
-        detail = format_pose(r.T_0to1) if r.status == "ok" else "; ".join(r.warnings)
-        if r.status == "unreliable":
+        detail = format_pose(r.T_0to1) if r.status == Status.OK else "; ".join(r.warnings)
+        if r.status == Status.UNRELIABLE:
             detail = "; ".join(r.info["unreliable"])
         extra = f", {r.num_inliers} inliers" if r.num_inliers is not None else ""
         print(f"{indent}  {name:<11} {r.status:<10} {detail}  ({r.time_ms:.1f} ms{extra})")
@@ -266,7 +268,7 @@ def _draw_estimate(path: str, est, file=None, images=None) -> None:
     what = (f"green: {int(mask.sum())} of {m.num_points} point matches support the "
             f"recommended pose ({est.pose.method}, {est.status})" if mask is not None
             else f"recommended pose: {est.status}; no inlier mask (every match drawn grey)")
-    if est.status == "unreliable" and est.pose.info.get("unreliable"):
+    if est.status == Status.UNRELIABLE and est.pose.info.get("unreliable"):
         what += f"; unreliable: {est.pose.info['unreliable'][0]}"
     print(f"drawing -> {save_matches_png(path, m, point_inliers=mask, title=what, legend=True)}",
           file=file)

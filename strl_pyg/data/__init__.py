@@ -45,17 +45,18 @@ __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 if TYPE_CHECKING:  # for type checkers and IDEs; never executed
     from strl_pyg.data import keys
     from strl_pyg.data.build import build_pair_graph, load_graph, save_graph
+    from strl_pyg.data.matches import PairMatches
     from strl_pyg.data.pair_graph import (
+        CompleteEdges,
         ImplicitEdgesError,
         MixedEdgesError,
         PairGraph,
         complete_edge_index,
+        drop_legacy_cross_edges,
         edge_index_dict,
         has_implicit_complete_edges,
         materialize_complete_edges,
     )
-    from strl_pyg.data.matches import PairMatches
-    from strl_pyg.data.pair_graph import CompleteEdges, drop_legacy_cross_edges
     from strl_pyg.data.transforms import (
         FixedSizeResample,
         MaterializeCompleteEdges,

@@ -10,9 +10,9 @@ from torch import Tensor
 from torch_geometric.data import Batch, HeteroData
 from torch_geometric.transforms import BaseTransform
 
+from strl_pyg.data import has_implicit_complete_edges, materialize_complete_edges
 from strl_pyg.data import keys as keys_
 from strl_pyg.data.build import line_edge_index
-from strl_pyg.data import has_implicit_complete_edges, materialize_complete_edges
 from strl_pyg.data.pair_graph import stored
 from strl_pyg.geometry.manifold import so3_exp
 

@@ -26,8 +26,8 @@ from torch.utils.data import IterableDataset, get_worker_info
 from torch_geometric.data import HeteroData
 
 from strl_pyg.data.build import build_pair_graph
-from strl_pyg.data.matches import PairMatches
 from strl_pyg.data.keys import PAIR_ID, SUBSET
+from strl_pyg.data.matches import PairMatches
 from strl_pyg.datasets.base import (
     CachedPairDataset,
     _check_training_frontend,

@@ -40,9 +40,9 @@ from strl_pyg.estimation import line_refine
 from strl_pyg.estimation.classical import BaselineResult, _failed, normalised_matches
 from strl_pyg.estimation.line_refine import (
     _homogeneous,
+    refine_with_lines,
     segment_geometry,
     vp_residual_px,
-    refine_with_lines,
 )
 from strl_pyg.geometry import Pose, check_rotation, pose_sampson
 

@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 
 from strl_pyg.geometry import Pose
+from strl_pyg.metrics import integrate_relative_poses, kitti_odometry_errors, kitti_odometry_summary
 from strl_pyg.metrics.stats import AUC_THRESHOLDS, pose_error_stats
 from strl_pyg.metrics.two_view import relative_pose_error
-from strl_pyg.metrics import integrate_relative_poses, kitti_odometry_errors, kitti_odometry_summary
 from strl_pyg.utils.io import atomic_open
 
 __all__ = ["SHORT_SEGMENT_LENGTHS", "PairResult", "pair_result", "EvalReport"]

@@ -45,6 +45,7 @@ from strl_pyg.evaluation.pairs import (
 from strl_pyg.evaluation.report import EvalReport, PairResult, pair_result
 from strl_pyg.geometry import Pose
 from strl_pyg.inference.network import network_pose
+from strl_pyg.inference.status import Status
 from strl_pyg.synthetic.config import LINE_SCENE_KINDS, SCENE_KINDS
 from strl_pyg.utils.commandline import OneLineArgumentParser, UsageError
 from strl_pyg.utils.io import one_line
@@ -183,7 +184,7 @@ def evaluate_pairs(
         est = estimator.estimate(pair.matches)
         for name in methods:
             r = est.methods[name]
-            ok = r.status == "ok"
+            ok = r.status == Status.OK
             pose = Pose.from_matrix(torch.as_tensor(r.T_0to1)) if ok else Pose.identity()
             results.append(pair_result(pair, name, pose, r.time_ms, ok))
     return EvalReport(results, methods, truth, dict(meta or {}))

@@ -21,5 +21,10 @@ __all__ = list(_EXPORTS)
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 
 if TYPE_CHECKING:  # for type checkers and IDEs; never executed
-    from strl_pyg.explain.pose import (EXPLAINERS, PoseExplainerModel, PoseExplanation,
-                                       explain_matches, explain_pose)
+    from strl_pyg.explain.pose import (
+        EXPLAINERS,
+        PoseExplainerModel,
+        PoseExplanation,
+        explain_matches,
+        explain_pose,
+    )

@@ -1,7 +1,11 @@
 """Pose of one image pair by every method: :class:`PoseEstimator` (:mod:`.estimator`), the
 method registry (:mod:`.registry`), the method classes (:mod:`.methods`, a module per concept),
 the support check (:mod:`.support`), the input checks (:mod:`.checks`), the network's input
-graph (:mod:`.network`), the records (:mod:`.record`) and the lazy recommended path
+graph (:mod:`.network`), the records (:mod:`.record`), the statuses and verdicts
+(:mod:`.status`), the rules on a pose (:mod:`.rules`, a module per rule), one pair's run
+(:mod:`.pair`, :mod:`.running`), the pick of the recommended record (:mod:`.pick`,
+:mod:`.policy`), the calibration (:mod:`.calibration`), the evidence the rules read
+(:mod:`.evidence`), two images to a pose (:mod:`.images`) and the lazy recommended path
 (:mod:`.recommended`).
 
 The registry (:data:`METHODS`) holds the built-in methods from its first read, whichever module
@@ -16,6 +20,11 @@ from strl_pyg.utils.lazy import lazy_exports
 
 _EXPORTS = {
     "STATUSES": "strl_pyg.inference.record",
+    "Status": "strl_pyg.inference.status",
+    "Verdict": "strl_pyg.inference.status",
+    "RULES": "strl_pyg.inference.rules",
+    "PoseRule": "strl_pyg.inference.rules",
+    "register_rule": "strl_pyg.inference.rules",
     "ZERO_PARALLAX_PX": "strl_pyg.inference.checks",
     "ZERO_PARALLAX_FRACTION": "strl_pyg.inference.checks",
     "FOCAL_RANGE": "strl_pyg.inference.checks",

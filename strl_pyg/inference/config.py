@@ -25,10 +25,59 @@ __all__ = ["EstimatorConfig"]
 @dataclass(frozen=True)
 class EstimatorConfig:
     """Every option of :class:`~strl_pyg.inference.estimator.PoseEstimator` (its keyword
-    arguments are these fields; their meaning is documented there), checked when built: a bad
+    arguments are these fields, documented below), checked when built: a bad
     value is a one-line ``ValueError``. ``methods`` ``None`` or ``"all"``: every installed
     method; a ``str`` is one method or comma-separated names (as ``--methods`` takes them).
-    ``device`` is kept as a ``torch.device`` (or ``None``)."""
+    ``device`` is kept as a ``torch.device`` (or ``None``).
+
+    Args:
+        methods: names from :data:`~strl_pyg.inference.registry.METHODS` to run (default: all
+            installed ones); one name as a ``str`` is one method.
+        seed: resampling and RANSAC seed (same input, same result).
+        threshold_px: inlier threshold of the classical solvers, pixels.
+        device: where the network runs: the model is moved there (``model.to(device)``, in
+            place); default: the model's device. A device this machine does not have (``"cuda"``
+            without CUDA) is a ``ValueError`` here, not a failure of every network method later.
+        raise_errors: re-raise a method's exception instead of recording ``"failed"``.
+        bootstrap: resamples of the point matches behind the ``poselib`` / ``opencv``
+            covariances (first order + bootstrap, :mod:`strl_pyg.estimation.uncertainty`);
+            ``0``: first order only. Their calibration scales apply only when the checkpoint's
+            ``metadata["calibration_bootstrap"]`` (0 when absent) equals it; otherwise the
+            record keeps the uncalibrated covariance and says so in ``warnings``.
+        min_inlier_ratio, min_inliers: a solver's pose (``PoseMethod.support_checked``) is
+            ``"failed"`` when the matches do not support it: fewer of the point matches lie
+            within :data:`~strl_pyg.inference.support.SUPPORT_BAND` x ``threshold_px`` of it
+            (Sampson distance; the band keeps correct poses of 2 px matches) than this fraction
+            of them, or than ``min(min_inliers, number of matches)`` (with fewer matches than
+            that, every match must agree). Random matches give RANSAC a few percent (11 of 300),
+            and on a few dozen its 5-point sample plus a handful (9 of 32 on two unrelated
+            images). When no checked solver is left ``"ok"`` for that reason, the regression is
+            not used as the recommended pose either. Defaults 0.1 and 12; ``0`` switches either
+            off. Only matches in front of both cameras count (as in the solvers' own counts).
+        min_in_front: a checked pose is ``"unreliable"`` when fewer than this fraction of the
+            point matches within the support band lie in front of both cameras (its sign or
+            decomposition is wrong; default :data:`~strl_pyg.inference.support.CHEIRALITY_MIN`,
+            ``0`` = off). Every pose is ``"unreliable"`` when the intrinsics fail
+            :func:`~strl_pyg.inference.checks.intrinsics_problems`.
+        resample: the regression's input graph: ``"model"`` (default: the point / line counts
+            the checkpoint was trained with, seeded by ``seed``), ``(points, lines)`` or
+            ``None`` (every match).
+        swap_check: the regression also runs on the swapped pair (image 1 first) and its
+            covariance grows by the disagreement of the two passes
+            (:func:`~strl_pyg.estimation.uncertainty.swap_covariance`; default ``True``): the
+            network's own variances are fitted on its training distribution and stay small away
+            from it.
+        data_check: the regression's covariance also grows by its distance to the classical pose
+            of the same matches (PoseLib's, else OpenCV's; one solve per pair, shared with that
+            method) (:func:`~strl_pyg.estimation.uncertainty.data_covariance`; default ``True``;
+            needs intrinsics and 8 distinct point matches).
+        focal_sensitivity, focal_range: the ``focal`` rule
+            (:mod:`strl_pyg.inference.rules.focal`): the recommended pose is solved again with
+            both focal lengths scaled by ``focal_range`` (default 2) each way; where the matches
+            do not verify the focal length, the spread is added to its ``covariance_with_focal``
+            (``sigma_with_focal``), never to its own ``covariance`` (default ``True``; two more
+            solves per pair).
+    """
 
     methods: tuple[str, ...] | None = None
     seed: int = 0

@@ -48,19 +48,18 @@ from strl_pyg.estimation.two_view import (
     TwoViewGeometry,
     bearings,
     classify_two_view,
-    planar_candidates,
 )
-from strl_pyg.inference.record import MethodResult, PoseEstimate
+from strl_pyg.inference.record import MethodResult
+from strl_pyg.inference.status import Status
 from strl_pyg.inference.support import check_support
 from strl_pyg.utils.threads import available_cores, shared_pool
 
 __all__ = ["LEARNED_SUPPORT_SHARE", "FOCAL_MIN_INLIERS", "PLANAR_AGREE_DEG",
            "FOCAL_RANGE_FACTOR", "FOCAL_VERIFIED_SHARE", "pair_geometry", "focal_consistency",
-           "focal_sensitivity", "apply_configuration", "learned_pose_evidence",
-           "apply_multiple_motions", "MULTIPLE_MIN_INLIERS", "MULTIPLE_SHARE",
+           "focal_sensitivity", "learned_pose_evidence", "MULTIPLE_MIN_INLIERS", "MULTIPLE_SHARE",
            "MULTIPLE_APART_DEG", "MULTIPLE_MOVING_RATIO", "MULTIPLE_MOVING_MIN_INLIERS",
            "MULTIPLE_MOVING_SHARE",
-           "ray_turn_deg", "apply_watermark", "WATERMARK_MIN_MATCHES",
+           "ray_turn_deg", "WATERMARK_MIN_MATCHES",
            "WATERMARK_STILL_PX", "WATERMARK_BORDER", "WATERMARK_MOVING_PX", "WATERMARK_SHARE"]
 
 #: The singular-value ratio (information only) is read from a fundamental matrix with at
@@ -143,13 +142,15 @@ def pair_geometry(matches: PairMatches, threshold_px: float = 1.0,
 
 def focal_sensitivity(pose: MethodResult, matches: PairMatches, threshold_px: float,
                       seed: int = 0, factor: float = FOCAL_RANGE_FACTOR) -> MethodResult:
-    """``pose`` (an ``"ok"`` pose with a covariance) with its sensitivity to the focal length
-    added to its covariance where the matches do not verify the focal length (module
-    docstring); ``info["focal"]`` says which (``"verified"`` or ``"not verified"``), with the
+    """``pose`` (an ``"ok"`` pose with a covariance) with its sensitivity to the focal length:
+    ``covariance_with_focal`` is its covariance plus, where the matches do not verify the
+    focal length, the spread of the solves with both focal lengths scaled by ``factor`` each
+    way (module docstring); its own ``covariance`` (the uncertainty for the K given) is
+    unchanged. ``info["focal"]`` says which (``"verified"`` or ``"not verified"``), with the
     inlier counts and the added RMS angles."""
     from strl_pyg.estimation.classical import estimate_relative_pose
 
-    if pose.status != "ok" or pose.covariance is None or not matches.has_intrinsics \
+    if pose.status != Status.OK or pose.covariance is None or not matches.has_intrinsics \
             or pose.T_0to1 is None or len(np.asarray(pose.covariance)) != 5:
         return pose
     solver = OPENCV if pose.method == OPENCV else preferred_solver()
@@ -174,10 +175,12 @@ def focal_sensitivity(pose: MethodResult, matches: PairMatches, threshold_px: fl
              "inliers_scaled": counts, "factor": factor}
     poses = [alt.T_0to1.matrix().numpy() for alt in solved if alt.success]
     if verified or not poses:
-        return replace(pose, info={**pose.info, "focal": focal})
+        return replace(pose, info={**pose.info, "focal": focal},
+                       covariance_with_focal=np.asarray(pose.covariance, np.float64).copy())
     # the scaled solves as a two-point spread about the pose: their mean second moment
-    pose, added = _with_spread(pose, poses, len(poses))
-    return replace(pose, info={**pose.info, "focal": {**focal, "added_sigma_deg": added}})
+    wider, added = _with_spread(pose, poses, len(poses))
+    return replace(pose, info={**pose.info, "focal": {**focal, "added_sigma_deg": added}},
+                   covariance_with_focal=wider.covariance)
 
 
 def _pose_inliers(T: np.ndarray, matches: PairMatches, threshold_px: float) -> np.ndarray:
@@ -196,106 +199,6 @@ def ray_turn_deg(matches: PairMatches) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
 
-def apply_multiple_motions(estimate: PoseEstimate, geo: TwoViewGeometry | None,
-                           matches: PairMatches, threshold_px: float,
-                           seed: int = 0) -> PoseEstimate:
-    """COLMAP's MULTIPLE: where the matches that the recommended pose leaves out hold a second
-    rigid motion (PoseLib, else OpenCV, on them) away from the pose (more than
-    :data:`MULTIPLE_APART_DEG` in rotation or three times that in translation direction; in
-    translation direction alone only where the pair shows parallax, not for a pure rotation,
-    whose translation the matches do not determine) with at least :data:`MULTIPLE_MIN_INLIERS`
-    inliers and :data:`MULTIPLE_SHARE` of the pose's own, or with at least
-    :data:`MULTIPLE_MOVING_MIN_INLIERS` and :data:`MULTIPLE_MOVING_SHARE` of the pose's,
-    moving :data:`MULTIPLE_MOVING_RATIO` times as far as the pose's (:func:`ray_turn_deg`): the
-    pair shows two motions (a turntable's room and
-    object, a moving car) and which one is "the" relative pose is the user's call: the
-    configuration is ``"multiple"`` and the pose ``"unreliable"``, with both poses' support
-    in the reason (the second pose in ``info["second_motion_T_0to1"]``)."""
-    from strl_pyg.estimation.classical import estimate_relative_pose
-
-    pose = estimate.pose
-    if geo is None or pose.status != "ok" or pose.T_0to1 is None or not matches.has_intrinsics:
-        return estimate
-    T = np.asarray(pose.T_0to1, dtype=np.float64)
-    first = _pose_inliers(T, matches, threshold_px)
-    rest = np.flatnonzero(~first)
-    n1 = int(first.sum())
-    need = max(MULTIPLE_MIN_INLIERS, MULTIPLE_SHARE * n1)
-    need_moving = max(MULTIPLE_MOVING_MIN_INLIERS, MULTIPLE_MOVING_SHARE * n1)
-    turn = ray_turn_deg(matches)
-    moving_at = MULTIPLE_MOVING_RATIO * float(np.median(turn[first])) if n1 else math.inf
-    # a moving second motion needs this many left-out matches that move that far
-    moving_possible = int((turn[rest] >= moving_at).sum()) >= need_moving
-    if len(rest) < max(need, 8) and not moving_possible:
-        return estimate  # too few left out to hold a second motion that counts
-    others = replace(matches, points0=matches.points0[rest], points1=matches.points1[rest],
-                     point_scores=None, lines0=None, lines1=None, line_scores=None)
-    second = estimate_relative_pose(others, preferred_solver(), threshold_px, seed=seed)
-    inl2 = np.asarray(second.inliers, bool) if second.success else np.zeros(len(rest), bool)
-    n2 = int(inl2.sum())
-    moving = n2 >= need_moving and float(np.median(turn[rest][inl2])) >= moving_at
-    if n2 < need and not moving:
-        return estimate
-    T2 = second.T_0to1.matrix().numpy()
-    rot = _rot_deg(T[:3, :3], T2[:3, :3])
-    trans = _angle_deg(T[:3, 3], T2[:3, 3])
-    if rot <= MULTIPLE_APART_DEG and (trans <= 3 * MULTIPLE_APART_DEG
-                                      or geo.configuration == "rotation"):
-        # the same motion, its matches just outside the threshold; or a pure rotation, whose
-        # translation direction the matches do not determine (two halves of the matches
-        # then fit two directions equally badly)
-        return estimate
-    estimate.geometry = geo = replace(geo, configuration="multiple", second_motion_inliers=n2)
-    info = {**pose.info, "second_motion_T_0to1": T2, "second_motion_inliers": n2}
-    still = (f"; its matches move {float(np.median(turn[rest][inl2])):.2f} deg, the pose's "
-             f"{float(np.median(turn[first])):.2f} deg: a still background beside a moving "
-             "object" if n2 < need else "")
-    estimate.pose = replace(pose, info=info).unreliable([
-        f"two motions (COLMAP's MULTIPLE): {n2} of the {len(rest)} matches the pose leaves "
-        f"out fit a second rigid motion ({rot:.1f} deg in rotation and {trans:.1f} deg in "
-        f"translation direction from the pose, which {n1} matches fit{still}): e.g. a "
-        "turntable's room and object; which is the relative pose is yours to say "
-        "(info['second_motion_T_0to1'])"])
-    return estimate
-
-
-def apply_watermark(estimate: PoseEstimate, geo: TwoViewGeometry | None,
-                    matches: PairMatches, threshold_px: float) -> PoseEstimate:
-    """COLMAP's WATERMARK: at least :data:`WATERMARK_MIN_MATCHES` (and
-    :data:`WATERMARK_SHARE`) of the recommended pose's inliers stay put (moving less than
-    :data:`WATERMARK_STILL_PX`) within :data:`WATERMARK_BORDER` of the image's size from a
-    border, while the other matches move
-    (median over :data:`WATERMARK_MOVING_PX`): a stamped overlay (a logo, a time stamp) that
-    matches itself. Such matches fit any pose without rotation, so they pull the pose towards
-    one: the configuration is ``"watermark"`` and the pose ``"unreliable"``."""
-    pose = estimate.pose
-    if geo is None or pose.status != "ok" or pose.T_0to1 is None or not matches.has_intrinsics:
-        return estimate
-    p0, p1 = np.asarray(matches.points0), np.asarray(matches.points1)
-    if len(p0) < WATERMARK_MIN_MATCHES:
-        return estimate
-    h, w = matches.image_size0
-    still = np.linalg.norm(p1 - p0, axis=1) < WATERMARK_STILL_PX
-    bx, by = WATERMARK_BORDER * w, WATERMARK_BORDER * h
-    border = (p0[:, 0] < bx) | (p0[:, 0] > w - 1 - bx) | (p0[:, 1] < by) | \
-        (p0[:, 1] > h - 1 - by)
-    inl = _pose_inliers(np.asarray(pose.T_0to1, dtype=np.float64), matches, threshold_px)
-    stamp = still & border & inl
-    others = ~(still & border)
-    if stamp.sum() < max(WATERMARK_MIN_MATCHES, WATERMARK_SHARE * inl.sum()) or \
-            others.sum() < WATERMARK_MIN_MATCHES or \
-            np.median(np.linalg.norm(p1[others] - p0[others], axis=1)) < WATERMARK_MOVING_PX:
-        return estimate
-    estimate.geometry = replace(geo, configuration="watermark")
-    estimate.pose = replace(pose, info={**pose.info, "watermark_matches": int(stamp.sum())}
-                            ).unreliable([
-        f"a watermark (COLMAP's WATERMARK): {int(stamp.sum())} of the pose's inliers stay put "
-        f"(under {WATERMARK_STILL_PX:g} px) near the image borders while the other matches "
-        "move: a stamped overlay matches itself and fits any pose without rotation; crop or "
-        "mask it"])
-    return estimate
-
-
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     c = float(np.dot(a, b) / max(np.linalg.norm(a) * np.linalg.norm(b), 1e-300))
     return math.degrees(math.acos(max(-1.0, min(1.0, c))))
@@ -308,79 +211,24 @@ def learned_pose_evidence(res: MethodResult, matches: PairMatches, threshold_px:
     it (module docstring; with the pair's configuration ``geo``, at least
     :data:`LEARNED_SUPPORT_SHARE` of its essential matrix's inliers), else ``"unreliable"``
     with the reason (the pose kept in ``info`` for inspection)."""
-    if res.status != "ok" or not matches.has_intrinsics:
+    if res.status != Status.OK or not matches.has_intrinsics:
         return res
     ratio, floor, in_front = support
     checked = check_support(replace(res, info=dict(res.info)), matches, threshold_px, ratio,
                             floor, in_front, checked=True)
     k = checked.info.get("support_inliers", 0)
     best = 0 if geo is None else geo.inliers_E
-    if checked.status == "ok" and k >= LEARNED_SUPPORT_SHARE * best:
+    if checked.status == Status.OK and k >= LEARNED_SUPPORT_SHARE * best:
         return res
-    if checked.status == "ok":
+    if checked.status == Status.OK:
         why = (f"it explains {k} point matches within the support band, the pair's essential "
                f"matrix {best} (below {100 * LEARNED_SUPPORT_SHARE:.0f} %)")
     else:
         why = checked.warnings[-1] if checked.warnings else "the matches do not support it"
     return res.unreliable([
         f"the network's pose stands in for no solver here: {why} (its sigma is calibrated on "
-        "generated scenes; where the classical solvers fail it is not evidence)"])
-
-
-def apply_configuration(estimate: PoseEstimate, geo: TwoViewGeometry | None,
-                        matches: PairMatches) -> PoseEstimate:
-    """The recommended pose under the pair's configuration (module docstring); records the
-    configuration in ``estimate.geometry`` and the pose's ``info["configuration"]``."""
-    estimate.geometry = geo
-    if geo is None:
-        return estimate
-    pose = estimate.pose
-    info = {**pose.info, "configuration": geo.configuration}
-    if geo.configuration == "rotation" and pose.status in ("ok", "failed", "unreliable") \
-            and geo.rotation is not None and not pose.bad_intrinsics:
-        sigma = geo.rotation_sigma_deg if geo.rotation_sigma_deg is not None else float("nan")
-        s = math.radians(max(sigma, 1e-3)) if math.isfinite(sigma) else None
-        cov = None if s is None else np.eye(3) * s * s / 3.0
-        note = (f"pure rotation: a rotation alone explains {geo.inliers_R} of the "
-                f"{geo.num_points} point matches (the essential matrix {geo.inliers_E}), so "
-                "the translation direction is not determined: the rotation is given "
-                "(rotation, sigma['rotation_deg']), T_0to1 is None")
-        if pose.status == "ok":
-            info["rotation_vs_method_deg"] = _rot_deg(pose.T_0to1[:3, :3], geo.rotation)
-        estimate.pose = MethodResult("rotation", "rotation_only", None, cov,
-                                     pose.warnings + [note], pose.time_ms, geo.inliers_R,
-                                     info, None, None, rotation=geo.rotation)
-        return estimate
-    if geo.configuration == "planar" and pose.status == "ok" and geo.H is not None:
-        x0, x1, _ = normalised_matches(matches)
-        cands = planar_candidates(geo.H, np.asarray(matches.K0), np.asarray(matches.K1),
-                                  x0.numpy(), x1.numpy())
-        R, t = pose.T_0to1[:3, :3], pose.T_0to1[:3, 3]
-        # the rotation decides: a plane seen with little parallax fixes its rotation well and
-        # its translation poorly (measured: a right pose of office_drink, 0.04 / 3.9 deg off,
-        # was 30 deg from the decomposition's translation)
-        agree = [i for i, (Rc, _) in enumerate(cands) if _rot_deg(R, Rc) < PLANAR_AGREE_DEG]
-        info["planar_candidates"] = [{"R": Rc, "t": tc, "rotation_from_pose_deg":
-                                      _rot_deg(R, Rc), "translation_from_pose_deg":
-                                      _angle_deg(t, tc)} for Rc, tc in cands]
-        others = [c for i, c in enumerate(cands) if i not in agree
-                  and not any(_rot_deg(c[0], cands[j][0]) < PLANAR_AGREE_DEG for j in agree)]
-        if cands and not agree:
-            estimate.pose = replace(pose, info=info).unreliable([
-                f"planar scene: the pose is none of the {len(cands)} decompositions of the "
-                "plane's homography that put the matches in front of the cameras "
-                "(info['planar_candidates'])"])
-            return estimate
-        warn = []
-        if others:
-            warn = [f"planar scene: {len(others)} other decomposition(s) of the plane's "
-                    "homography also put the matches in front of both cameras and the matches "
-                    "cannot rule them out (info['planar_candidates'])"]
-        estimate.pose = _with_planar_spread(replace(pose, info=info,
-                                                    warnings=pose.warnings + warn), cands)
-        return estimate
-    estimate.pose = replace(pose, info=info)
-    return estimate
+        "generated scenes; where the classical solvers fail it is not evidence)"],
+        rule="learned_support", evidence={"support_inliers": k, "essential_inliers": best})
 
 
 def _with_planar_spread(pose: MethodResult, cands: list) -> MethodResult:

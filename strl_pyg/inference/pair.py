@@ -122,9 +122,11 @@ def pair_rules(results: dict[str, MethodResult], matches: PairMatches,
         # the network then reads coordinates normalised by the image size, not by K: its
         # rotation and its calibrated sigma are not those of a calibrated pair
         reasons.append(NO_INTRINSICS)
+    rule = "intrinsics" if problems else "no_intrinsics"
     for name, res in results.items():
         new = [why for why in reasons if why not in res.warnings]  # a known result may
-        results[name] = res = res.unreliable(new)  # carry them already
+        results[name] = res = res.unreliable(new, rule=rule,  # carry them already
+                                             evidence={"problems": list(problems)})
         res.bad_intrinsics = res.bad_intrinsics or bool(problems)
         if res.info.get("inlier_mask") is not None and res.inliers is None:
             res.inliers = np.asarray(res.info.pop("inlier_mask"), dtype=bool)[rows]
@@ -159,6 +161,41 @@ class PairRun:
     #: the two-view configuration (strl_pyg.inference.evidence), or the Future computing it
     #: beside the methods (:attr:`geometry` waits for it)
     pending_geometry: Any = None
+    #: what the rules measured on this pair, by key (:meth:`once`)
+    evidence: dict = field(default_factory=dict)
+
+    @classmethod
+    def start(cls, matches: PairMatches, ctx: MethodContext) -> PairRun:
+        """The pair's one context: its input check (:func:`checked_pair`), its two-view
+        configuration started beside the methods (:func:`start_geometry`; none for a degenerate
+        pair, failing intrinsics or none) and ``ctx``, the context its methods share."""
+        checked, warnings, rows, degenerate, problems = checked_pair(matches)
+        memo: dict = {}
+        cfg = ctx.config
+        geometry = None if degenerate is not None or problems or not checked.has_intrinsics \
+            else start_geometry(checked, memo, cfg.threshold_px, cfg.seed)
+        return cls(checked, warnings, rows, degenerate, problems, ctx, memo, geometry)
+
+    def once(self, key: Any, compute: Any) -> Any:
+        """``compute()`` the first time ``key`` is asked for on this pair, its stored result
+        after that: each evidence pass of the rules runs once per pair, however many steps
+        the recommended walk takes (inside the pair's normalisation scope)."""
+        if key not in self.evidence:
+            from strl_pyg.estimation.classical import normalisation_scope
+
+            with normalisation_scope(self.memo):
+                self.evidence[key] = compute()
+        return self.evidence[key]
+
+    def pose_inliers(self, T: Any) -> np.ndarray:
+        """The point matches within the inlier threshold (Sampson, pixels) of the pose ``T``
+        ``[4, 4]``, once per pair and pose."""
+        from strl_pyg.geometry.epipolar import epipolar_residuals
+
+        T = np.asarray(T, dtype=np.float64)
+        thr = self.ctx.config.threshold_px
+        return self.once(("inliers", T.tobytes(), thr),
+                         lambda: epipolar_residuals(self.matches, T)[0] < thr)
 
     @property
     def geometry(self) -> Any:

@@ -32,8 +32,9 @@ classical bootstrap, the network's come from its predicted log-variances
 
 from __future__ import annotations
 
+import enum
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -41,10 +42,9 @@ import torch
 
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.geometry.pose import Pose
+from strl_pyg.inference.status import STATUSES, Action, Status, Verdict
 
-__all__ = ["STATUSES", "MethodResult", "PoseEstimate"]
-
-STATUSES = ("ok", "rotation_only", "unreliable", "degenerate", "failed", "skipped")
+__all__ = ["STATUSES", "Status", "Verdict", "MethodResult", "PoseEstimate"]
 
 
 @dataclass
@@ -53,7 +53,7 @@ class MethodResult:
 
     Attributes:
         method: the method's name (``None`` for a recommended pose no method could give).
-        status: one of :data:`STATUSES`.
+        status: a :class:`~strl_pyg.inference.status.Status` (its string is taken too).
         T_0to1: float64 ``[4, 4]`` when ``status == "ok"``, else ``None`` (given as a ``[4, 4]``
             array or as a :class:`~strl_pyg.geometry.Pose`, kept for :meth:`as_pose`).
         covariance: ``[5, 5]`` (module docstring) or ``None`` when not available.
@@ -79,6 +79,13 @@ class MethodResult:
             regression, whose pose is learned, not fitted to the matches).
         raised: the exception's type name where the method raised (``status == "failed"``);
             ``info["raised"]`` in the JSON record.
+        verdicts: every rule's :class:`~strl_pyg.inference.status.Verdict` on this pose, in
+            the order they spoke (refusals, widened sigmas, reports); :attr:`rule` is the one
+            that gave it its status.
+        covariance_with_focal: the covariance with the focal length's effect added (the
+            ``focal`` rule: solves with both focal lengths scaled by its range, where the
+            matches do not verify the focal length); ``None`` where it was not measured.
+            :attr:`covariance` is the pose's uncertainty for the intrinsics given.
     """
 
     method: str | None
@@ -97,11 +104,12 @@ class MethodResult:
     unsupported: bool = False
     raised: str | None = None
     support_checked: bool = True
+    verdicts: list[Verdict] = field(default_factory=list)
+    covariance_with_focal: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
-        if self.status not in STATUSES:
-            raise ValueError(f"Expected status in {STATUSES} (got {self.status!r})")
-        if self.status == "rotation_only":
+        self.status = Status.of(self.status)
+        if self.status is Status.ROTATION_ONLY:
             R = None if self.rotation is None else np.asarray(self.rotation, dtype=np.float64)
             if R is None or R.shape != (3, 3) or not np.isfinite(R).all():
                 raise ValueError("Expected a finite rotation [3, 3] with status "
@@ -123,7 +131,7 @@ class MethodResult:
                         pose.t.detach().cpu().double().clone())
             self.T_0to1 = pose.matrix().numpy()
         self._pose = self._pose_of = None
-        if self.status == "ok":
+        if self.status is Status.OK:
             T = np.asarray(self.T_0to1, dtype=np.float64) if self.T_0to1 is not None else None
             if T is None or T.shape != (4, 4) or not np.isfinite(T).all():
                 raise ValueError("Expected a finite T_0to1 [4, 4] with status 'ok' (got "
@@ -134,6 +142,7 @@ class MethodResult:
             self.rotation = T[:3, :3].copy()
         else:
             self.T_0to1 = self.covariance = self.rotation = None
+            self.covariance_with_focal = None
 
     def as_pose(self) -> Pose | None:
         """``T_0to1`` as a float64 :class:`~strl_pyg.geometry.Pose` (``None`` unless
@@ -147,39 +156,71 @@ class MethodResult:
             self._pose_of = T.copy()
         return self._pose
 
-    def unreliable(self, reasons: list[str]) -> MethodResult:
-        """This record as ``"unreliable"`` (from ``"ok"``; an ``"unreliable"`` one gets the
-        further reasons; any other is returned unchanged): no ``T_0to1`` nor covariance, the
-        pose moved to ``info["unreliable_T_0to1"]``, ``reasons`` added to ``warnings`` and to
-        ``info["unreliable"]``."""
-        if self.status not in ("ok", "rotation_only", "unreliable") or not reasons:
+    def unreliable(self, reasons: list[str], rule: str,
+                   evidence: dict[str, Any] | None = None) -> MethodResult:
+        """This record refused by ``rule`` as ``"unreliable"`` (from ``"ok"`` or
+        ``"rotation_only"``; an ``"unreliable"`` one gets the further reasons; any other is
+        returned unchanged): no ``T_0to1`` nor covariance, the pose moved to
+        ``info["unreliable_T_0to1"]``, ``reasons`` added to ``warnings`` and to
+        ``info["unreliable"]``, and a :class:`~strl_pyg.inference.status.Verdict` of ``rule``
+        (with ``evidence``) to :attr:`verdicts`."""
+        if self.status not in (Status.OK, Status.ROTATION_ONLY, Status.UNRELIABLE) \
+                or not reasons:
             return self
         info = {**self.info, "unreliable": list(self.info.get("unreliable", [])) + reasons}
-        if self.status == "ok":
+        if self.status is Status.OK:
             info["unreliable_T_0to1"] = self.T_0to1
-        if self.status == "rotation_only":
+        if self.status is Status.ROTATION_ONLY:
             info["unreliable_rotation"] = self.rotation
-        return MethodResult(self.method, "unreliable", None, None, self.warnings + reasons,
-                            self.time_ms, self.num_inliers, info, self.raw, self.inliers,
-                            calibrated=self.calibrated, bad_intrinsics=self.bad_intrinsics)
+        verdict = Verdict(rule, Action.REFUSED, Status.UNRELIABLE, "; ".join(reasons),
+                          dict(evidence or {}))
+        return MethodResult(self.method, Status.UNRELIABLE, None, None,
+                            self.warnings + reasons, self.time_ms, self.num_inliers, info,
+                            self.raw, self.inliers, calibrated=self.calibrated,
+                            bad_intrinsics=self.bad_intrinsics,
+                            verdicts=[*self.verdicts, verdict])
+
+    def with_verdict(self, verdict: Verdict, warn: bool = True) -> MethodResult:
+        """This record with ``verdict`` added to :attr:`verdicts` (and its reason to the
+        warnings with ``warn``); the caller has made the change it describes."""
+        warnings = self.warnings + [verdict.reason] if warn and verdict.reason and \
+            verdict.reason not in self.warnings else self.warnings
+        return replace(self, verdicts=[*self.verdicts, verdict], warnings=warnings)
+
+    @property
+    def rule(self) -> str | None:
+        """The rule that gave this record its status: the last refusing verdict's (``None``
+        for an ``"ok"`` pose, or where no rule was named)."""
+        if self.status is Status.OK:
+            return None
+        for v in reversed(self.verdicts):
+            if v.status is self.status:
+                return v.rule
+        return None
+
+    @property
+    def sigma_with_focal(self) -> dict[str, float] | None:
+        """:attr:`sigma` of :attr:`covariance_with_focal` (``None`` where it was not
+        measured)."""
+        return None if self.covariance_with_focal is None else _sigma_of(
+            self.covariance_with_focal)
 
     @property
     def sigma(self) -> dict[str, float] | None:
         """``{"rotation_deg", "translation_deg"}`` RMS angles of :attr:`covariance`."""
-        if self.covariance is None:
-            return None
-        d = np.clip(np.diag(self.covariance), 0.0, None)
-        return {"rotation_deg": math.degrees(math.sqrt(d[:3].sum())),
-                "translation_deg": math.degrees(math.sqrt(d[3:].sum())) if len(d) > 3
-                else None}  # a rotation alone has no translation direction
+        return None if self.covariance is None else _sigma_of(self.covariance)
 
     def to_dict(self) -> dict[str, Any]:
-        return _jsonable({"method": self.method, "status": self.status, "T_0to1": self.T_0to1,
-                          "rotation": self.rotation, "sigma": self.sigma, "covariance": self.covariance,
+        return _jsonable({"method": self.method, "status": self.status.value,
+                          "rule": self.rule, "T_0to1": self.T_0to1,
+                          "rotation": self.rotation, "sigma": self.sigma,
+                          "sigma_with_focal": self.sigma_with_focal,
+                          "covariance": self.covariance,
                           "warnings": list(self.warnings), "time_ms": self.time_ms,
                           "num_inliers": self.num_inliers, "info": {
                               **self.info, **({"unsupported": True} if self.unsupported else {}),
                               **({"raised": self.raised} if self.raised else {})},
+                          "verdicts": [v.to_dict() for v in self.verdicts],
                           "inliers": self.inliers})
 
 
@@ -246,7 +287,18 @@ class PoseEstimate:
                     self.geometry.to_dict())}
 
 
+def _sigma_of(cov: Any) -> dict[str, float | None]:
+    """``{"rotation_deg", "translation_deg"}`` RMS angles of a ``[5, 5]`` (or a rotation's
+    ``[3, 3]``) covariance."""
+    d = np.clip(np.diag(np.asarray(cov, dtype=np.float64)), 0.0, None)
+    return {"rotation_deg": math.degrees(math.sqrt(d[:3].sum())),
+            "translation_deg": math.degrees(math.sqrt(d[3:].sum())) if len(d) > 3
+            else None}  # a rotation alone has no translation direction
+
+
 def _jsonable(v: Any) -> Any:
+    if isinstance(v, enum.Enum):
+        return v.value
     if isinstance(v, dict):
         return {str(k): _jsonable(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):

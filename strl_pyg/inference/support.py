@@ -14,6 +14,7 @@ from strl_pyg.estimation.classical import normalised_matches
 from strl_pyg.geometry import pose_sampson
 from strl_pyg.geometry.essential import triangulated_depths
 from strl_pyg.inference.record import MethodResult
+from strl_pyg.inference.status import Action, Status, Verdict
 
 __all__ = ["MIN_INLIER_RATIO", "MIN_SUPPORT_INLIERS", "SUPPORT_BAND", "CHEIRALITY_MIN",
            "check_support"]
@@ -49,7 +50,7 @@ def check_support(res: MethodResult, matches: PairMatches, threshold_px: float =
     if checked is None:
         checked = res.support_checked
     n = matches.num_points
-    if (res.status != "ok" or not checked or res.T_0to1 is None
+    if (res.status is not Status.OK or not checked or res.T_0to1 is None
             or n <= 0 or not matches.has_intrinsics):
         return res
     pose = res.as_pose()  # the method's own Pose (no round trip through the matrix)
@@ -68,15 +69,19 @@ def check_support(res: MethodResult, matches: PairMatches, threshold_px: float =
             return res.unreliable([
                 f"{m - k} of the {m} point matches that fit its epipolar geometry lie "
                 f"behind a camera (more than {100 * (1 - min_in_front):.0f} %): the "
-                "sign of t or the decomposition is likely wrong"])
+                "sign of t or the decomposition is likely wrong"], rule="cheirality",
+                evidence={"behind_camera": m - k, "near": m})
         return res
     why = (f"below {100 * min_inlier_ratio:.0f} %" if k < min_inlier_ratio * n
            else f"fewer than {floor}")
     behind = f"; {m - k} more lie behind a camera" if m > k else ""
-    return MethodResult(res.method, "failed", time_ms=res.time_ms, num_inliers=k,
+    reason = (f"the matches do not support this pose: {k} of {n} point matches are within "
+              f"{band:g} px of it and in front of both cameras ({100 * k / n:.0f} %, {why}"
+              f"{behind}; random matches give RANSAC a few percent, and a handful on few "
+              "matches)")
+    verdict = Verdict("support", Action.REFUSED, Status.FAILED, reason,
+                      {"support_inliers": k, "points": n, "behind_camera": m - k})
+    return MethodResult(res.method, Status.FAILED, time_ms=res.time_ms, num_inliers=k,
                         raw=res.raw, info=dict(res.info), unsupported=True,
-                        warnings=res.warnings + [
-        f"the matches do not support this pose: {k} of {n} point matches are within "
-        f"{band:g} px of it and in front of both cameras ({100 * k / n:.0f} %, {why}"
-        f"{behind}; random matches give RANSAC a few percent, and a handful on few "
-        "matches)"])
+                        warnings=res.warnings + [reason],
+                        verdicts=[*res.verdicts, verdict])

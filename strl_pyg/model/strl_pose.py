@@ -13,12 +13,12 @@ import torch
 from torch import Tensor, nn
 from torch_geometric.data import HeteroData
 
+from strl_pyg.data import CompleteEdges
 from strl_pyg.data import keys as K
 from strl_pyg.model.checkpoint import CheckpointIO
 from strl_pyg.model.config import NO_INTRINSICS, GeometricOutput, PoseOutput, StrLPoseConfig
 from strl_pyg.model.gather import ModelInputs, gather_inputs
 from strl_pyg.model.legacy import upgrade_legacy_keys
-from strl_pyg.data import CompleteEdges
 from strl_pyg.nn import (
     DenseLayout,
     DualGraphLayer,

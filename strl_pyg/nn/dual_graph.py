@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from torch import Tensor, nn
 
-from strl_pyg.nn.attention import AttentionConv
 from strl_pyg.data import CompleteEdges
+from strl_pyg.nn.attention import AttentionConv
 from strl_pyg.nn.layout import DenseLayout
 from strl_pyg.nn.line import LineEndpointConv
 

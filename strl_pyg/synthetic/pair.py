@@ -14,10 +14,10 @@ import numpy as np
 
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.geometry.epipolar import fundamental_from_pose
+from strl_pyg.synthetic import SceneConfig
 from strl_pyg.synthetic.photometric import apply_photometric
 from strl_pyg.synthetic.render import View, project, render_view
 from strl_pyg.synthetic.scene import Scene, build_scene
-from strl_pyg.synthetic import SceneConfig
 
 __all__ = ["SyntheticPair", "generate_pair", "SceneGenerationError"]
 

@@ -144,8 +144,8 @@ def load_training_model(path: str | os.PathLike):
     """The :class:`~strl_pyg.model.strl_pose.StrLPose` of a training checkpoint (``last.pt``): its
     ``model_config`` and ``model`` weights, in eval mode, with default metadata (the run's
     ``model.pt``, written when the run finishes, also holds the training metadata)."""
-    from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.model import StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose
 
     path = Path(path)
     state = load_checkpoint(path)

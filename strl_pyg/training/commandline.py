@@ -18,9 +18,9 @@ import torch
 
 from strl_pyg.training.checkpoints import load_checkpoint
 from strl_pyg.training.config import TrainConfig, add_train_arguments
-from strl_pyg.training.options import config_values, flag_dest, option_fields
 from strl_pyg.training.log import plot_history
 from strl_pyg.training.loop import TrainingDiverged, train
+from strl_pyg.training.options import config_values, flag_dest, option_fields
 
 __all__ = ["config_from_args", "FLAG_FIELDS", "given_fields", "settings_from_run",
            "run_from_args", "check_device"]

@@ -46,20 +46,20 @@ from strl_pyg.training.checkpoints import (
     set_rng_state,
 )
 from strl_pyg.training.clip import GradientClip
-from strl_pyg.training.distributed import StopSignals, distributed_setup, seed_everything
-from strl_pyg.training.skipped import keep_skipped
 from strl_pyg.training.config import TrainConfig
-from strl_pyg.training.sampling import ResampledPairs, StepBatchSampler, _InMemory
 from strl_pyg.training.data import (
     build_datasets,
-    describe_data,
     check_graph_channels,
     collater,
+    describe_data,
     fit_input_statistics,
     unaugmented_poses,
 )
+from strl_pyg.training.distributed import StopSignals, distributed_setup, seed_everything
 from strl_pyg.training.log import TrainLogger
 from strl_pyg.training.loss import GeometricLoss, PoseLoss
+from strl_pyg.training.sampling import ResampledPairs, StepBatchSampler, _InMemory
+from strl_pyg.training.skipped import keep_skipped
 from strl_pyg.training.validation import evaluate_model, mean_pose
 
 __all__ = ["train", "TrainingDiverged", "MAX_SKIPPED_STEPS", "check_run_folder",

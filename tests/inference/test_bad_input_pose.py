@@ -148,6 +148,8 @@ def _behind_and_in_front(seed=0, n_front=140, n_behind=60):
 def test_a_pose_whose_matches_lie_behind_a_camera_is_unreliable(model):
     """The support check counted Sampson distances, which cannot tell t from -t: the geometric
     head's pose on dino pairs had most of its support behind a camera and was "ok"."""
+    from strl_pyg.inference.support import check_support
+
     m, T = _behind_and_in_front()
     est = PoseEstimator(model, methods=["opencv"], bootstrap=0)
     rec = est.estimate(m).methods["opencv"]
@@ -155,15 +157,19 @@ def test_a_pose_whose_matches_lie_behind_a_camera_is_unreliable(model):
     _assert_unreliable(rec, "lie behind a camera")
     # the rule applies to every checked method alike, the geometric one included
     ok = MethodResult("geometric", "ok", T, np.eye(5) * 1e-6)
-    assert est._support(ok, m).status == "unreliable"
+    support = est.config.support
+    assert check_support(ok, m, 1.0, *support).status == "unreliable"
+    assert check_support(ok, m, 1.0, *support).rule == "cheirality"
     # a clean pair keeps its pose; with t flipped (the same epipolar geometry) every match
     # lies behind a camera and supports nothing
     clean, _ = _behind_and_in_front(n_behind=0)
     assert est.estimate(clean).methods["opencv"].status == "ok"
     flipped = T.copy()
     flipped[:3, 3] *= -1
-    res = est._support(MethodResult("geometric", "ok", flipped, np.eye(5)), clean)
+    res = check_support(MethodResult("geometric", "ok", flipped, np.eye(5)), clean, 1.0,
+                        *support)
     assert res.status == "failed" and res.info["support_inliers"] == 0
+    assert res.rule == "support" and res.verdicts[-1].evidence["behind_camera"] == 140
     assert any("140 more lie behind a camera" in w for w in res.warnings), res.warnings
     off = PoseEstimator(model, methods=["opencv"], bootstrap=0, min_in_front=0)
     assert off.estimate(m).methods["opencv"].status == "ok"

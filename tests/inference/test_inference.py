@@ -38,8 +38,8 @@ from strl_pyg.synthetic import generate_pair
 REPO_ROOT = Path(__file__).resolve().parents[2]
 SEED = 2_000_017  # held out from training
 HAVE_POSELIB = METHODS["poselib"].available()
-KEYS = {"method", "status", "T_0to1", "sigma", "covariance", "warnings", "time_ms",
-        "num_inliers", "info", "inliers", "rotation"}
+KEYS = {"method", "status", "rule", "T_0to1", "sigma", "sigma_with_focal", "covariance",
+        "warnings", "time_ms", "num_inliers", "info", "verdicts", "inliers", "rotation"}
 
 def readme_python_block(must_contain: str) -> str:
     """The first ```python block of README.md that contains ``must_contain``."""
@@ -326,12 +326,18 @@ def test_method_results_hold_a_pose_only_when_ok():
         MethodResult("x", "fine", np.eye(4))
     # "unreliable": no pose either; the computed one stays in info, for inspection only
     assert MethodResult("x", "unreliable", np.eye(4), np.eye(5)).sigma is None
-    marked = MethodResult("x", "ok", np.eye(4), np.eye(5)).unreliable(["why"])
+    marked = MethodResult("x", "ok", np.eye(4), np.eye(5)).unreliable(["why"], rule="mine",
+                                                                      evidence={"n": 3})
     assert marked.status == "unreliable" and marked.T_0to1 is None and marked.sigma is None
+    assert marked.rule == "mine" and marked.verdicts[-1].evidence == {"n": 3}
+    assert marked.to_dict()["rule"] == "mine"
+    assert marked.to_dict()["verdicts"][0]["action"] == "refused"
     assert marked.info["unreliable"] == ["why"] and "why" in marked.warnings
     np.testing.assert_array_equal(marked.info["unreliable_T_0to1"], np.eye(4))
-    again = marked.unreliable(["and this"])
+    again = marked.unreliable(["and this"], rule="theirs")
     assert again.info["unreliable"] == ["why", "and this"] and "unreliable_T_0to1" in again.info
+    assert again.rule == "theirs" and [v.rule for v in again.verdicts] == ["mine", "theirs"]
+    assert MethodResult("x", "ok", np.eye(4)).rule is None
 
 
 def test_to_dict_is_json_with_the_documented_keys(estimate):
@@ -591,7 +597,7 @@ def test_inliers_of_matches_index_the_matches_the_methods_ran_on(pair):
 def test_the_point_poor_regime_counts_distinct_matches(pair, monkeypatch):
     """Before: the recommended order read num_points (rows, one-to-many included) while the
     methods' minimum counts read the distinct ones."""
-    import strl_pyg.inference.estimator as est_mod
+    import strl_pyg.inference.pick as pick
 
     m = pair.matches
     # 25 distinct correspondences, then 15 rows reusing keypoints of image 1 (one-to-many)
@@ -600,8 +606,8 @@ def test_the_point_poor_regime_counts_distinct_matches(pair, monkeypatch):
     pm = _pm(pair, p0, p1)
     assert pm.num_points == 40 and pm.num_distinct_points == 25
     seen = []
-    real = est_mod.recommended_order
-    monkeypatch.setattr(est_mod, "recommended_order",
+    real = pick.recommended_order
+    monkeypatch.setattr(pick, "recommended_order",
                         lambda model, n=None: seen.append(n) or real(model, n))
     PoseEstimator(methods="poselib").estimate(pm)
     assert seen == [25]

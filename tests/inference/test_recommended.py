@@ -241,7 +241,9 @@ def test_the_recommended_path_checks_a_point_poor_pair_once(model, monkeypatch):
     est = estimate_recommended(model, p.image0, p.image1, p.K, p.K,
                                FrontendConfig.preset("legacy", max_keypoints=40))
     assert est.methods["vp"].status == "failed" and est.num_lines > 0
-    assert est.pose.method == estimator.classical_method() and est.status == "ok"
+    from strl_pyg.inference.registry import classical_method
+
+    assert est.pose.method == classical_method() and est.status == "ok"
     assert len(dedup) == 1 and len(problems) == 1, (len(dedup), len(problems))
 
 
@@ -267,6 +269,7 @@ def test_lines_join_a_pair_without_its_check_or_its_point_results_again(model, p
     points are refused."""
     from strl_pyg.frontend.pipeline import add_lines
     from strl_pyg.inference.registry import classical_method
+    from strl_pyg.inference.running import run_methods
 
     cfg = FrontendConfig(lines=False)
     pts = match_images(pair.image0, pair.image1, pair.K, pair.K, cfg)
@@ -274,7 +277,7 @@ def test_lines_join_a_pair_without_its_check_or_its_point_results_again(model, p
     assert lined.num_lines > 0
     est = PoseEstimator(model)
     run = est._pair(pts)
-    est._run_methods(run, (classical_method(),))
+    run_methods(run, (classical_method(),))
     kept = run.ctx.results[classical_method()]
     twice = lined.select(None, np.r_[np.arange(lined.num_lines), 0])  # one line match twice
     points = run.matches.points0

@@ -182,9 +182,10 @@ def test_a_method_asked_for_alone_runs_with_the_methods_it_reads():
 
 def test_a_classical_dependency_is_the_solver_asked_for():
     from strl_pyg.inference import methods_needed
+    from strl_pyg.inference.registry import classical_method
 
     assert methods_needed(["opencv", "fused"]) == ("regression", "opencv", "fused")
-    assert methods_needed(["fused"])[:2] == ("regression", est_mod.classical_method())
+    assert methods_needed(["fused"])[:2] == ("regression", classical_method())
 
 
 def test_the_face_gives_the_registry_with_its_built_in_methods():

@@ -56,6 +56,7 @@ from typing import Any
 
 import numpy as np
 
+from strl_pyg.data.checks import as_array, load_npz
 from strl_pyg.data.external.checks import (
     MatchFormatError,
     as_numpy,
@@ -65,7 +66,6 @@ from strl_pyg.data.external.checks import (
     unbatch,
 )
 from strl_pyg.data.external.readers import RANKS, READERS
-from strl_pyg.data.checks import as_array, load_npz
 from strl_pyg.data.matches import PairMatches
 
 __all__ = ["FORMATS", "detect_format", "load_external_matches", "from_lightglue"]

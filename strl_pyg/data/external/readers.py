@@ -15,6 +15,7 @@ import warnings
 
 import numpy as np
 
+from strl_pyg.data.checks import as_array
 from strl_pyg.data.external.checks import (
     MatchFormatError,
     as_indices,
@@ -23,7 +24,6 @@ from strl_pyg.data.external.checks import (
     keypoints,
     scores_at,
 )
-from strl_pyg.data.checks import as_array
 
 __all__ = ["RANKS", "READERS"]
 

@@ -11,6 +11,7 @@ from strl_pyg.estimation.uncertainty import bootstrap_resamples
 from strl_pyg.inference.methods.base import PoseMethod
 from strl_pyg.inference.methods.context import MethodContext, _add_bootstrap, _solve
 from strl_pyg.inference.record import MethodResult
+from strl_pyg.inference.status import Status
 
 __all__ = ["Classical", "OpenCV", "PoseLib"]
 
@@ -38,7 +39,7 @@ class Classical(PoseMethod):
         thr = ctx.config.threshold_px
         res = _solve(name, matches, ctx)
         if not res.success:
-            return MethodResult(name, "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
+            return MethodResult(name, Status.FAILED, time_ms=res.time_ms, num_inliers=0, raw=res,
                                 warnings=[f"{name} found no pose (no essential matrix with "
                                           "points in front of both cameras)"])
         warnings, cov, info = [], None, dict(res.info)
@@ -47,7 +48,7 @@ class Classical(PoseMethod):
             cov = cov.numpy()
         except ValueError as err:
             warnings.append(f"{name}: no covariance ({err})")
-        rec = MethodResult(name, "ok", res.pose, cov, warnings, res.time_ms,
+        rec = MethodResult(name, Status.OK, res.pose, cov, warnings, res.time_ms,
                            res.num_inliers, info=info, raw=res)
         if cov is not None and ctx.config.bootstrap:
             # first order (noise around a right solution) + bootstrap (instability of the

@@ -24,6 +24,7 @@ from strl_pyg.estimation.uncertainty import FAR_ROTATION_DEG, FAR_TRANSLATION_DE
 from strl_pyg.inference.network import network_pose
 from strl_pyg.inference.record import MethodResult
 from strl_pyg.inference.settings import CheckpointSettings
+from strl_pyg.inference.status import Status
 
 if TYPE_CHECKING:
     from strl_pyg.inference.config import EstimatorConfig
@@ -119,7 +120,7 @@ def _full_forward(matches: PairMatches, ctx: MethodContext):
 
 def _no_head(name: str, ctx: MethodContext) -> MethodResult | None:
     if not getattr(ctx.model.config, "geometric", False):
-        return MethodResult(name, "failed", warnings=[
+        return MethodResult(name, Status.FAILED, warnings=[
             f"{name} needs a model with the geometric head (config.geometric=True); this "
             "checkpoint has only the regression head"])
     return None
@@ -141,7 +142,7 @@ def with_covariance(name: str, pose: Any, matches: PairMatches, thr: float,
         cov = classical_covariance(pose, matches, inl, threshold_px=thr)[1].numpy()
     except ValueError as err:
         warnings.append(f"{name}: no covariance ({err})")
-    return MethodResult(name, "ok", pose, cov, warnings, num_inliers=int(inl.sum()), **kw)
+    return MethodResult(name, Status.OK, pose, cov, warnings, num_inliers=int(inl.sum()), **kw)
 
 
 def _add_bootstrap(rec: MethodResult, boot: np.ndarray | None, n_boot: int, kind: str,

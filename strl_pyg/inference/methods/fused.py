@@ -12,6 +12,7 @@ from strl_pyg.inference.methods.context import MethodContext, _add_bootstrap
 from strl_pyg.inference.methods.regression import Regression, swap_term
 from strl_pyg.inference.record import MethodResult
 from strl_pyg.inference.settings import CheckpointSettings
+from strl_pyg.inference.status import Status
 
 __all__ = ["Fused"]
 
@@ -35,9 +36,9 @@ class Fused(PoseMethod):
 
         net = ctx.results.get(Regression.name)
         cls = next((ctx.results[c] for c in (POSELIB, OPENCV)
-                    if c in ctx.results and ctx.results[c].status == "ok"), None)
-        if net is None or net.status != "ok" or cls is None:
-            return MethodResult(self.name, "failed", warnings=[
+                    if c in ctx.results and ctx.results[c].status == Status.OK), None)
+        if net is None or net.status != Status.OK or cls is None:
+            return MethodResult(self.name, Status.FAILED, warnings=[
                 "fused needs an 'ok' regression and an 'ok' classical estimate (poselib or "
                 "opencv)"])
         start = time.perf_counter()
@@ -50,14 +51,14 @@ class Fused(PoseMethod):
                        network_scale=scale, network_extra=swap_term(net))
         ms = (time.perf_counter() - start) * 1e3 + net.time_ms + cls.time_ms
         if f.source == "network":
-            return MethodResult(self.name, "failed", time_ms=ms, raw=f, warnings=[
+            return MethodResult(self.name, Status.FAILED, time_ms=ms, raw=f, warnings=[
                 f"fused: too few {cls.method} inliers for a covariance ({f.info['num_inliers']})"])
         gate = f.info.get("gate", {})
         info = {"classical": cls.method, "network_weight": f.weights,
                 "sign_disagreement": f.info["sign_disagreement"], "used": f.source,
                 "gate_d2": gate.get("d2"), "network_variance_scale": scale}
         warnings = [] if f.source == "fused" else [f"fused: {gate.get('reason')}"]
-        rec = MethodResult(self.name, "ok", f.pose, f.covariance.numpy(),
+        rec = MethodResult(self.name, Status.OK, f.pose, f.covariance.numpy(),
                            warnings, time_ms=ms, num_inliers=f.info["num_inliers"], info=info,
                            raw=f)
         # the fused pose stays near the classical one and moves with it when the matches change:

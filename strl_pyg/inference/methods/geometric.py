@@ -19,6 +19,7 @@ from strl_pyg.inference.methods.context import (
     with_covariance,
 )
 from strl_pyg.inference.record import MethodResult
+from strl_pyg.inference.status import Status
 
 __all__ = ["Geometric", "Guided"]
 
@@ -48,7 +49,8 @@ class Geometric(PoseMethod):
         if status != 0:
             why = "degenerate weighted solve (too few effective matches or rank-deficient)" \
                 if status == DEGENERATE else "no intrinsics: the weighted solve needs K0, K1"
-            return MethodResult(self.name, "degenerate" if status == DEGENERATE else "failed",
+            return MethodResult(self.name,
+                                Status.DEGENERATE if status == DEGENERATE else Status.FAILED,
                                 time_ms=ms, warnings=[f"geometric: {why}"], raw=out)
         start = time.perf_counter()
         w = torch.sigmoid(geo.point_logits.double().cpu())
@@ -85,12 +87,12 @@ class Guided(PoseMethod):
         out, ms = _full_forward(matches, ctx)
         w = torch.sigmoid(out.geometric.point_logits.double().cpu()).numpy()
         prior = ctx.results.get(base)
-        classical = prior.raw if prior is not None and prior.status == "ok" else None
+        classical = prior.raw if prior is not None and prior.status == Status.OK else None
         res = guided_estimate(matches, w, base, ctx.config.threshold_px, seed=ctx.config.seed,
                               classical=classical)
         ms += res.time_ms
         if not res.success:
-            return MethodResult(self.name, "failed", time_ms=ms, raw=res,
+            return MethodResult(self.name, Status.FAILED, time_ms=ms, raw=res,
                                 warnings=[f"guided {base}: no hypothesis found"])
         info = {"base": base, "candidate": res.info["candidate"], "refined": res.info["refined"]}
         rec = with_covariance(self.name, res.pose, matches,

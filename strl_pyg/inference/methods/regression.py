@@ -16,6 +16,7 @@ from strl_pyg.inference.methods.base import PoseMethod
 from strl_pyg.inference.methods.context import DATA_CHECK_MIN_POINTS, MethodContext, _solve
 from strl_pyg.inference.network import network_pose
 from strl_pyg.inference.record import MethodResult
+from strl_pyg.inference.status import Status
 
 __all__ = ["Regression", "swap_term"]
 
@@ -46,7 +47,7 @@ class Regression(PoseMethod):
         q, t, lv = (x[0].detach().cpu().double() for x in (out.quaternion, out.translation,
                                                            out.log_var))
         if not all(bool(torch.isfinite(x).all()) for x in (q, t, lv)) or float(t.norm()) < 1e-12:
-            return MethodResult(self.name, "failed", time_ms=ms, raw=out,
+            return MethodResult(self.name, Status.FAILED, time_ms=ms, raw=out,
                                 warnings=["the network returned a non-finite or zero pose"],
                                 support_checked=self.support_checked)
         cov = network_covariance(q, t, lv, tangent_basis(t)).numpy()
@@ -89,7 +90,8 @@ class Regression(PoseMethod):
                 cov = cov + data_covariance(*found)
                 info["data_disagreement_deg"] = {"rotation": math.degrees(found[0]),
                                                  "translation": math.degrees(found[1])}
-        return MethodResult(self.name, "ok", pose, cov, warnings, time_ms=ms, info=info, raw=out,
+        return MethodResult(self.name, Status.OK, pose, cov, warnings, time_ms=ms, info=info,
+                            raw=out,
                             support_checked=self.support_checked)
 
 

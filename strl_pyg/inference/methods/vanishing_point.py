@@ -25,6 +25,7 @@ from strl_pyg.inference.methods.context import (
     with_covariance,
 )
 from strl_pyg.inference.record import MethodResult
+from strl_pyg.inference.status import Status
 
 __all__ = ["VanishingPoint", "VanishingPointChecked", "VP_CHECK_ANGLE_DEG",
            "VP_CHECK_SUPPORT_SLACK"]
@@ -54,7 +55,7 @@ class VanishingPoint(PoseMethod):
 
         if matches.num_lines == 0:
             # the input lacks what vp reads: "skipped", as for a model without its pixels
-            return MethodResult(self.name, "skipped", warnings=[
+            return MethodResult(self.name, Status.SKIPPED, warnings=[
                 "vp needs line matches (got none: FrontendConfig(lines=True), or lines0/lines1)"])
         # the 5-point solver's supported pose is a second start of the joint refinement with the
         # lines: its record of this run when it ran before, else solved and support-checked here
@@ -70,12 +71,13 @@ class VanishingPoint(PoseMethod):
                 cls = ctx.vp_start = check_support(
                     Classical.of(base)(matches, ctx), matches, ctx.config.threshold_px,
                     *ctx.config.support)
-            starts = [cls.T_0to1] if cls.status == "ok" else []
+            starts = [cls.T_0to1] if cls.status == Status.OK else []
         res = vanishing_point_pose(matches, ctx.config.threshold_px, seed=ctx.config.seed,
                                    directions=_vanishing_directions(matches, ctx), starts=starts,
                                    line_sigma_px=sigma)
         if not res.success:
-            return MethodResult(self.name, "failed", time_ms=res.time_ms, num_inliers=0, raw=res,
+            return MethodResult(self.name, Status.FAILED, time_ms=res.time_ms, num_inliers=0,
+                                raw=res,
                                 info=dict(res.info), warnings=[f"vp: {res.info['reason']}"])
         rec = with_covariance(self.name, res.pose, matches, ctx.config.threshold_px,
                                time_ms=res.time_ms, info=dict(res.info), raw=res)
@@ -113,8 +115,9 @@ def _result_of(name: str, matches: PairMatches, ctx: MethodContext) -> MethodRes
 
     res = ctx.results.get(name)
     if res is None:
-        res = (VanishingPoint() if name == VanishingPoint.name else Classical.of(name))(matches, ctx)
-    if res.status == "ok" and "support_inliers" not in res.info:
+        solver = VanishingPoint() if name == VanishingPoint.name else Classical.of(name)
+        res = solver(matches, ctx)
+    if res.status == Status.OK and "support_inliers" not in res.info:
         res = check_support(res, matches, ctx.config.threshold_px, min_inlier_ratio=0.0,
                             min_inliers=0, min_in_front=0.0)
     return res
@@ -149,12 +152,12 @@ class VanishingPointChecked(PoseMethod):
 
         def take(rec: MethodResult, reason: str) -> MethodResult:
             ms = (time.perf_counter() - start) * 1e3
-            if rec.status != "ok":
+            if rec.status != Status.OK:
                 return MethodResult(self.name, rec.status, time_ms=ms, info={**info,
                                     "reason": reason}, warnings=[f"vp_checked: {reason}"]
                                     + [w for w in rec.warnings if w not in reason],
                                     bad_intrinsics=rec.bad_intrinsics)
-            return MethodResult(self.name, "ok", rec.as_pose(), rec.covariance,
+            return MethodResult(self.name, Status.OK, rec.as_pose(), rec.covariance,
                                 list(rec.warnings), ms, rec.num_inliers,
                                 info={**info, "source": rec.method, "reason": reason,
                                       "covariance": rec.info.get("covariance"),
@@ -168,9 +171,9 @@ class VanishingPointChecked(PoseMethod):
         if matches.num_lines == 0:
             return take(cls, "no line matches to check the pose against")
         vp = _result_of(VanishingPoint.name, matches, ctx)
-        if cls.status != "ok":
+        if cls.status != Status.OK:
             return take(vp, f"{base} gave no supported pose" + (
-                "; vp's pose" if vp.status == "ok" else "; nor did vp"))
+                "; vp's pose" if vp.status == Status.OK else "; nor did vp"))
         dirs = _vanishing_directions(matches, ctx)
         if not dirs:
             return take(cls, "no vanishing direction shared by both images' lines")
@@ -181,7 +184,7 @@ class VanishingPointChecked(PoseMethod):
         if angle <= self.angle_deg:
             return take(cls, f"the {base} rotation agrees with the lines' strongest vanishing "
                              f"direction ({angle:.1f} deg)")
-        if vp.status != "ok":
+        if vp.status != Status.OK:
             return take(cls, f"the {base} rotation is {angle:.1f} deg off the lines' vanishing "
                              f"direction, but vp has no supported pose")
         s_cls, s_vp = cls.info["support_inliers"], vp.info["support_inliers"]
