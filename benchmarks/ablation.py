@@ -325,9 +325,9 @@ def cmd_cache(args: argparse.Namespace) -> int:
     """Builds the training match cache (``--workers`` processes) and, with ``--eval``, the
     evaluation sets' matches, PoseLib's errors and the sets' pair ids."""
     if not args.eval_only:
+        from strl_pyg.training.commandline import config_from_args
         from strl_pyg.training.config import add_train_arguments
         from strl_pyg.training.data import build_datasets
-        from strl_pyg.training.commandline import config_from_args
 
         ap = add_train_arguments(argparse.ArgumentParser())
         targs = ap.parse_args([*TRAIN_ARGS, "--cache-dir", str(Path(args.root) / "cache"),
@@ -580,10 +580,9 @@ def plot_medians(runs: dict, refs: dict, names: list[str], path: Path, title: st
     import matplotlib
 
     matplotlib.use("Agg")
+    import ablation_eval as ae
     import matplotlib.pyplot as plt
     import numpy as np
-
-    import ablation_eval as ae
 
     rows = [r for r in ROWS if r in runs]
     fig, axes = plt.subplots(2, 1, figsize=(max(8, 1.2 * len(names)), 7.5), sharex=True)

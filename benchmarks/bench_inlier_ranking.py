@@ -22,7 +22,8 @@ outliers by the object-centred poses; they stay in, as they do for every method.
 
     python benchmarks/bench_inlier_ranking.py run --models shipped:geometric \\
         --out benchmarks/results_real_scenes/inlier_ranking
-    python benchmarks/bench_inlier_ranking.py report --out benchmarks/results_real_scenes/inlier_ranking
+    python benchmarks/bench_inlier_ranking.py report \
+        --out benchmarks/results_real_scenes/inlier_ranking
 """
 
 from __future__ import annotations

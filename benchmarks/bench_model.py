@@ -37,8 +37,8 @@ import torch_geometric
 from torch_geometric.loader import DataLoader
 
 from strl_pyg.data import PairMatches, build_pair_graph
-from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.model import StrLPoseConfig
+from strl_pyg.model.strl_pose import StrLPose
 
 
 def make_batch(batch: int, points: int, lines: int, complete: str, seed: int = 0):

@@ -127,7 +127,7 @@ def real_val_pairs(cache: Path, gap: int, stride: int):
             a, b = ims[i], ims[i + gap]
             T = np.linalg.inv(np.array(b["T_cam_to_world"])) @ np.array(a["T_cam_to_world"])
             try:
-                m = bp._cached(cache, f"real_{scene}_{i}_{i + gap}", lambda a=a, b=b:
+                m = bp._cached(cache, f"real_{scene}_{i}_{i + gap}", lambda a=a, b=b, folder=folder:
                                match_images(bp._read(folder / a["file"]),
                                             bp._read(folder / b["file"]),
                                             K0=np.array(a["K"]), K1=np.array(b["K"])))

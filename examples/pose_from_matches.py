@@ -9,7 +9,8 @@ Examples:
     # visual branch; otherwise the classical methods run alone, with a note
     python examples/pose_from_matches.py --npz a_b_matches.npz --K calib.txt --size 370 1226
 
-The match file may be any layout `strl_pyg.data.external.load_external_matches` reads: strl-pyg's own
+The match file may be any layout `strl_pyg.data.external.load_external_matches` reads: strl-pyg's
+own
 (`strl-pose match`, PairMatches.save), `mkpts0/mkpts1[/mlines0/mlines1]`, SuperGlue
 (`keypoints0/1`, `matches`, `match_confidence`), a LightGlue dict saved with
 `np.savez(path, keypoints0=..., keypoints1=..., matches=..., scores=..., image_size0=...)`,
@@ -40,8 +41,8 @@ import numpy as np
 
 
 def _parser() -> argparse.ArgumentParser:
-    from strl_pyg.utils import OneLineArgumentParser
     from strl_pyg.training.checkpoints import default_checkpoint
+    from strl_pyg.utils import OneLineArgumentParser
 
     # a bad command line or file is one `error: ...` line (exit 2), as in `strl-pose`
     ap = OneLineArgumentParser(description=__doc__,

@@ -34,8 +34,8 @@ import sys
 
 from strl_pyg.cli.commands import check_train_files
 from strl_pyg.cli.guard import run_guarded
-from strl_pyg.utils import OneLineArgumentParser
 from strl_pyg.training.config import add_train_arguments
+from strl_pyg.utils import OneLineArgumentParser
 
 
 class _Help(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):

@@ -31,8 +31,8 @@ def test_reuse_layers_dense_equals_explicit(capsys):
 
 
 def test_pose_from_matches_on_a_saved_file(tmp_path, capsys):
-    from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.model import StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.synthetic import SceneConfig, generate_pair
 
     ckpt = tmp_path / "tiny.pt"
@@ -51,8 +51,8 @@ def generated_pair_files(tmp_path_factory):
     import cv2
     import numpy as np
 
-    from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.model import StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.synthetic import SceneConfig, generate_pair
 
     root = tmp_path_factory.mktemp("pair")

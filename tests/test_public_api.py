@@ -104,7 +104,7 @@ def _home(face, name, obj):
 
 
 def _literal_map(node) -> dict[str, str]:
-    return {k.value: v.value for k, v in zip(node.keys, node.values)
+    return {k.value: v.value for k, v in zip(node.keys, node.values, strict=True)
             if isinstance(k, ast.Constant) and isinstance(v, ast.Constant)}
 
 

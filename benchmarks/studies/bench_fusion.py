@@ -23,10 +23,12 @@ from strl_bench_common import banner  # noqa: E402
 
 from strl_pyg.estimation.classical import estimate_relative_pose  # noqa: E402
 from strl_pyg.estimation.pose_fusion import classical_covariance, fuse_poses, pose_to_tangent
-from strl_pyg.geometry import tangent_basis
-from strl_pyg.evaluation.run import predict_pose
 from strl_pyg.evaluation import EvalReport, PairResult, pair_result, synthetic_eval_pairs
-from strl_pyg.geometry import Pose  # noqa: E402
+from strl_pyg.evaluation.run import predict_pose
+from strl_pyg.geometry import (
+    Pose,  # noqa: E402
+    tangent_basis,
+)
 from strl_pyg.model.strl_pose import StrLPose  # noqa: E402
 
 DEFAULT_CKPT = Path(__file__).resolve().parents[2] / "strl_pyg" / "weights" / (

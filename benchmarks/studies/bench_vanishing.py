@@ -295,9 +295,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.fit:
         ang, slack, fit_text = fit(cache, args.fit)
         print(fit_text)
-        if (ang, slack) != (LM.VanishingPointChecked.angle_deg, LM.VanishingPointChecked.support_slack):
+        checked = LM.VanishingPointChecked
+        if (ang, slack) != (checked.angle_deg, checked.support_slack):
             print(f"note: the fit ({ang}, {slack}) differs from the package's "
-                  f"({LM.VanishingPointChecked.angle_deg}, {LM.VanishingPointChecked.support_slack}); the evaluation uses "
+                  f"({checked.angle_deg}, {checked.support_slack}); the evaluation uses "
                   "the fit: set the fitted constants in the package")
         LM.VanishingPointChecked.angle_deg, LM.VanishingPointChecked.support_slack = ang, slack
     few = FrontendConfig.preset("legacy", max_keypoints=ae.FEW_KEYPOINTS)
@@ -324,7 +325,8 @@ def main(argv: list[str] | None = None) -> int:
              "pose) = 180 deg, [95 % bootstrap interval]; median max-error (deg) over the "
              "pairs with a pose, and how many of the pairs have one. Constants: "
              f"VP_LINE_SIGMA_PX {L.VP_LINE_SIGMA_PX}, VP_CHECK_ANGLE_DEG "
-             f"{LM.VanishingPointChecked.angle_deg}, VP_CHECK_SUPPORT_SLACK {LM.VanishingPointChecked.support_slack}.", "",
+             f"{LM.VanishingPointChecked.angle_deg}, VP_CHECK_SUPPORT_SLACK "
+             f"{LM.VanishingPointChecked.support_slack}.", "",
              "| set | pairs | " + " | ".join(METHODS) + " | "
              + " | ".join(f"{k} - PoseLib (AUC)" for k in RECOMMENDED) + " |",
              "|---|---" + "|---" * (len(METHODS) + len(RECOMMENDED)) + "|"]

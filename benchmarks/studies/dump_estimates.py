@@ -47,7 +47,8 @@ def record(r) -> dict:
         sig = r.sigma_with_focal
     sigma = None if sig is None else {k: None if v is None else round(v, 6)
                                       for k, v in sig.items()}
-    return {"method": r.method, "status": str(r.status), "sigma": sigma, "warnings": list(r.warnings),
+    return {"method": r.method, "status": str(r.status), "sigma": sigma,
+            "warnings": list(r.warnings),
             "T": None if r.T_0to1 is None else np.round(r.T_0to1, 9).tolist()}
 
 

@@ -214,10 +214,9 @@ def gradient_shares(run: Path, batches: int = 8) -> dict[str, float]:
     from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.training.checkpoints import load_checkpoint
     from strl_pyg.training.config import TrainConfig
-    from strl_pyg.training.data import build_datasets
-    from strl_pyg.training.sampling import ResampledPairs
-    from strl_pyg.training.data import collater
+    from strl_pyg.training.data import build_datasets, collater
     from strl_pyg.training.loop import losses_for
+    from strl_pyg.training.sampling import ResampledPairs
 
     state = load_checkpoint(run / "last.pt")
     cfg = TrainConfig.from_dict(state["train_config"])
@@ -596,9 +595,9 @@ def validation_pairs(run: Path) -> list[tuple[str, object, object]]:
     that its validation read, with the generator's motion of each pair."""
     import numpy as np
 
+    from strl_pyg.training import load_checkpoint
     from strl_pyg.training.config import TrainConfig
     from strl_pyg.training.data import build_datasets
-    from strl_pyg.training import load_checkpoint
 
     cfg = TrainConfig.from_dict(load_checkpoint(run / "last.pt")["train_config"])
     if cfg.matches != "frontend":

@@ -155,8 +155,8 @@ def test_table3_and_the_study_pin_their_reference_recipe():
     trained with."""
     import study_pose_recipe as study
 
-    from strl_pyg.training.config import add_train_arguments
     from strl_pyg.training.commandline import config_from_args
+    from strl_pyg.training.config import add_train_arguments
 
     ablation = _ablation_module()
     ap = add_train_arguments(argparse.ArgumentParser())
@@ -208,7 +208,8 @@ def test_table3_on_real_photographs_trains_posed_pairs_with_its_own_plan(tmp_pat
                                          for s in range(3))
     assert ab.PLAN[:3] == [("baseline", 0), ("LP", 0), ("full", 0)]
     assert ab.PLAN[9:] == [("L", 0), ("V", 0), ("L", 1), ("L", 2)]  # after the three rows
-    assert ab.STEPS == ab.REAL_STEPS and ab.RESULTS == BENCH / "results_ablation" / "real_photographs"
+    assert ab.STEPS == ab.REAL_STEPS
+    assert ab.RESULTS == BENCH / "results_ablation" / "real_photographs"
     ap = add_train_arguments(argparse.ArgumentParser())
     cfg = config_from_args(ap.parse_args([*ab.TRAIN_ARGS, "--model", "LP"]), ap)
     assert (cfg.dataset, cfg.synthetic_share, cfg.steps, cfg.loss) == (

@@ -87,7 +87,7 @@ def help_runs():
                               capture_output=True, text=True, timeout=300)
 
     with ThreadPoolExecutor(max_workers=2) as pool:
-        return dict(zip(RUNNABLE, pool.map(run, RUNNABLE)))
+        return dict(zip(RUNNABLE, pool.map(run, RUNNABLE), strict=True))
 
 
 @pytest.mark.slow

@@ -3,10 +3,9 @@ neighbourhood-consensus score and the ROC-AUC, on known answers."""
 
 from __future__ import annotations
 
-import numpy as np
-
 import bench_inlier_ranking as bir
 import bench_status as bs
+import numpy as np
 
 
 def test_each_refusal_names_its_rule():

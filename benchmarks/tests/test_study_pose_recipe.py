@@ -127,8 +127,8 @@ def test_default_width_runs_are_named_apart_and_train_at_the_models_width(tmp_pa
     import argparse
 
     from strl_pyg.model.config import StrLPoseConfig
-    from strl_pyg.training.config import add_train_arguments
     from strl_pyg.training.commandline import config_from_args
+    from strl_pyg.training.config import add_train_arguments
 
     assert spr.run_id("fe", "both", 0) == "fe-both-s0"
     assert spr.run_id("fe", "both", 1, "LP", wide=True) == "fe-LP-both-w128-s1"

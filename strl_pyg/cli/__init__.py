@@ -1,6 +1,7 @@
 """The ``strl-pose`` command: the subcommands and the parser (:mod:`.commands`), how a run
 ends on an error (:mod:`.guard`), argument reading (:mod:`.readers`), ``predict``
-(:mod:`.predict`), ``export`` (:mod:`.export`) and ``bench`` (:mod:`.bench`). Torch-free until a command runs.
+(:mod:`.predict`), ``export`` (:mod:`.export`) and ``bench`` (:mod:`.bench`). Torch-free until a
+command runs.
 """
 
 from __future__ import annotations

@@ -240,11 +240,13 @@ def build_pair_graph(
 
     data[keys_.IMAGE_SIZE0] = torch.tensor([sizes[0]], dtype=torch.long)
     data[keys_.IMAGE_SIZE1] = torch.tensor([sizes[1]], dtype=torch.long)
-    if matches.has_intrinsics:
-        data[keys_.K0], data[keys_.K1] = Ks[0].unsqueeze(0), Ks[1].unsqueeze(0)
+    K0, K1 = Ks
+    if K0 is not None and K1 is not None:
+        data[keys_.K0], data[keys_.K1] = K0.unsqueeze(0), K1.unsqueeze(0)
     if pose is not None:
         data[keys_.T_0TO1] = pose.unsqueeze(0)
     if keep_images:
+        assert images is not None  # keep_images without images was refused above
         data[keys_.IMAGE0], data[keys_.IMAGE1] = images[0].unsqueeze(0), images[1].unsqueeze(0)
     return data
 

@@ -113,7 +113,7 @@ def atomic_save_npz(path: str | os.PathLike, arrays: dict[str, np.ndarray]) -> N
     """Writes ``arrays`` to ``path`` via a temporary file in the same folder and a rename, so
     readers never see a half-written file."""
     with atomic_open(path) as f:
-        np.savez(f, **arrays)
+        np.savez(f, **arrays)  # type: ignore[arg-type]  # numpy's stub types **kwds as bool
 
 
 def load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:

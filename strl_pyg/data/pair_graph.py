@@ -28,8 +28,9 @@ graph is complete on the kept nodes, which is what the marker says).
 from __future__ import annotations
 
 import copy
+from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Any, Iterator
+from typing import Any
 
 import torch
 from torch import Tensor
@@ -420,7 +421,8 @@ class PairGraph(HeteroData):
             elif has_dense:
                 d = store[keys_.DENSE]
                 if not isinstance(d, Tensor) or d.dtype != torch.bool or d.shape != (n,):
-                    got = f"{d.dtype} {tuple(d.shape)}" if isinstance(d, Tensor) else type(d)
+                    got = (f"{d.dtype} {tuple(d.shape)}" if isinstance(d, Tensor)
+                           else type(d).__name__)
                     problem = (f"Expected '{keys_.DENSE}' of edge type {et} as one bool per graph, "
                                f"shape ({n},) (got {got})")
             if problem is not None:

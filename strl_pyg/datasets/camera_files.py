@@ -95,8 +95,9 @@ def read_real_scene(scene_dir: str | os.PathLike) -> list[PosedImage]:
     path = scene_dir / "cameras.json"
     data = _load_json(path, "a real_scenes cameras file")
     if not isinstance(data, dict) or not isinstance(data.get("images"), list):
+        got = data.get("images") if isinstance(data, dict) else data
         raise ValueError(f"Expected an 'images' list in '{path}' (got "
-                         f"{type(data.get('images') if isinstance(data, dict) else data).__name__})")
+                         f"{type(got).__name__})")
     out = []
     for n, im in enumerate(data["images"]):
         where = f"'{path}' image {n}"

@@ -1,7 +1,8 @@
 """Posed photographs: image folders with known cameras, in the formats people have, and the
 pairs of them that overlap.
 
-Every reader (:mod:`strl_pyg.datasets.camera_files`) returns a list of :class:`PosedImage` in one convention: ``K`` ``[3, 3]`` in
+Every reader (:mod:`strl_pyg.datasets.camera_files`) returns a list of :class:`PosedImage` in one
+convention: ``K`` ``[3, 3]`` in
 pixels of the image file, OpenCV pixel centres (the top-left pixel's centre is ``(0, 0)``) and
 ``T_c2w`` ``[4, 4]`` camera-to-world with OpenCV camera axes (x right, y down, z forward). The
 relative pose of a pair is then ``T_0to1 = inv(T_c2w[1]) @ T_c2w[0]`` (``X1 = R X0 + t``).

@@ -202,7 +202,8 @@ def bootstrap_resamples(matches: PairMatches, pose: Pose, method: str = POSELIB,
 
 def data_covariance(rotation_rad: float, translation_rad: float) -> np.ndarray:
     """The ``[5, 5]`` tangent covariance that the regression's data check adds
-    (:attr:`strl_pyg.inference.methods.MethodContext.data_check`), before its calibration scale as the swap check's term:
+    (:attr:`strl_pyg.inference.methods.MethodContext.data_check`), before its calibration scale as
+    the swap check's term:
     the classical pose is far more precise than the network's where it is right, so the
     distance to it stands for the network's own error, its square spread over the 3 rotation
     and the 2 direction axes (``d_R^2 / 3``, ``d_t^2 / 2``). Where the classical pose is wrong
@@ -214,7 +215,8 @@ def data_covariance(rotation_rad: float, translation_rad: float) -> np.ndarray:
 
 def swap_covariance(rotation_rad: float, translation_rad: float) -> np.ndarray:
     """The ``[5, 5]`` tangent covariance that a disagreement between the network's pose and
-    the inverse of its pose of the swapped pair adds (:attr:`strl_pyg.inference.methods.MethodContext.swap_check`): were
+    the inverse of its pose of the swapped pair adds
+    (:attr:`strl_pyg.inference.methods.MethodContext.swap_check`): were
     the two errors independent and alike, their difference would hold twice the variance of
     each, spread over the 3 rotation and the 2 direction axes, so ``d_R^2 / 6`` and
     ``d_t^2 / 4`` per axis. The network's own log-variances are fitted on the training

@@ -3,7 +3,8 @@ on the same matches, with the paper's tables; also the ``strl-pose evaluate`` co
 
 Per pair (:class:`~strl_pyg.evaluation.pairs.EvalPair`: matches, ground-truth ``T_0to1``,
 subset, id) the methods of :class:`~strl_pyg.inference.PoseEstimator`, by the registry's names
-(:data:`~strl_pyg.inference.METHODS`, the registry: ``regression``, ``opencv``, ``poselib``, ``fused``,
+(:data:`~strl_pyg.inference.METHODS`, the registry: ``regression``, ``opencv``, ``poselib``,
+``fused``,
 ``geometric``, ``guided``, ``vp``, ``vp_checked``), estimate ``T_0to1`` (``X1 = R X0 + t``)
 with the estimator's support checks and statuses: a method's pose counts only with status
 ``"ok"``. The 0.2 names (``strl``, ``fused_opencv``, ``fused_poselib``) are refused with their
@@ -55,7 +56,8 @@ __all__ = ["LEGACY_METHOD_NAMES", "registered_methods", "available_methods", "re
 
 def registered_methods() -> tuple[str, ...]:
     """The methods ``evaluate`` scores: the registry of
-    :class:`~strl_pyg.inference.PoseEstimator` by the same names, a method registered later included."""
+    :class:`~strl_pyg.inference.PoseEstimator` by the same names, a method registered later
+    included."""
     from strl_pyg.inference import METHODS as REGISTRY
 
     return tuple(REGISTRY)
@@ -75,7 +77,8 @@ LEGACY_METHOD_NAMES = {"strl": "regression", "fused_poselib": "fused", "fused_op
 
 
 def available_methods() -> tuple[str, ...]:
-    """:data:`~strl_pyg.inference.METHODS` whose dependencies are installed (PoseLib's only when importable)."""
+    """:data:`~strl_pyg.inference.METHODS` whose dependencies are installed (PoseLib's only when
+    importable)."""
     from strl_pyg.inference import METHODS as REGISTRY
 
     return tuple(m for m in REGISTRY if REGISTRY[m].available())
@@ -144,7 +147,8 @@ def evaluate_pairs(
     Args:
         model: a :class:`~strl_pyg.model.StrLPose` (``None``: classical methods only).
         pairs: :class:`EvalPair` s.
-        methods: names from :data:`~strl_pyg.inference.METHODS` (old names of :data:`LEGACY_METHOD_NAMES` are
+        methods: names from :data:`~strl_pyg.inference.METHODS` (old names of
+        :data:`LEGACY_METHOD_NAMES` are
             accepted with a warning; default: :func:`available_methods`, without the network
             methods when ``model`` is ``None``).
         resample: the regression's input graph (``"model"``: the checkpoint's counts,

@@ -68,7 +68,8 @@ class FrontendConfig:
             matches, segments as detected: their endpoints do *not*
             correspond (``info["line_endpoints"]``), so only the line solvers (``vp``,
             ``vp_checked``) may read them; the network methods refuse them. Measured in
-            ``benchmarks/studies/results_line_matchers.md``: better on real street pairs with very few
+            ``benchmarks/studies/results_line_matchers.md``: better on real street pairs with very
+            few
             points, worse where an F from 8-30 points exists. (default: ``"epipolar"``)
         line_descriptor_ratio: Lowe's ratio test of the descriptor matcher (nearest / second
             nearest descriptor distance). (default: 0.85)
@@ -125,7 +126,7 @@ class FrontendConfig:
     thorough_below: int = 200
 
     @classmethod
-    def preset(cls, name: str, **overrides) -> "FrontendConfig":
+    def preset(cls, name: str, **overrides) -> FrontendConfig:
         """A named set of point settings (:data:`PRESETS`), other fields as given.
 
         ``FrontendConfig.preset("thorough", lines=False)``; the names are those of

@@ -277,7 +277,8 @@ class PoseEstimate:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: ``{"pose": {...}, "methods": {name: {...}}, "num_points",
-        "num_lines", "two_view"}`` (the configuration, :attr:`geometry`); each record has ``method``, ``status``, ``T_0to1`` (nested lists or
+        "num_lines", "two_view"}`` (the configuration, :attr:`geometry`); each record has
+        ``method``, ``status``, ``T_0to1`` (nested lists or
         ``None``), ``sigma``, ``covariance``, ``warnings``, ``time_ms``, ``num_inliers``,
         ``info``; non-finite numbers become ``None``."""
         return {"pose": self.pose.to_dict(),

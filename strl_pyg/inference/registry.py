@@ -170,10 +170,14 @@ def network_free_methods() -> tuple[str, ...]:
                  if not any(METHODS[m].uses_network for m in methods_needed((n,))))
 
 
-def classical_method() -> str:
-    """The classical solver other methods start from: PoseLib if its method is available (the
-    registry's say, which a caller may change), else OpenCV."""
-    return POSELIB if METHODS[POSELIB].available() else OPENCV
+def classical_method(results: Any = None) -> str:
+    """The classical solver the inference layer starts from, decided here only: the one the
+    run holds a result of (``results``: a pair's method results; PoseLib first), else PoseLib
+    if its method is available (the registry's say, which a caller may change), else OpenCV.
+    The methods' base (``classical_base``), the data check, MULTIPLE's second solve and the
+    focal solves all read it."""
+    found = next((c for c in (POSELIB, OPENCV) if results and c in results), None)
+    return found or (POSELIB if METHODS[POSELIB].available() else OPENCV)
 
 
 def checked_method_names(methods: Any) -> tuple[str, ...] | str:

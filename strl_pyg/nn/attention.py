@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import torch
 import torch.nn.functional as F
@@ -34,7 +35,8 @@ def _complete_batches(
     b_src, b_dst = as_pair(batch)
     if marker.batch_src is not None:
         for mine, given in ((marker.batch_src, b_src), (marker.batch_dst, b_dst)):
-            if given is not None and not torch.equal(mine, given.to(mine.device)):
+            if mine is not None and given is not None and \
+                    not torch.equal(mine, given.to(mine.device)):
                 raise ValueError("Expected the 'batch' argument to agree with the graph ids "
                                  "that CompleteEdges carries (got different graph ids)")
         b_src, b_dst = marker.batch_src, marker.batch_dst
@@ -66,6 +68,7 @@ def _complete_layouts(
     if b_src is None and b_dst is None:
         return DenseLayout.single(n_src), DenseLayout.single(n_dst)
     ref = b_src if b_src is not None else b_dst
+    assert ref is not None
     if b_src is None:  # no ids on one side: all its nodes belong to graph 0
         b_src = ref.new_zeros(n_src)
     if b_dst is None:
@@ -315,17 +318,24 @@ class AttentionConv(MessagePassing):
         if isinstance(edge_index, CompleteEdges):
             msg = self._dense(q, k, v, *_complete_layouts(edge_index, batch, layout, *size))
         else:
-            edge_index, e = as_index(edge_index), None
+            edge_index, e = cast(Tensor, as_index(edge_index)), None
             if edge_attr is not None:
+                assert self.lin_edge is not None  # edge_attr without edge_dim: refused above
                 if edge_attr.dim() != 2 or edge_attr.shape[0] != edge_index.shape[1]:
                     raise ValueError(f"Expected edge_attr of shape [{edge_index.shape[1]}, "
                                      f"{self.edge_dim}] (got {tuple(edge_attr.shape)})")
                 e = self.lin_edge(edge_attr).view(-1, H, D)
-            alpha = self.edge_updater(edge_index, q=q, k=k, e=e, size=size)
-            msg = self.propagate(edge_index, v=v, alpha=alpha, e=e, size=size)
+            try:
+                alpha = self.edge_updater(edge_index, q=q, k=k, e=e, size=size)
+                msg = self.propagate(edge_index, v=v, alpha=alpha, e=e, size=size)
+            except (IndexError, RuntimeError) as err:  # checked only when PyG's index fails
+                _check_edge_range(edge_index, size, err)
+                raise
         msg = self.lin_out(msg.reshape(-1, H * D))
         out = x_dst + self.update_mlp(torch.cat([x_dst, msg], dim=-1))
         if return_attention_weights:
+            # with the weights asked for, complete attention took the explicit path above
+            assert isinstance(edge_index, Tensor) and alpha is not None
             return out, _attention_weights(given, edge_index, alpha)
         return out
 
@@ -371,6 +381,7 @@ class AttentionConv(MessagePassing):
         qd = ld.to_dense(q).transpose(1, 2)  # [B, H, L_dst, D]
         # A graph without source nodes would give an all-masked softmax row (NaN): let it
         # attend to its padding and zero its messages afterwards instead.
+        assert ls.counts is not None and ls.mask is not None  # a layout of several graphs
         has_src = ls.counts > 0
         key_mask = ls.mask | ~has_src[:, None]
         out = F.scaled_dot_product_attention(qd, kd, vd, attn_mask=key_mask[:, None, None, :],
@@ -386,11 +397,24 @@ class AttentionConv(MessagePassing):
         )
 
 
-def _attention_weights(given: object, edge_index: Tensor, alpha: Tensor) -> object:
-    """``(edge_index, alpha)``; for a sparse adjacency the weights in its layout,
-    ``[N_dst, N_src, H]``, as GATConv returns them."""
+def _check_edge_range(edge_index: Tensor, size: tuple[int, int], err: Exception) -> None:
+    """A one-line ``ValueError`` (from ``err``) where a strided ``edge_index`` points outside
+    the ``size = (N_src, N_dst)`` nodes; nothing otherwise (the caller re-raises ``err``)."""
+    if edge_index.layout != torch.strided or edge_index.dim() != 2 or not edge_index.numel():
+        return
+    for row, n, what in ((0, size[0], "source"), (1, size[1], "target")):
+        lo, hi = int(edge_index[row].min()), int(edge_index[row].max())
+        if lo < 0 or hi >= n:
+            raise ValueError(f"Expected edge_index[{row}] ({what} nodes) in [0, {n - 1}] (got "
+                             f"values from {lo} to {hi})") from err
+
+
+def _attention_weights(given: object, edge_index: Tensor,
+                       alpha: Tensor) -> tuple[Tensor, Tensor]:
+    """``(edge_index, alpha)``; for a ``torch.sparse`` adjacency ``(adj, alpha)``, ``adj``
+    holding the weights in its layout (``[N_dst, N_src, H]``), as GATConv returns them."""
     if isinstance(given, Tensor) and given.layout != torch.strided:
         from torch_geometric.utils.sparse import set_sparse_value
 
-        return set_sparse_value(given, alpha)
+        return set_sparse_value(given, alpha), alpha
     return edge_index, alpha

@@ -94,6 +94,7 @@ class DualGraphLayer(nn.Module):
 
         g = self.geo_self(g, self_edges, layout=lay(self_edges))
         if self.line_conv is not None and line_edges is not None:
+            assert callable(self.line_conv)
             if line_feat is None:
                 raise ValueError("Expected line_feat together with line_edges (got None)")
             g = self.line_conv(g, line_edges, line_feat)
@@ -102,6 +103,7 @@ class DualGraphLayer(nn.Module):
                 raise ValueError("Expected visual features and cross_edges for a layer with a "
                                  f"visual graph (got v={type(v).__name__}, "
                                  f"cross_edges={type(cross_edges).__name__})")
+            assert self.vis_cross is not None  # built together with vis_self
             v = self.vis_self(v, self_edges, layout=lay(self_edges))
             v = self.vis_cross((v, v), cross_edges, query=g, layout=lay(cross_edges))
         return g, v

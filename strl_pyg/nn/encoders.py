@@ -237,6 +237,7 @@ class SpatialCoordinateEncoder(_MLPEncoder):
             if batch is not None:  # the swapped copy of a pair is a pair of its own
                 batch = torch.cat([batch, batch + int(batch.max()) + 1])
         f = self.features(coords.double(), batch)
+        assert self.feature_mean is not None and self.feature_std is not None
         self.feature_mean.copy_(f.mean(0))
         self.feature_std.copy_(f.std(0).clamp_min(1e-6))
 
@@ -254,6 +255,7 @@ class SpatialCoordinateEncoder(_MLPEncoder):
     def forward(self, x: Tensor, batch: Tensor | None = None,
                 layout: DenseLayout | None = None) -> Tensor:
         if self.inputs != "paper":
+            assert self.feature_mean is not None and self.feature_std is not None
             x = (self.features(x, batch, layout) - self.feature_mean.to(x)) \
                 / self.feature_std.to(x)
         return self.mlp(x)
@@ -389,8 +391,10 @@ class ImageEncoder(nn.Module):
         """Node features :math:`(N, C)` from images :math:`(B, c, H, W)` and the nodes' pixel
         coordinates :math:`(N, 2)` in image 0 and image 1 (``layout``: see
         :func:`sample_at_pixels`)."""
-        f0 = sample_at_pixels(self(image0), kpts0, batch, tuple(image0.shape[-2:]), layout)
-        f1 = sample_at_pixels(self(image1), kpts1, batch, tuple(image1.shape[-2:]), layout)
+        size0 = (int(image0.shape[-2]), int(image0.shape[-1]))
+        size1 = (int(image1.shape[-2]), int(image1.shape[-1]))
+        f0 = sample_at_pixels(self(image0), kpts0, batch, size0, layout)
+        f1 = sample_at_pixels(self(image1), kpts1, batch, size1, layout)
         return self.embed(torch.cat([f0, f1], dim=-1))
 
     def __repr__(self) -> str:

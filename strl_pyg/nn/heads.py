@@ -63,10 +63,12 @@ class PoseHead(nn.Module):
     def reset_parameters(self) -> None:
         reset_mlp(self.pose_mlp)
         reset_mlp(self.var_mlp)
+        var_out, pose_out = self.var_mlp[-1], self.pose_mlp[-1]
+        assert isinstance(var_out, nn.Linear) and isinstance(pose_out, nn.Linear)
         with torch.no_grad():
-            self.var_mlp[-1].weight.mul_(0.01)
-            self.var_mlp[-1].bias.zero_()
-            self.pose_mlp[-1].bias[0] += 1.0  # start at the identity rotation
+            var_out.weight.mul_(0.01)
+            var_out.bias.zero_()
+            pose_out.bias[0] += 1.0  # start at the identity rotation
 
     def forward(self, z: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         raw = self.pose_mlp(z)

@@ -75,10 +75,12 @@ class LineEndpointConv(MessagePassing):
     def forward(self, x: Tensor | tuple[Tensor, Tensor], edge_index: Tensor,
                 line_feat: Tensor | tuple[Tensor | None, Tensor | None]) -> Tensor:
         if isinstance(line_feat, (tuple, list)):  # PyG's hetero machinery: (src, dst)
-            line_feat = line_feat[0]
-            if line_feat is None:
+            first = line_feat[0]
+            if first is None:
                 raise ValueError("Expected line features of the source node type (got None "
                                  "in the (source, target) pair)")
+            line_feat = first
+        assert isinstance(line_feat, Tensor)
         x_src, x_dst = as_pair(x)
         src_channels, dst_channels = as_pair(self.channels)
         for what, t, c in (("source", x_src, src_channels), ("target", x_dst, dst_channels),

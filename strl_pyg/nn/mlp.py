@@ -30,8 +30,9 @@ def reset_mlp(module: nn.Module) -> None:
     """Re-initialises every descendant of ``module`` that has ``reset_parameters``, in
     registration order (so a seed gives the same weights every time)."""
     for child in module.modules():
-        if child is not module and hasattr(child, "reset_parameters"):
-            child.reset_parameters()
+        reset = getattr(child, "reset_parameters", None)
+        if child is not module and callable(reset):
+            reset()
 
 
 def as_pair(x: Any) -> tuple[Any, Any]:

@@ -31,7 +31,8 @@ DATASETS = ("synthetic", "kitti", "demon", "posed")
 
 #: Image channels of each dataset's graphs: generated scenes are rendered grey, KITTI's
 #: ``image_0`` camera is grey, DeMoN is RGB, posed photographs are read grey (the shipped
-#: weights' channels; ``--set patch_features=3 --set image_channels=3`` for colour). The default model's ``patch_features`` and
+#: weights' channels; ``--set patch_features=3 --set image_channels=3`` for colour). The default
+#: model's ``patch_features`` and
 #: ``image_channels`` follow them, so the default model accepts the default data.
 DATA_CHANNELS = {"synthetic": 1, "kitti": 1, "demon": 3, "posed": 1}
 

@@ -15,8 +15,8 @@ import pytest
 
 from strl_pyg import cli
 from strl_pyg.inference.estimator import PoseEstimator
-from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.model import StrLPoseConfig
+from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.synthetic import generate_pair
 from strl_pyg.training.checkpoints import (
     CHECKPOINT_VERSION,

@@ -38,8 +38,8 @@ class _Planted:
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     """Paths of every kind the fuzz draws from, keyed by kind."""
-    from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.model import StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose
 
     d = tmp_path_factory.mktemp("fuzz")
     rng = np.random.default_rng(0)

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 import torch
 
+from strl_pyg.data.external import MatchFormatError
 from strl_pyg.data.external.formats import (
     FORMATS,
     detect_format,
     from_lightglue,
     load_external_matches,
 )
-from strl_pyg.data.external import MatchFormatError
 from strl_pyg.data.external.hloc import load_hloc_matches
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.inference import PoseEstimator

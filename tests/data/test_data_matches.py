@@ -231,7 +231,8 @@ def test_lsd_rows_are_read_as_segments(held_out_pair):
                           image_size1=m.image_size1)
         np.testing.assert_allclose(got.lines0, ref.lines0, rtol=1e-6)
         np.testing.assert_array_equal(got.lines1, ref.lines1)
-    with pytest.raises(ValueError, match=r"Expected 'lines0' of shape \[N, 2, 2\] \(got \(5, 3\)\)"):
+    with pytest.raises(ValueError,
+                       match=r"Expected 'lines0' of shape \[N, 2, 2\] \(got \(5, 3\)\)"):
         PairMatches(m.points0, m.points1, np.ones((5, 3)), np.ones((5, 3)),
                     image_size0=m.image_size0, image_size1=m.image_size1)
 

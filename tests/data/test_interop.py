@@ -13,17 +13,17 @@ from torch import nn
 from torch_geometric.data import Batch, HeteroData
 from torch_geometric.nn import to_hetero
 
-from strl_pyg.data import keys as K
-from strl_pyg.data.build import build_pair_graph, load_graph, save_graph
 from strl_pyg.data import (
+    CompleteEdges,
     ImplicitEdgesError,
     PairGraph,
     edge_index_dict,
     has_implicit_complete_edges,
     materialize_complete_edges,
 )
+from strl_pyg.data import keys as K
+from strl_pyg.data.build import build_pair_graph, load_graph, save_graph
 from strl_pyg.nn.attention import AttentionConv
-from strl_pyg.data import CompleteEdges
 
 SIZES = [(5, 2), (3, 0), (0, 3), (7, 1)]  # (points, lines): uneven, one graph without points
 

@@ -19,8 +19,8 @@ import torch
 from torch_geometric.loader import DataLoader
 
 from strl_pyg.data import keys as K
-from strl_pyg.data.transforms import FixedSizeResample
 from strl_pyg.data.keys import PAIR_ID, SUBSET
+from strl_pyg.data.transforms import FixedSizeResample
 from strl_pyg.datasets import (
     DeMoNFolder,
     DeMoNHDF5,

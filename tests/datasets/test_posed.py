@@ -1,4 +1,5 @@
-"""strl_pyg.datasets.camera_files and posed: each format written from a known camera set reads back the same
+"""strl_pyg.datasets.camera_files and posed: each format written from a known camera set reads back
+the same
 intrinsics and relative poses; pairs by overlap; clear errors on bad files."""
 
 from __future__ import annotations
@@ -110,7 +111,8 @@ def _write_colmap(root, Ts, K, names, points, binary=False):
                     f.write(struct.pack("<ddq", x, y, pid))
     else:
         (model / "cameras.txt").write_text(
-            "# Camera list\n1 PINHOLE %d %d %s\n" % (W, H, " ".join(repr(float(v)) for v in params)))
+            "# Camera list\n1 PINHOLE {} {} {}\n".format(
+                W, H, " ".join(repr(float(v)) for v in params)))
         lines = ["# Image list"]
         for k, ((q, t), name, pts) in enumerate(zip(poses, names, points, strict=True)):
             q_t = " ".join(repr(float(v)) for v in [*q, *t])

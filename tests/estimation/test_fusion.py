@@ -22,8 +22,17 @@ from strl_pyg.estimation.pose_fusion import (
     tangent_to_pose,
     truncated_sigma,
 )
-from strl_pyg.geometry import so3_exp, so3_log, sphere_exp, sphere_log, tangent_basis
-from strl_pyg.geometry import Pose, essential_from_pose, normalize_points, sampson_error
+from strl_pyg.geometry import (
+    Pose,
+    essential_from_pose,
+    normalize_points,
+    sampson_error,
+    so3_exp,
+    so3_log,
+    sphere_exp,
+    sphere_log,
+    tangent_basis,
+)
 from strl_pyg.metrics.two_view import relative_pose_error
 from strl_pyg.synthetic import SceneConfig, generate_pair
 
@@ -239,8 +248,8 @@ def test_estimator_fusion_uses_the_checkpoints_inflation():
     import copy
 
     from strl_pyg.estimation.pose_fusion import fuse_poses
-    from strl_pyg.inference.estimator import PoseEstimator
     from strl_pyg.estimation.uncertainty import swap_covariance
+    from strl_pyg.inference.estimator import PoseEstimator
     from strl_pyg.inference.methods import swap_term
     from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.synthetic import SceneConfig, generate_pair

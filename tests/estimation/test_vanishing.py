@@ -10,16 +10,15 @@ import pytest
 import torch
 
 from strl_pyg.data.matches import PairMatches
+from strl_pyg.estimation.line_refine import refine_with_lines
 from strl_pyg.estimation.vanishing import (
     segment_geometry,
-    vp_residual_px,
     vanishing_directions,
     vanishing_point_pose,
+    vp_residual_px,
 )
-from strl_pyg.estimation.line_refine import refine_with_lines
 from strl_pyg.geometry.pose import rotation_angle_deg
-from strl_pyg.inference import PoseEstimator
-from strl_pyg.inference import RECOMMENDED_ORDER, recommended_order
+from strl_pyg.inference import RECOMMENDED_ORDER, PoseEstimator, recommended_order
 
 K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
 SIZE = (480, 640)
@@ -477,8 +476,8 @@ def test_vp_checked_takes_vp_where_the_classical_rotation_contradicts_the_lines(
     """A planted classical pose 20 deg off (as a 5-point solve on a handful of points may be)
     and as well supported as vp's: the lines' vanishing direction contradicts it, so
     vp_checked answers with vp's pose; a right classical pose is kept as it is."""
-    from strl_pyg.inference.methods import VP_CHECK_ANGLE_DEG, VanishingPointChecked
     from strl_pyg.inference.config import EstimatorConfig
+    from strl_pyg.inference.methods import VP_CHECK_ANGLE_DEG, VanishingPointChecked
     from strl_pyg.inference.methods.context import MethodContext
 
     m, R, t = manhattan_pair(1, n_points=15, noise=0.3)
@@ -499,16 +498,16 @@ def test_vp_checked_takes_vp_where_the_classical_rotation_contradicts_the_lines(
 
 
 def test_vp_checked_keeps_a_classical_pose_that_fits_clearly_more_points():
-    from strl_pyg.inference.methods import VP_CHECK_SUPPORT_SLACK, VanishingPointChecked
     from strl_pyg.inference.config import EstimatorConfig
+    from strl_pyg.inference.methods import VP_CHECK_SUPPORT_SLACK, VanishingPointChecked
     from strl_pyg.inference.methods.context import MethodContext
 
     m, R, t = manhattan_pair(1, n_points=15, noise=0.3)
     vp = PoseEstimator(methods=("vp",), bootstrap=0).estimate(m).methods["vp"]
     off = cv2.Rodrigues(np.array([0.0, np.radians(20.0), 0.0]))[0] @ R
     more = vp.info["support_inliers"] + VP_CHECK_SUPPORT_SLACK + 1
-    ctx = MethodContext(EstimatorConfig(bootstrap=0), results={_base(): _planted(_base(), off, t, more),
-                                              "vp": vp})
+    planted = _planted(_base(), off, t, more)
+    ctx = MethodContext(EstimatorConfig(bootstrap=0), results={_base(): planted, "vp": vp})
     res = VanishingPointChecked()(m, ctx)
     assert res.info["source"] == _base() and "fits fewer point matches" in res.info["reason"]
 
@@ -587,7 +586,7 @@ def test_the_closed_form_vp_residuals_agree_with_the_cross_product_reference():
     products of the refinement, vanishing points at infinity included."""
     import torch
 
-    from strl_pyg.estimation.line_refine import vp_residual_px, _vp_residuals
+    from strl_pyg.estimation.line_refine import _vp_residuals, vp_residual_px
 
     rng = np.random.default_rng(0)
     ends = np.concatenate([rng.uniform(0, 640, (40, 2, 2)), np.ones((40, 2, 1))], axis=-1)

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 import torch
 
-from strl_pyg.evaluation.run import available_methods, evaluate_pairs
 from strl_pyg.evaluation import EvalPair, EvalReport, PairResult, synthetic_eval_pairs
-from strl_pyg.model.strl_pose import StrLPose
+from strl_pyg.evaluation.run import available_methods, evaluate_pairs
 from strl_pyg.model import StrLPoseConfig
+from strl_pyg.model.strl_pose import StrLPose
 
 REPO = Path(__file__).resolve().parents[2]
 

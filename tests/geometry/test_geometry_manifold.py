@@ -69,8 +69,8 @@ def test_signed_sampson_is_the_signed_root_of_sampson_error():
 def test_one_image_reader_for_the_cli_and_the_datasets(tmp_path):
     cv2 = pytest.importorskip("cv2")
     from strl_pyg.cli.readers import read_image_file
-    from strl_pyg.utils import UsageError
     from strl_pyg.datasets import read_image
+    from strl_pyg.utils import UsageError
 
     rgb = np.random.default_rng(0).integers(0, 256, (20, 30, 3), dtype=np.uint8)
     path = tmp_path / "a.png"

@@ -11,8 +11,8 @@ from strl_pyg.estimation.classical import estimate_relative_pose, normalised_mat
 from strl_pyg.estimation.guided import guided_estimate, msac_cost
 from strl_pyg.geometry import epipolar_residuals
 from strl_pyg.metrics.two_view import relative_pose_error
-from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.model import ABLATIONS, StrLPoseConfig
+from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.synthetic import SceneConfig, generate_pair
 from strl_pyg.training.loss import GeometricLoss
 

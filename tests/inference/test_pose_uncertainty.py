@@ -219,8 +219,7 @@ def test_pose_to_tangent_batched_equals_one_by_one():
     import torch
 
     from strl_pyg.estimation.pose_fusion import pose_to_tangent
-    from strl_pyg.geometry import sphere_log, tangent_basis
-    from strl_pyg.geometry import Pose
+    from strl_pyg.geometry import Pose, sphere_log, tangent_basis
     from strl_pyg.geometry.manifold import so3_exp
 
     g = torch.Generator().manual_seed(0)

@@ -18,7 +18,7 @@ from strl_pyg.synthetic import generate_pair
 
 def _assert_same_graph(fast, ref):
     assert fast.node_types == ref.node_types and fast.edge_types == ref.edge_types
-    for store_f, store_r in zip(fast.stores, ref.stores):
+    for store_f, store_r in zip(fast.stores, ref.stores, strict=True):
         assert set(store_f.keys()) == set(store_r.keys())
         for key, value in store_r.items():
             other = store_f[key]

@@ -103,7 +103,8 @@ class _Shout(PoseRule):
     def __call__(self, estimate, run):
         if estimate.pose.status != Status.OK:
             return None
-        return Verdict(self.name, Action.REPORTED, Status.OK, "heard", {"n": run.matches.num_points})
+        return Verdict(self.name, Action.REPORTED, Status.OK, "heard",
+                       {"n": run.matches.num_points})
 
 
 def test_a_rule_registered_at_run_time_speaks_on_every_pose():

@@ -5,12 +5,6 @@ import pytest
 import torch
 
 from strl_pyg.geometry import Pose, quaternion_to_rotation, relative_pose_from_c2w
-from strl_pyg.metrics.two_view import (
-    pose_auc,
-    relative_pose_error,
-    rotation_error_deg,
-    translation_angle_error_deg,
-)
 from strl_pyg.metrics import (
     KITTI_SEGMENT_LENGTHS,
     absolute_trajectory_error,
@@ -22,6 +16,12 @@ from strl_pyg.metrics import (
     umeyama_alignment,
     write_kitti_trajectory,
     write_tum_trajectory,
+)
+from strl_pyg.metrics.two_view import (
+    pose_auc,
+    relative_pose_error,
+    rotation_error_deg,
+    translation_angle_error_deg,
 )
 
 F64 = torch.float64

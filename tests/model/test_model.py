@@ -11,8 +11,8 @@ from torch_geometric.loader import DataLoader
 
 from strl_pyg.data import PairMatches, build_pair_graph
 from strl_pyg.data import keys as K
-from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.model import ABLATIONS, StrLPoseConfig
+from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.training.loss import PoseLoss, pose_targets
 
 H, W = 96, 128
@@ -278,8 +278,8 @@ def test_small_model_overfits_eight_pairs():
 @pytest.mark.parametrize("dtype", [torch.bfloat16, torch.float64])
 def test_a_model_in_another_dtype_runs_on_a_float32_graph(dtype):
     from strl_pyg.data import build_pair_graph
-    from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.model import StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.synthetic import generate_pair
 
     p = generate_pair(1)

@@ -1,6 +1,7 @@
 """StrLPose against outputs recorded from the version-1 module layout (before DualGraphLayer).
 
-``tests/fixtures/legacy_model.pt`` was written by ``tests/fixtures/record_legacy_model.py`` on a frozen
+``tests/fixtures/legacy_model.pt`` was written by ``tests/fixtures/record_legacy_model.py`` on a
+frozen
 copy of commit 3a109d5: graphs, version-2 checkpoints of tiny seeded models in the old key
 layout (``geo_self.{i}.*``, ``line_convs.{i}.*``, ``vis_self.{i}.*``, ``vis_cross.{i}.*``,
 ``fusion.pose_mlp.*``, ``fusion.var_mlp.*``) and the outputs of those models and of the shipped
@@ -16,8 +17,8 @@ import torch
 from torch_geometric.data import Batch
 
 from strl_pyg.data import PairGraph
-from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.model import StrLPoseConfig, upgrade_key
+from strl_pyg.model.strl_pose import StrLPose
 
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "legacy_model.pt"
 TINY = ["full", "full_geometric", "baseline", "V", "LP_metric"]

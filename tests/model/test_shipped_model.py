@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 import torch
 
-from strl_pyg.training import DEFAULT_WEIGHTS
 from strl_pyg.evaluation.run import predict_pose
 from strl_pyg.geometry import Pose
 from strl_pyg.metrics.two_view import rotation_error_deg, translation_angle_error_deg
 from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.synthetic import SceneConfig, generate_pair
+from strl_pyg.training import DEFAULT_WEIGHTS
 
 # Held-out seeds (training used seeds below 2,000,000), the kinds the model was trained on.
 SEEDS = [(2_100_000 + i, kind) for i, kind in enumerate(["street", "indoor", "boxes"] * 3)]

@@ -7,9 +7,9 @@ import math
 import pytest
 import torch
 
+from strl_pyg.data import CompleteEdges
 from strl_pyg.nn import DenseLayout
 from strl_pyg.nn.attention import AttentionConv
-from strl_pyg.data import CompleteEdges
 
 
 def complete_edges(b_src: torch.Tensor, b_dst: torch.Tensor) -> torch.Tensor:
@@ -449,8 +449,10 @@ def test_attention_conv_pyg_habits_get_one_line_each():
 
 @pytest.mark.parametrize("layout", ["csr", "coo"])
 def test_attention_weights_in_the_sparse_adjacency_layout(layout):
-    """A sparse adjacency's attention comes back in its layout, [N_dst, N_src, H], as
-    GATConv's does (it returned the input adjacency)."""
+    """A sparse adjacency's attention comes back as GATConv's does: ``(adj, alpha)``, ``adj``
+    in the adjacency's layout, [N_dst, N_src, H] (it returned the adjacency alone, not the
+    pair GATConv returns)."""
+    from torch_geometric.nn import GATConv
     from torch_geometric.utils import to_torch_coo_tensor, to_torch_csr_tensor
 
     torch.manual_seed(0)
@@ -460,9 +462,13 @@ def test_attention_weights_in_the_sparse_adjacency_layout(layout):
     ref, (_, alpha) = conv(x, ei, return_attention_weights=True)
     make = to_torch_csr_tensor if layout == "csr" else to_torch_coo_tensor
     adj_t = make(ei.flip(0), size=(6, 6))  # adj_t[dst, src], PyG's convention
-    out, weights = conv(x, adj_t, return_attention_weights=True)
+    out, (weights, flat) = conv(x, adj_t, return_attention_weights=True)
     torch.testing.assert_close(out, ref, atol=1e-5, rtol=1e-5)
     assert weights.layout == adj_t.layout and weights.shape == (6, 6, 2)
+    assert flat.shape == alpha.shape
+    # GATConv's form on the same adjacency: (out, (adj, alpha))
+    _, (gat_adj, gat_alpha) = GATConv(16, 4, heads=2)(x, adj_t, return_attention_weights=True)
+    assert gat_adj.layout == weights.layout and gat_alpha.shape == flat.shape
     dense = weights.to_dense()
     torch.testing.assert_close(dense[ei[1], ei[0]], alpha, atol=1e-6, rtol=1e-5)
     assert float(dense.sum()) == pytest.approx(float(alpha.sum()), abs=1e-5)  # nothing else

@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from strl_pyg.geometry import epipolar_residuals
-from strl_pyg.geometry import relative_pose_from_c2w
+from strl_pyg.geometry import epipolar_residuals, relative_pose_from_c2w
 from strl_pyg.synthetic import SCENE_KINDS, SceneConfig, generate_pair
 from strl_pyg.synthetic.match_quality import line_transfer_error, point_transfer_error
 
@@ -141,7 +140,7 @@ def test_visibility_cull_renders_what_every_quad_would(kind, monkeypatch):
     for (R, t), f in zip(views, fast, strict=True):
         ref = render.render_view(scene.quads, K, R, t, size, cfg.near, scene.background,
                                  scene.gradient)
-        for a, b in zip((f.image, f.depth, f.ids), (ref.image, ref.depth, ref.ids)):
+        for a, b in zip((f.image, f.depth, f.ids), (ref.image, ref.depth, ref.ids), strict=True):
             np.testing.assert_array_equal(a, b)
     assert skipped > 0
 

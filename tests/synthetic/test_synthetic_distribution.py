@@ -12,8 +12,8 @@ import torch
 from torch_geometric.loader import DataLoader
 
 from strl_pyg.data import keys as K
-from strl_pyg.datasets import InfiniteSyntheticPairs, SyntheticPairs
 from strl_pyg.data.keys import PAIR_ID, SUBSET
+from strl_pyg.datasets import InfiniteSyntheticPairs, SyntheticPairs
 from strl_pyg.datasets.synthetic import _scene_fingerprint
 from strl_pyg.geometry import epipolar_residuals
 from strl_pyg.synthetic import (

@@ -12,10 +12,10 @@ import pytest
 import torch
 
 from strl_pyg import cli
-from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.model import StrLPoseConfig
-from strl_pyg.training.checkpoints import init_weights, rng_state, set_rng_state
+from strl_pyg.model.strl_pose import StrLPose
 from strl_pyg.training import CHECKPOINT_VERSION, load_checkpoint, save_checkpoint
+from strl_pyg.training.checkpoints import init_weights, rng_state, set_rng_state
 from strl_pyg.utils.io import UnsafeFileError, one_line, safe_torch_load
 
 REPO = Path(__file__).resolve().parents[2]

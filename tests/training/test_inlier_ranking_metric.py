@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import torch
 
+from strl_pyg.metrics.stats import roc_auc
 from strl_pyg.training import TrainConfig
 from strl_pyg.training.config import BEST_METRICS
-from strl_pyg.metrics.stats import roc_auc
 from strl_pyg.training.validation import inlier_ranking_auc
 
 

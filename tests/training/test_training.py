@@ -9,7 +9,6 @@ import pytest
 import torch
 
 from strl_pyg.geometry import Pose
-from strl_pyg.training.loop import train
 from strl_pyg.training import (
     StepBatchSampler,
     TrainConfig,
@@ -17,6 +16,7 @@ from strl_pyg.training import (
     mean_pose,
     plot_history,
 )
+from strl_pyg.training.loop import train
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -140,9 +140,9 @@ def test_the_rotation_weight_reaches_the_pose_loss():
 
     import torch
 
+    from strl_pyg.training.commandline import config_from_args
     from strl_pyg.training.config import add_train_arguments
     from strl_pyg.training.loop import losses_for
-    from strl_pyg.training.commandline import config_from_args
 
     ap = add_train_arguments(argparse.ArgumentParser())
     cfg = config_from_args(ap.parse_args(["--rot-weight", "3"]), ap)
@@ -167,9 +167,9 @@ def test_beta_reaches_the_pose_loss():
 
     import torch
 
+    from strl_pyg.training.commandline import config_from_args
     from strl_pyg.training.config import add_train_arguments
     from strl_pyg.training.loop import losses_for
-    from strl_pyg.training.commandline import config_from_args
 
     ap = add_train_arguments(argparse.ArgumentParser())
     cfg = config_from_args(ap.parse_args(["--beta", "1"]), ap)
@@ -262,11 +262,11 @@ def test_init_from_loads_weights_and_rejects_other_architectures(tmp_path):
 
 @pytest.mark.slow  # a training run: the slow tier
 def test_geometric_head_trains_on_a_scene_distribution_from_regression_weights(tmp_path):
-    from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.model import StrLPoseConfig
+    from strl_pyg.model.strl_pose import StrLPose
+    from strl_pyg.training import shuffle_point_matches
     from strl_pyg.training.config import TrainConfig
     from strl_pyg.training.loop import train
-    from strl_pyg.training import shuffle_point_matches
 
     base = StrLPose(StrLPoseConfig.ablation("full", hidden=16, layers=1, heads=2,
                                             patch_features=1))
@@ -380,8 +380,8 @@ def test_the_default_recipe_is_the_studys_and_the_papers_is_one_dict_away():
     import argparse
 
     from strl_pyg.training import PAPER_RECIPE
-    from strl_pyg.training.config import add_train_arguments
     from strl_pyg.training.commandline import config_from_args
+    from strl_pyg.training.config import add_train_arguments
 
     d = TrainConfig()
     assert (d.lr, d.lr_schedule, d.warmup_steps, d.beta, d.loss) == (

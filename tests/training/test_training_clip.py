@@ -46,8 +46,8 @@ def test_the_relative_clip_follows_the_median_of_recent_norms():
 def test_the_command_line_turns_the_clip_off_at_0_and_refuses_a_negative_one():
     import argparse
 
-    from strl_pyg.training.config import add_train_arguments
     from strl_pyg.training.commandline import config_from_args
+    from strl_pyg.training.config import add_train_arguments
 
     ap = add_train_arguments(argparse.ArgumentParser())
     assert config_from_args(ap.parse_args(["--grad-clip", "0"]), ap).grad_clip is None

@@ -80,6 +80,7 @@ def _read_lightglue(d, batch_index, line_endpoints) -> dict:
         i0, i1 = per_node
         scores = scores_at(d, "matching_scores0", len(kp0), i0)
     else:
+        assert per_pair is not None  # one of the two was read (checked above)
         i0, i1 = per_pair
         scores = scores_at(d, "scores", len(i0), None)
         if scores is None:

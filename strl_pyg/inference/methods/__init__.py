@@ -6,7 +6,8 @@ they are the first entries of :data:`METHODS <strl_pyg.inference.registry.METHOD
 
 * ``regression`` (:mod:`.regression`): the network's pose head (resampled graph, as in
   training).
-* ``opencv``, ``poselib`` (:mod:`.classical`: :class:`OpenCV`, :class:`PoseLib`): the classical essential-matrix solvers
+* ``opencv``, ``poselib`` (:mod:`.classical`: :class:`OpenCV`, :class:`PoseLib`): the classical
+  essential-matrix solvers
   (:mod:`strl_pyg.estimation.classical`).
 * ``fused`` (:mod:`.fused`): the network and the first ``"ok"`` classical pose combined in
   information form (:func:`~strl_pyg.estimation.pose_fusion.fuse_poses`).
@@ -37,7 +38,8 @@ from strl_pyg.inference.methods.vanishing_point import (
     VanishingPointChecked,
 )
 
-__all__ = ["Regression", "Classical", "OpenCV", "PoseLib", "Geometric", "Guided", "Fused", "VanishingPoint",
+__all__ = ["Regression", "Classical", "OpenCV", "PoseLib", "Geometric", "Guided", "Fused",
+           "VanishingPoint",
            "VanishingPointChecked", "VP_CHECK_ANGLE_DEG", "VP_CHECK_SUPPORT_SLACK", "swap_term",
            "builtin_methods", "PoseMethod", "FunctionMethod", "DESCRIPTION", "CLASSICAL"]
 

@@ -23,7 +23,8 @@ class PoseMethod:
     it returns one :class:`~strl_pyg.inference.MethodResult`. What it needs and how its result
     is treated are class attributes, its description (:data:`DESCRIPTION`: ``name``, ``label``,
     ``summary`` (a sentence for the methods table), ``requires`` (an optional package),
-    ``needs_lines`` (skipped without line matches), ``min_points``, ``needs_intrinsics``, ``reads_lines``, ``uses_network``, ``depends_on``,
+    ``needs_lines`` (skipped without line matches), ``min_points``, ``needs_intrinsics``,
+    ``reads_lines``, ``uses_network``, ``depends_on``,
     ``support_checked``, ``bootstrapped``, ``classical_base``, ``needs_geometric_head``), and
     :meth:`available` says whether it is installed. Register one with
     ``register_method(MyMethod())``; the built-in ones are in
@@ -82,7 +83,8 @@ class FunctionMethod(PoseMethod):
     """A function ``fn(matches, context) -> MethodResult`` as a :class:`PoseMethod`, with its
     description given as keywords (:data:`DESCRIPTION`) and ``available`` a callable."""
 
-    def __init__(self, name: str, fn: Callable[..., Any], available: Callable[[], bool] | None = None,
+    def __init__(self, name: str, fn: Callable[..., Any],
+                 available: Callable[[], bool] | None = None,
                  **description: Any) -> None:
         unknown = sorted(set(description) - set(DESCRIPTION))
         if unknown:

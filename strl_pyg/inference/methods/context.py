@@ -15,10 +15,7 @@ import torch
 
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.estimation.classical import (
-    OPENCV,
-    POSELIB,
     estimate_relative_pose,
-    preferred_solver,
 )
 from strl_pyg.estimation.uncertainty import FAR_ROTATION_DEG, FAR_TRANSLATION_DEG, MIN_BOOTSTRAP
 from strl_pyg.inference.network import network_pose
@@ -95,9 +92,13 @@ def _solve(name: str, matches: PairMatches, ctx: MethodContext) -> Any:
 
 def classical_base(ctx: MethodContext) -> str:
     """The classical solver a method reads: the one the run holds a result of (PoseLib first),
-    else PoseLib where installed, else OpenCV; a method's :data:`~strl_pyg.inference.methods.base.CLASSICAL` dependency is that
-    solver (:func:`~strl_pyg.inference.registry.methods_needed`)."""
-    return next((c for c in (POSELIB, OPENCV) if c in ctx.results), preferred_solver())
+    else PoseLib where installed, else OpenCV; a method's
+    :data:`~strl_pyg.inference.methods.base.CLASSICAL` dependency is that
+    solver (:func:`~strl_pyg.inference.registry.methods_needed`):
+    :func:`~strl_pyg.inference.registry.classical_method` of the run's results."""
+    from strl_pyg.inference.registry import classical_method  # the registry imports methods
+
+    return classical_method(ctx.results)
 
 
 #: The point-poor regime, one bound for everything that depends on it: at or below this many

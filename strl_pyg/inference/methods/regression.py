@@ -10,10 +10,14 @@ import numpy as np
 import torch
 
 from strl_pyg.data.matches import PairMatches
-from strl_pyg.estimation.classical import preferred_solver
 from strl_pyg.estimation.uncertainty import data_covariance, swap_covariance
 from strl_pyg.inference.methods.base import PoseMethod
-from strl_pyg.inference.methods.context import DATA_CHECK_MIN_POINTS, MethodContext, _solve
+from strl_pyg.inference.methods.context import (
+    DATA_CHECK_MIN_POINTS,
+    MethodContext,
+    _solve,
+    classical_base,
+)
 from strl_pyg.inference.network import network_pose
 from strl_pyg.inference.record import MethodResult
 from strl_pyg.inference.status import Status
@@ -111,7 +115,7 @@ def _data_disagreement(matches: PairMatches, pose: Any,
     n = matches.num_distinct_points
     if n < DATA_CHECK_MIN_POINTS:
         return f"{n} distinct point matches (fewer than {DATA_CHECK_MIN_POINTS})"
-    name = preferred_solver()
+    name = classical_base(ctx)
     res = _solve(name, matches, ctx)
     if not res.success:
         return f"{name} found no pose"

@@ -83,7 +83,8 @@ def second_motion(T: np.ndarray, run) -> dict | None:
 
 
 def _second_motion(T: np.ndarray, run) -> dict | None:
-    from strl_pyg.estimation.classical import estimate_relative_pose, preferred_solver
+    from strl_pyg.estimation.classical import estimate_relative_pose
+    from strl_pyg.inference.registry import classical_method
 
     matches, geo, cfg = run.matches, run.geometry, run.ctx.config
     first = run.pose_inliers(T)
@@ -99,7 +100,8 @@ def _second_motion(T: np.ndarray, run) -> dict | None:
         return None  # too few left out to hold a second motion that counts
     others = replace(matches, points0=matches.points0[rest], points1=matches.points1[rest],
                      point_scores=None, lines0=None, lines1=None, line_scores=None)
-    solved = estimate_relative_pose(others, preferred_solver(), cfg.threshold_px, seed=cfg.seed)
+    solver = classical_method(run.ctx.results)
+    solved = estimate_relative_pose(others, solver, cfg.threshold_px, seed=cfg.seed)
     inl2 = np.asarray(solved.inliers, bool) if solved.success else np.zeros(len(rest), bool)
     n2 = int(inl2.sum())
     moving = n2 >= need_moving and float(np.median(turn[rest][inl2])) >= moving_at
