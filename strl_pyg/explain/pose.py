@@ -41,6 +41,25 @@ __all__ = ["PoseExplainerModel", "PoseExplanation", "explain_pose", "explain_mat
 EXPLAINERS = ("gnn", "attention", "saliency")
 
 
+#: Why an explainer's edge mask is refused on the pose model (its layers see other edges)
+EDGE_MASK_REFUSED = (
+    "Expected a node mask (Explainer(..., node_mask_type='object', edge_mask_type=None), as "
+    "strl_pyg.explain.explain_pose does) (got an edge mask: the explainer's mask would be "
+    "applied to every layer of the pose model, whose edge sets differ: complete attention has "
+    "no explicit edges and the line layer its own)")
+
+
+def refuse_edge_masks(model: torch.nn.Module) -> None:
+    """A one-line ``ValueError`` (:data:`EDGE_MASK_REFUSED`) where an explainer set an edge
+    mask on the layers of ``model`` (PyG's ``set_masks``); the masks are cleared first, so the
+    model is as it was (PyG's explainer does not clear them when its model raises)."""
+    if any(getattr(m, "_edge_mask", None) is not None for m in model.modules()):
+        from torch_geometric.explain.algorithm.utils import clear_masks
+
+        clear_masks(model)
+        raise ValueError(EDGE_MASK_REFUSED)
+
+
 class PoseExplainerModel(nn.Module):
     """``StrLPose`` on one pair graph with PyG's explainer calling convention (module
     docstring). ``model(x, edge_index)`` -> ``[1, 7]``."""
@@ -77,6 +96,7 @@ class PoseExplainerModel(nn.Module):
         if x.dim() != 2 or x.shape != (self.num_nodes, 1):
             raise ValueError(f"Expected x as one gate per node, shape [{self.num_nodes}, 1] "
                              f"(got {tuple(x.shape)})")
+        refuse_edge_masks(self.model)
         out = self.model(self.data, node_gate=x)
         return torch.cat([out.quaternion, nn.functional.normalize(out.translation, dim=-1)],
                          dim=-1)

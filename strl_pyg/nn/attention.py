@@ -247,7 +247,8 @@ class AttentionConv(MessagePassing):
         ``[2, E]`` or a :class:`CompleteEdges` marker; ``batch`` graph ids for complete
         attention (a tensor, or a ``(source, target)`` pair); ``query`` the query features of
         the target nodes (default: the target features); ``complete=True``: complete attention
-        within each graph of ``batch``, with ``edge_index=None``; ``layout``: for complete
+        within each graph of ``batch``, with ``edge_index=None`` (without ``batch`` nor ``layout``
+        all the nodes are one graph); ``layout``: for complete
         attention, a :class:`~strl_pyg.nn.DenseLayout` of the nodes (or a ``(source,
         target)`` pair) built once by the caller, in place of graph ids: the layer then never
         synchronises with the host (graph ids are read on the host on every call);
@@ -315,6 +316,12 @@ class AttentionConv(MessagePassing):
 
             edge_index = complete_edge_index(ids(ls), ids(ld), ls.num_graphs)
         alpha, given = None, edge_index
+        if isinstance(edge_index, CompleteEdges) and getattr(self, "_edge_mask", None) \
+                is not None:
+            raise ValueError("Expected explicit edges for an explainer's edge mask (got "
+                             "complete attention, which has none): explain nodes instead "
+                             "(node_mask_type='object', strl_pyg.explain), or give "
+                             "materialize_complete_edges(data)'s edges")
         if isinstance(edge_index, CompleteEdges):
             msg = self._dense(q, k, v, *_complete_layouts(edge_index, batch, layout, *size))
         else:

@@ -98,3 +98,40 @@ def test_bad_calls_refuse_in_one_line():
         explain_pose(model, g, "gnn", epochs=0)
     with pytest.raises(ValueError, match="one gate per node"):
         PoseExplainerModel(model, g)(torch.ones(3, 1))
+
+
+def test_an_edge_mask_on_the_pose_model_is_refused_in_one_line():
+    """Before: GNNExplainer with an edge mask met a bare AssertionError inside PyG (its one mask
+    was applied to the line layer's edges too), or "Could not compute gradients for edges" on
+    complete attention. The node-mask path is the one that works; the refusal names it."""
+    from torch_geometric.explain.algorithm import GNNExplainer
+
+    model, g = small_model(), pair()
+    adapter = PoseExplainerModel(model, g)
+    x, ei = adapter.inputs()
+    explainer = Explainer(adapter, GNNExplainer(epochs=2), explanation_type="model",
+                          edge_mask_type="object", node_mask_type=None,
+                          model_config=dict(mode="regression", task_level="graph",
+                                            return_type="raw"))
+    with pytest.raises(ValueError, match="Expected a node mask .*node_mask_type='object'"):
+        explainer(x, ei)
+    # the masks are cleared with the refusal: the node path works afterwards
+    assert explain_pose(model, g, "gnn", epochs=2).points.shape == (24,)
+
+
+def test_an_edge_mask_on_complete_attention_is_refused_by_the_layer():
+    from torch_geometric.explain.algorithm.utils import clear_masks, set_masks
+
+    from strl_pyg.data import CompleteEdges
+    from strl_pyg.nn.attention import AttentionConv
+
+    conv = AttentionConv(8, heads=2)
+    x = torch.randn(5, 8)
+    set_masks(conv, torch.ones(25, requires_grad=True), torch.zeros(2, 25, dtype=torch.long),
+              apply_sigmoid=True)
+    try:
+        with pytest.raises(ValueError, match="Expected explicit edges for an explainer's edge"):
+            conv(x, CompleteEdges())
+    finally:
+        clear_masks(conv)
+    assert conv(x, CompleteEdges()).shape == (5, 8)

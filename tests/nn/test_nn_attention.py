@@ -467,8 +467,35 @@ def test_attention_weights_in_the_sparse_adjacency_layout(layout):
     assert weights.layout == adj_t.layout and weights.shape == (6, 6, 2)
     assert flat.shape == alpha.shape
     # GATConv's form on the same adjacency: (out, (adj, alpha))
-    _, (gat_adj, gat_alpha) = GATConv(16, 4, heads=2)(x, adj_t, return_attention_weights=True)
+    gat = GATConv(16, 4, heads=2, add_self_loops=False)
+    _, (gat_adj, gat_alpha) = gat(x, adj_t, return_attention_weights=True)
     assert gat_adj.layout == weights.layout and gat_alpha.shape == flat.shape
     dense = weights.to_dense()
     torch.testing.assert_close(dense[ei[1], ei[0]], alpha, atol=1e-6, rtol=1e-5)
     assert float(dense.sum()) == pytest.approx(float(alpha.sum()), abs=1e-5)  # nothing else
+
+
+def test_an_out_of_range_edge_index_is_a_one_line_error():
+    """Before: PyG's raw IndexError from inside its gather."""
+    conv = AttentionConv(8, heads=2)
+    x = torch.randn(4, 8)
+    with pytest.raises(ValueError, match=r"Expected edge_index\[0\] \(source nodes\) in "
+                                         r"\[0, 3\] \(got values from 0 to 7\)"):
+        conv(x, torch.tensor([[0, 7], [1, 2]]))
+    with pytest.raises(ValueError, match=r"Expected edge_index\[1\] \(target nodes\) in "
+                                         r"\[0, 2\] \(got values from -1 to 1\)"):
+        conv((x, x[:3]), torch.tensor([[0, 1], [1, -1]]))
+    assert conv(x, torch.tensor([[0, 3], [1, 2]])).shape == (4, 8)
+
+
+def test_complete_attention_without_graph_ids_is_one_graph():
+    """``complete=True`` with no ``batch`` nor ``layout``: all the nodes are one graph
+    (documented), the same as graph ids of zeros."""
+    torch.manual_seed(0)
+    conv = AttentionConv(8, heads=2).eval()
+    x = torch.randn(6, 8)
+    one = conv(x, complete=True)
+    zeros = conv(x, complete=True, batch=torch.zeros(6, dtype=torch.long))
+    torch.testing.assert_close(one, zeros)
+    two = conv(x, complete=True, batch=torch.tensor([0, 0, 0, 1, 1, 1]))
+    assert not torch.allclose(one, two)
