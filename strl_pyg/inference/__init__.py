@@ -21,6 +21,8 @@ from strl_pyg.utils.lazy import lazy_exports
 _EXPORTS = {
     "STATUSES": "strl_pyg.inference.record",
     "Status": "strl_pyg.inference.status",
+    "network_poses": "strl_pyg.inference.network",
+    "NetworkPoses": "strl_pyg.inference.network",
     "Verdict": "strl_pyg.inference.status",
     "RULES": "strl_pyg.inference.rules",
     "PoseRule": "strl_pyg.inference.rules",

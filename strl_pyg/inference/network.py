@@ -9,6 +9,8 @@ fixed-size resampling (seeded, so a pair always gets the same graph); the forwar
 from __future__ import annotations
 
 import copy
+from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import cv2
@@ -17,7 +19,8 @@ import torch
 
 from strl_pyg.data.matches import PairMatches
 
-__all__ = ["prepare_matches", "prepare_graph", "forward_pose", "network_pose"]
+__all__ = ["prepare_matches", "prepare_graph", "forward_pose", "network_pose", "network_poses",
+           "NetworkPoses", "resampled_rows"]
 
 
 def _convert_image(image: np.ndarray | None, channels: int | None) -> np.ndarray | None:
@@ -81,10 +84,7 @@ def prepare_graph(matches: PairMatches, model: torch.nn.Module, seed: int | None
         return build_pair_graph(m, patch_size=p, keep_images=keep_images)
     n_points, n_lines = int(resample[0]), int(resample[1])
     if not reference:
-        # FixedSizeResample's draws, in its order (points, then lines), on the matches' rows
-        generator = None if seed is None else torch.Generator().manual_seed(seed)
-        pi = resample_indices(m.num_points, n_points, generator)
-        li = resample_indices(m.num_lines, n_lines, generator)
+        pi, li = resampled_rows(m, (n_points, n_lines), seed)
         if pi.numel() or li.numel():
             return build_pair_graph(m._derived(pi.numpy(), li.numpy()), patch_size=p,
                                     keep_images=keep_images)
@@ -92,6 +92,72 @@ def prepare_graph(matches: PairMatches, model: torch.nn.Module, seed: int | None
     if not reference:  # nothing drawn (targets 0, or nothing to draw): the empty graph, no redraw
         return FixedSizeResample(n_points, n_lines, seed=0)(data)
     return FixedSizeResample(n_points, n_lines, seed=seed)(data)
+
+
+def resampled_rows(matches: PairMatches, resample: tuple[int, int],
+                   seed: int | None) -> tuple[torch.Tensor, torch.Tensor]:
+    """The rows of ``matches`` the model's graph holds at ``resample = (points, lines)``:
+    FixedSizeResample's draws, in its order (points, then lines), with ``seed``."""
+    from strl_pyg.data.transforms import resample_indices
+
+    generator = None if seed is None else torch.Generator().manual_seed(seed)
+    pi = resample_indices(matches.num_points, int(resample[0]), generator)
+    li = resample_indices(matches.num_lines, int(resample[1]), generator)
+    return pi, li
+
+
+@dataclass
+class NetworkPoses:
+    """The network on several pairs at once (:func:`network_poses`); row ``i`` is pair ``i``.
+
+    Attributes:
+        output: the model's :class:`~strl_pyg.model.PoseOutput` of the batch.
+        T_0to1: ``[B, 4, 4]`` float64, ``X1 = R X0 + t`` (unit translation direction).
+        sigma_deg: ``[B, 2]`` the network's own RMS rotation and translation-direction angles
+            (:attr:`PoseOutput.sigma_deg <strl_pyg.model.PoseOutput.sigma_deg>`: uncalibrated;
+            :class:`~strl_pyg.inference.PoseEstimator`'s ``regression`` record scales them by
+            the checkpoint's calibration and widens them by the swap and data checks).
+        point_weights: per pair, the geometric head's inlier weight (sigmoid of its logit) of
+            each point node of the pair's graph (``None`` without a geometric head).
+        point_rows: per pair, the input row of each of those point nodes (the graph holds
+            the model's resampled rows: ``resample="model"``).
+    """
+
+    output: Any
+    T_0to1: np.ndarray
+    sigma_deg: np.ndarray
+    point_weights: list[np.ndarray] | None
+    point_rows: list[np.ndarray]
+
+
+def network_poses(model: torch.nn.Module, pairs: Sequence[PairMatches], seed: int | None = 0,
+                  resample: Any = "model", device: Any = None) -> NetworkPoses:
+    """The model on a batch of pairs: each pair's graph as :func:`prepare_graph` builds it (the
+    same graph as one pair at a time: the same poses, to float precision), one
+    ``Batch.from_data_list``, one forward (:func:`forward_pose`). A model that reads pixels
+    (the shipped one: ``visual="pixel"``) needs each pair's images in its matches."""
+    from torch_geometric.data import Batch
+
+    from strl_pyg.data import keys as K
+
+    pairs = list(pairs)
+    if not pairs or not all(isinstance(m, PairMatches) for m in pairs):
+        raise TypeError(f"Expected a non-empty list of PairMatches (got "
+                        f"{[type(m).__name__ for m in pairs][:3] or 'an empty list'})")
+    graphs = [prepare_graph(m, model, seed, resample) for m in pairs]
+    out = forward_pose(model, Batch.from_data_list(graphs), device)
+    T = out.T_0to1.detach().double().cpu().numpy()
+    if isinstance(resample, str) and resample == "model":
+        resample = _metadata(model)["resample"]
+    rows = [resampled_rows(m, resample, seed)[0].numpy() if resample is not None
+            else np.arange(m.num_points) for m in pairs]
+    weights = None
+    geo = out.geometric
+    if geo is not None and geo.point_logits is not None:
+        counts = [int(g[K.POINT].num_nodes) for g in graphs]
+        w = torch.sigmoid(geo.point_logits.detach().double()).cpu().numpy()
+        weights = list(np.split(w, np.cumsum(counts)[:-1]))
+    return NetworkPoses(out, T, out.sigma_deg.detach().double().cpu().numpy(), weights, rows)
 
 
 def _model_dtype(model: torch.nn.Module) -> tuple[torch.dtype, torch.device]:

@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
+import torch
 from torch import Tensor
 
 from strl_pyg.geometry import Pose, quaternion_to_rotation
@@ -171,6 +172,25 @@ class PoseOutput:
     def T_0to1(self) -> Tensor:
         """Homogeneous ``[B, 4, 4]`` matrices."""
         return self.pose.matrix()
+
+    @property
+    def sigma_deg(self) -> Tensor:
+        """``[B, 2]``: the RMS rotation and translation-direction angles (degrees) that
+        :attr:`log_var` predicts, to first order (the square roots of the traces of
+        :func:`~strl_pyg.estimation.pose_fusion.network_covariance`'s blocks). The network's
+        own, uncalibrated: :class:`~strl_pyg.inference.PoseEstimator`'s ``regression`` record
+        scales it by the checkpoint's calibration."""
+        var = torch.exp(self.log_var.double())
+        q = torch.nn.functional.normalize(self.quaternion.double(), dim=-1)
+        # the rotation block is 4 G^T diag(var_q) G, G's rows orthonormal to q: its trace is
+        # 4 sum_i var_i (1 - q_i^2)
+        rot = 4.0 * (var[:, :4] * (1.0 - q * q)).sum(-1)
+        # the translation block projects diag(var_t) / |t|^2 onto the plane normal to t
+        t = self.translation.double()
+        tn2 = (t * t).sum(-1).clamp_min(1e-24)
+        u = t / tn2.sqrt()[:, None]
+        tr = (var[:, 4:] * (1.0 - u * u)).sum(-1) / tn2
+        return torch.rad2deg(torch.stack([rot.sqrt(), tr.sqrt()], dim=-1))
 
 
 #: ``GeometricOutput.status`` codes: the solve's own (``strl_pyg.geometry.essential.OK`` /
