@@ -66,7 +66,7 @@ def prepare_graph(matches: PairMatches, model: torch.nn.Module, seed: int | None
     generator, so the same graph as building every match and resampling the graph: every node
     feature is the node's own); ``reference=True`` takes that longer way."""
     from strl_pyg.data.build import build_pair_graph
-    from strl_pyg.data.transforms import FixedSizeResample, resample_indices
+    from strl_pyg.data.transforms import FixedSizeResample
 
     # every network method (regression, the geometric head, guided, fused through regression)
     # comes through here, so this one check is what refuses descriptor-matched lines
