@@ -259,11 +259,32 @@ def covered(r: dict) -> bool:
     return rot <= 2 * sig[0] and tr <= 2 * sig[1]
 
 
+def replay_multiple(rows: list[dict], comparable: float) -> list[dict]:
+    """Rows of ``run --fit`` (MULTIPLE refusing nothing) as the shipped rule decides them:
+    an ``ok`` pose whose second motion (not repeated structure) has at least ``comparable``
+    of its support is refused by ``multiple``; exact, as MULTIPLE runs before every rule that
+    could refuse what it leaves (a refused pose meets no later rule)."""
+    out = []
+    for r in rows:
+        share = next((v["evidence"].get("share") for v in r.get("verdicts", [])
+                      if v["rule"] == "multiple"
+                      and not v["evidence"].get("repeated_structure")), None)
+        if r["status"] == "ok" and share is not None and share >= comparable:
+            r = {**r, "status": "unreliable", "rule": "multiple", "refused": r["rec"],
+                 "rec": 180.0, "sigma": None, "sigma_with_focal": None}
+        out.append(r)
+    return out
+
+
 def report(args) -> int:
     from strl_pyg.metrics.stats import auc_difference_interval, coverage_interval, roc_auc
 
     out = Path(args.out)
     every = [json.loads(x) for x in (out / "rows.jsonl").open()]
+    if args.replay_fit:
+        from strl_pyg.inference.rules.multiple import MULTIPLE_COMPARABLE
+
+        every = replay_multiple(every, MULTIPLE_COMPARABLE)
     rows = [r for r in every if r["variant"] != "unrelated"]
     unrelated = [r for r in every if r["variant"] == "unrelated"]
     lines = [f"# The recommended pose's status on real photographs ({out.name})", "",
@@ -403,6 +424,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", default="outputs/bench_status_cache")
     ap.add_argument("--variants", type=lambda v: tuple(v.split(",")), default=VARIANTS,
                     help=f"comma-separated variants to run (default {','.join(VARIANTS)})")
+    ap.add_argument("--replay-fit", action="store_true",
+                    help="report: rows of run --fit, with MULTIPLE's shipped threshold applied")
     ap.add_argument("--fit", action="store_true",
                     help="record every rule's evidence with MULTIPLE refusing nothing (for "
                          "benchmarks/studies/fit_rules_loso.py)")

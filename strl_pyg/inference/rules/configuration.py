@@ -37,6 +37,7 @@ class Configuration(PoseRule):
                "decomposition or refused, the others in the sigma")
     order = 30.0
     decides = "replace, refuse, widen"
+    warns = False  # its own warnings are in the pose it leaves (the note, the other plane)
 
     def __call__(self, estimate, run):
         geo = estimate.geometry or run.geometry
