@@ -3,7 +3,8 @@
 
 Per pair, median ms over ``--repeat`` runs after a warm-up, stages interleaved in one process
 on a quiet machine: the front end's SIFT detection on both images (as ``match_images`` runs it),
-the recommended pose of ``PoseEstimator()`` on the pair's matches, and the same pose's
+the recommended pose of ``PoseEstimator(methods="recommended")`` (``predict``'s default) on the
+pair's matches, and the same pose's
 solver alone (PoseLib on the matches, what a plain pipeline would run). The status machinery
 is what the recommended estimate costs beyond that solve: the input check, the two-view
 configuration, the covariance and its bootstrap, the support check, and the rules (the focal
@@ -57,7 +58,7 @@ def main(argv=None) -> int:
     for name, paths, K in _pairs(Path(args.data)):
         g0, g1 = (cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in paths)
         m = fe.match_images(g0, g1, K0=K, K1=K, config=fe.FrontendConfig(lines=False))
-        est = PoseEstimator()
+        est = PoseEstimator(methods="recommended")  # the default predict path
         solver = preferred_solver()
         stages = {
             "sift": lambda g0=g0, g1=g1: fe.points.on_both(
