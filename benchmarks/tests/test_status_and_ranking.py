@@ -9,16 +9,25 @@ import numpy as np
 
 
 def test_each_refusal_names_its_rule():
-    assert bs.rule_of("poselib bootstrap: 3 of 8 resamples found another pose") == "bootstrap"
-    assert bs.rule_of("12 of 40 point matches lie behind a camera (more than 10 %)") == \
-        "cheirality"
-    assert bs.rule_of("two motions (COLMAP's MULTIPLE): 80 of the 199 matches") == "multiple"
-    assert bs.rule_of("a watermark (COLMAP's WATERMARK): 40 of the pose's inliers") == \
-        "watermark"
-    assert bs.rule_of("something new") == "other"
-    assert bs.rules_of({"status": "failed", "rules": []}) == ["no pose (failed)"]
-    assert bs.rules_of({"status": "unreliable", "rules": ["other"],
-                        "reasons": ["two motions (COLMAP's MULTIPLE): 8 of 9"]}) == ["multiple"]
+    """The rule is the record's own (no warning text is matched)."""
+    assert bs.rules_of({"status": "ok", "rule": None}) == []
+    assert bs.rules_of({"status": "unreliable", "rule": "multiple"}) == ["multiple"]
+    assert bs.rules_of({"status": "failed", "rule": "support"}) == ["support"]
+    assert bs.rules_of({"status": "failed", "rule": None}) == ["unnamed"]
+
+
+def test_replaying_multiple_refuses_only_ok_poses_from_the_share():
+    def row(status, share, repeated=False):
+        return {"status": status, "rule": None, "rec": 2.0 if status == "ok" else 180.0,
+                "refused": None, "sigma": [1.0, 2.0], "sigma_with_focal": [1.0, 2.0],
+                "verdicts": [{"rule": "multiple", "action": "reported", "status": "ok",
+                              "evidence": {"share": share, "repeated_structure": repeated}}]}
+
+    out = bs.replay_multiple([row("ok", 0.5), row("ok", 0.1), row("ok", 0.9, True),
+                              row("unreliable", 0.9)], 0.2)
+    assert [r["status"] for r in out] == ["unreliable", "ok", "ok", "unreliable"]
+    assert out[0]["rule"] == "multiple" and out[0]["refused"] == 2.0 and out[0]["rec"] == 180.0
+    assert out[3]["rule"] is None  # refused by another rule before: left as it was
 
 
 def test_perturbed_intrinsics():

@@ -245,8 +245,7 @@ def build_pair_graph(
         data[keys_.K0], data[keys_.K1] = K0.unsqueeze(0), K1.unsqueeze(0)
     if pose is not None:
         data[keys_.T_0TO1] = pose.unsqueeze(0)
-    if keep_images:
-        assert images is not None  # keep_images without images was refused above
+    if keep_images and images is not None:  # (keep_images without images: refused above)
         data[keys_.IMAGE0], data[keys_.IMAGE1] = images[0].unsqueeze(0), images[1].unsqueeze(0)
     return data
 

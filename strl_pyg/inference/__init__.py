@@ -19,14 +19,11 @@ import sys
 from strl_pyg.utils.lazy import lazy_exports
 
 _EXPORTS = {
-    "STATUSES": "strl_pyg.inference.record",
+    "STATUSES": "strl_pyg.inference.status",
     "Status": "strl_pyg.inference.status",
     "network_poses": "strl_pyg.inference.network",
     "NetworkPoses": "strl_pyg.inference.network",
     "Verdict": "strl_pyg.inference.status",
-    "RULES": "strl_pyg.inference.rules",
-    "PoseRule": "strl_pyg.inference.rules",
-    "register_rule": "strl_pyg.inference.rules",
     "ZERO_PARALLAX_PX": "strl_pyg.inference.checks",
     "ZERO_PARALLAX_FRACTION": "strl_pyg.inference.checks",
     "FOCAL_RANGE": "strl_pyg.inference.checks",

@@ -42,9 +42,9 @@ import torch
 
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.geometry.pose import Pose
-from strl_pyg.inference.status import STATUSES, Action, Status, Verdict
+from strl_pyg.inference.status import Action, Status, Verdict
 
-__all__ = ["STATUSES", "Status", "Verdict", "MethodResult", "PoseEstimate"]
+__all__ = ["MethodResult", "PoseEstimate"]
 
 
 @dataclass

@@ -13,10 +13,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from strl_pyg.estimation.classical import BASELINE_METHODS, MIN_POINTS, OPENCV, POSELIB
+from strl_pyg.estimation.classical import BASELINE_METHODS, MIN_POINTS, POSELIB
 from strl_pyg.inference.methods.base import CLASSICAL, FunctionMethod, PoseMethod
 from strl_pyg.inference.methods.builtin import builtin_methods
-from strl_pyg.inference.methods.context import MethodFn
+from strl_pyg.inference.methods.context import MethodFn, classical_solver
 
 __all__ = ["RECOMMENDED", "METHODS", "ENTRY_POINT_GROUP", "methods_table",
            "register_method", "methods_where",
@@ -174,10 +174,8 @@ def classical_method(results: Any = None) -> str:
     """The classical solver the inference layer starts from, decided here only: the one the
     run holds a result of (``results``: a pair's method results; PoseLib first), else PoseLib
     if its method is available (the registry's say, which a caller may change), else OpenCV.
-    The methods' base (``classical_base``), the data check, MULTIPLE's second solve and the
-    focal solves all read it."""
-    found = next((c for c in (POSELIB, OPENCV) if results and c in results), None)
-    return found or (POSELIB if METHODS[POSELIB].available() else OPENCV)
+    The decision is :func:`~strl_pyg.inference.methods.context.classical_solver`'s."""
+    return classical_solver(results, METHODS[POSELIB].available())
 
 
 def checked_method_names(methods: Any) -> tuple[str, ...] | str:

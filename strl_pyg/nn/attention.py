@@ -316,28 +316,13 @@ class AttentionConv(MessagePassing):
 
             edge_index = complete_edge_index(ids(ls), ids(ld), ls.num_graphs)
         alpha, given = None, edge_index
-        if isinstance(edge_index, CompleteEdges) and getattr(self, "_edge_mask", None) \
-                is not None:
-            raise ValueError("Expected explicit edges for an explainer's edge mask (got "
-                             "complete attention, which has none): explain nodes instead "
-                             "(node_mask_type='object', strl_pyg.explain), or give "
-                             "materialize_complete_edges(data)'s edges")
         if isinstance(edge_index, CompleteEdges):
+            if getattr(self, "_edge_mask", None) is not None:
+                raise ValueError(EDGE_MASK_ON_COMPLETE)
             msg = self._dense(q, k, v, *_complete_layouts(edge_index, batch, layout, *size))
         else:
-            edge_index, e = cast(Tensor, as_index(edge_index)), None
-            if edge_attr is not None:
-                assert self.lin_edge is not None  # edge_attr without edge_dim: refused above
-                if edge_attr.dim() != 2 or edge_attr.shape[0] != edge_index.shape[1]:
-                    raise ValueError(f"Expected edge_attr of shape [{edge_index.shape[1]}, "
-                                     f"{self.edge_dim}] (got {tuple(edge_attr.shape)})")
-                e = self.lin_edge(edge_attr).view(-1, H, D)
-            try:
-                alpha = self.edge_updater(edge_index, q=q, k=k, e=e, size=size)
-                msg = self.propagate(edge_index, v=v, alpha=alpha, e=e, size=size)
-            except (IndexError, RuntimeError) as err:  # checked only when PyG's index fails
-                _check_edge_range(edge_index, size, err)
-                raise
+            edge_index = cast(Tensor, as_index(edge_index))
+            alpha, msg = self._explicit(edge_index, q, k, v, edge_attr, size)
         msg = self.lin_out(msg.reshape(-1, H * D))
         out = x_dst + self.update_mlp(torch.cat([x_dst, msg], dim=-1))
         if return_attention_weights:
@@ -345,6 +330,24 @@ class AttentionConv(MessagePassing):
             assert isinstance(edge_index, Tensor) and alpha is not None
             return out, _attention_weights(given, edge_index, alpha)
         return out
+
+    def _explicit(self, edge_index: Tensor, q: Tensor, k: Tensor, v: Tensor,
+                  edge_attr: Tensor | None, size: tuple[int, int]) -> tuple[Tensor, Tensor]:
+        """``(alpha, messages)`` over explicit edges (PyG's message passing); an out-of-range
+        ``edge_index`` is a one-line ``ValueError`` (checked only when PyG's gather fails)."""
+        H, D, e = self.heads, self.head_dim, None
+        if edge_attr is not None:
+            assert self.lin_edge is not None  # edge_attr without edge_dim: refused before
+            if edge_attr.dim() != 2 or edge_attr.shape[0] != edge_index.shape[1]:
+                raise ValueError(f"Expected edge_attr of shape [{edge_index.shape[1]}, "
+                                 f"{self.edge_dim}] (got {tuple(edge_attr.shape)})")
+            e = self.lin_edge(edge_attr).view(-1, H, D)
+        try:
+            alpha = self.edge_updater(edge_index, q=q, k=k, e=e, size=size)
+            return alpha, self.propagate(edge_index, v=v, alpha=alpha, e=e, size=size)
+        except (IndexError, RuntimeError) as err:
+            _check_edge_range(edge_index, size, err)
+            raise
 
     def edge_update(
         self, q_i: Tensor, k_j: Tensor, e: Tensor | None, index: Tensor, ptr: Tensor | None,
@@ -402,6 +405,13 @@ class AttentionConv(MessagePassing):
             f"{self.__class__.__name__}({self.channels}, heads={self.heads}, "
             f"mlp_ratio={self.mlp_ratio}{edge})"
         )
+
+
+#: Why an explainer's edge mask cannot be applied to complete attention.
+EDGE_MASK_ON_COMPLETE = ("Expected explicit edges for an explainer's edge mask (got complete "
+                         "attention, which has none): explain nodes instead "
+                         "(node_mask_type='object', strl_pyg.explain), or give "
+                         "materialize_complete_edges(data)'s edges")
 
 
 def _check_edge_range(edge_index: Tensor, size: tuple[int, int], err: Exception) -> None:

@@ -16,15 +16,15 @@ from strl_pyg.estimation.uncertainty import MAX_SIGMA_DEG, cap_covariance
 from strl_pyg.inference import PoseEstimator
 from strl_pyg.inference.record import MethodResult, PoseEstimate
 from strl_pyg.inference.rules import (
-    RULES,
     PoseRule,
     ordered_rules,
     register_rule,
     rules_table,
     unregister_rule,
 )
+from strl_pyg.inference.rules.registry import RULES
 from strl_pyg.inference.rules.sigma_cap import SigmaCap
-from strl_pyg.inference.status import STATUSES, Action, Status, Verdict
+from strl_pyg.inference.status import STATUSES, Action, Status, Verdict  # noqa: F401
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -108,13 +108,14 @@ class _Shout(PoseRule):
 
 
 def test_a_rule_registered_at_run_time_speaks_on_every_pose():
-    from tests.inference.test_evidence import make_pair
+    from strl_pyg.synthetic import generate_pair
 
     register_rule(_Shout)
     try:
         with pytest.raises(ValueError, match="Expected a new rule name"):
             register_rule(_Shout)
-        est = PoseEstimator(methods=("poselib",), bootstrap=0).estimate(make_pair("general")[0])
+        est = PoseEstimator(methods=("poselib",), bootstrap=0).estimate(
+            generate_pair(2_000_017).matches)
         assert est.pose.status == "ok" and est.pose.verdicts[-1].rule == "shout"
         assert est.pose.verdicts[-1].evidence["n"] == est.matches.num_points
     finally:

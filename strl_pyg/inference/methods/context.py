@@ -15,7 +15,10 @@ import torch
 
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.estimation.classical import (
+    OPENCV,
+    POSELIB,
     estimate_relative_pose,
+    have_poselib,
 )
 from strl_pyg.estimation.uncertainty import FAR_ROTATION_DEG, FAR_TRANSLATION_DEG, MIN_BOOTSTRAP
 from strl_pyg.inference.network import network_pose
@@ -94,11 +97,18 @@ def classical_base(ctx: MethodContext) -> str:
     """The classical solver a method reads: the one the run holds a result of (PoseLib first),
     else PoseLib where installed, else OpenCV; a method's
     :data:`~strl_pyg.inference.methods.base.CLASSICAL` dependency is that
-    solver (:func:`~strl_pyg.inference.registry.methods_needed`):
-    :func:`~strl_pyg.inference.registry.classical_method` of the run's results."""
-    from strl_pyg.inference.registry import classical_method  # the registry imports methods
+    solver (:func:`~strl_pyg.inference.registry.methods_needed`): :func:`classical_solver` of
+    the run's results."""
+    return classical_solver(ctx.results, have_poselib())
 
-    return classical_method(ctx.results)
+
+def classical_solver(results: Any, poselib_available: bool) -> str:
+    """Which classical solver the inference layer starts from, decided here only (the
+    methods' base, the registry's :func:`~strl_pyg.inference.registry.classical_method`, the
+    data check, MULTIPLE's second solve): the one ``results`` (a pair's method results) hold
+    a result of, PoseLib first; else PoseLib where available, else OpenCV."""
+    found = next((c for c in (POSELIB, OPENCV) if results and c in results), None)
+    return found or (POSELIB if poselib_available else OPENCV)
 
 
 #: The point-poor regime, one bound for everything that depends on it: at or below this many

@@ -1,7 +1,8 @@
 """The rules on the recommended pose, as records: one rule a module, one registry.
 
-:data:`RULES` holds the built-in rules (:func:`builtin_rules`), the rules installed packages
-declare (entry-point group :data:`ENTRY_POINT_GROUP`) and those registered at run time
+:data:`~strl_pyg.inference.rules.registry.RULES` holds the built-in rules (:func:`builtin_rules`),
+the rules installed packages
+declare (entry-point group ``strl-pyg.rules``) and those registered at run time
 (:func:`register_rule`), run by increasing :attr:`PoseRule.order` on the recommended pose of
 every pair (:func:`~strl_pyg.inference.rules.base.apply_rules`). Each returns a
 :class:`~strl_pyg.inference.status.Verdict` naming itself; the record keeps them all
@@ -16,113 +17,16 @@ The rules that act on one method's record are named the same way: ``intrinsics``
 
 from __future__ import annotations
 
-from typing import Any
-
 from strl_pyg.inference.rules.base import PoseRule, apply_rules
-from strl_pyg.inference.rules.configuration import Configuration
-from strl_pyg.inference.rules.focal import Focal
-from strl_pyg.inference.rules.multiple import Multiple
-from strl_pyg.inference.rules.sigma_cap import SigmaCap
-from strl_pyg.inference.rules.watermark import Watermark
-from strl_pyg.inference.status import Action, Status, Verdict
+from strl_pyg.inference.rules.registry import (
+    builtin_rules,
+    ordered_rules,
+    register_rule,
+    rules_table,
+    unregister_rule,
+)
 
-__all__ = ["PoseRule", "RULES", "ENTRY_POINT_GROUP", "METHOD_RULES", "builtin_rules",
-           "register_rule", "unregister_rule", "ordered_rules", "rules_table", "apply_rules",
-           "Status", "Verdict", "Action"]
-
-#: The entry-point group through which an installed package adds a rule: in its
-#: ``pyproject.toml``, ``[project.entry-points."strl-pyg.rules"]`` ``myrule =
-#: "mypackage.myrule:MyRule"`` (a :class:`PoseRule` class or instance).
-ENTRY_POINT_GROUP = "strl-pyg.rules"
-
-#: The rules applied to each method's own record (not registry entries: they run inside the
-#: methods' run), by name: what they decide.
-METHOD_RULES = {
-    "intrinsics": "intrinsics that fail the input checks: every pose unreliable",
-    "no_intrinsics": "no K0, K1: no metric pose (the fundamental matrix instead)",
-    "support": "too few point matches within the support band and in front: failed",
-    "cheirality": "too many supporting matches behind a camera: unreliable",
-    "learned_support": "the network's pose without the matches' support: unreliable",
-    "degenerate_input": "zero parallax or normalised coordinates as pixels: degenerate",
-    "too_few_matches": "fewer distinct point matches than the method needs: degenerate",
-    "no_matches": "the front end found no matches: degenerate",
-    "missing_input": "the input lacks what the method reads (images, a skipped method): skipped",
-    "raised": "the method raised an exception: failed",
-    "solver": "the solver found no pose: failed",
-}
-
-
-def builtin_rules() -> tuple[PoseRule, ...]:
-    """New instances of the built-in rules on the recommended pose."""
-    return (Watermark(), Multiple(), Configuration(), Focal(), SigmaCap())
-
-
-def _installed_rules(taken: set[str]) -> list[PoseRule]:
-    """The rules installed packages declare (:data:`ENTRY_POINT_GROUP`); one that does not
-    load, or whose name is taken, is left out with a one-line warning naming it."""
-    import warnings
-    from importlib.metadata import entry_points
-
-    out: list[PoseRule] = []
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            obj = ep.load()
-            rule = obj() if isinstance(obj, type) else obj
-            if not isinstance(rule, PoseRule) or not isinstance(rule.name, str) \
-                    or not rule.name:
-                raise TypeError(f"expected a PoseRule with a name, got {obj!r}")
-            if rule.name in taken or rule.name in METHOD_RULES or \
-                    any(r.name == rule.name for r in out):
-                raise ValueError(f"the name {rule.name!r} is taken")
-        except Exception as err:  # a third party's plugin must not break the package
-            warnings.warn(f"pose rule entry point {ep.name!r} ({ep.value}) not loaded: "
-                          f"{type(err).__name__}: {err}", stacklevel=2)
-            continue
-        out.append(rule)
-    return out
-
-
-def _build() -> dict[str, PoseRule]:
-    rules = {r.name: r for r in builtin_rules()}
-    rules.update({r.name: r for r in _installed_rules(set(rules))})
-    return rules
-
-
-#: ``name -> PoseRule``: the rules on the recommended pose (module docstring).
-RULES: dict[str, PoseRule] = _build()
-
-
-def ordered_rules() -> list[PoseRule]:
-    """The rules of :data:`RULES` by increasing order (registration order among equals)."""
-    return sorted(RULES.values(), key=lambda r: r.order)
-
-
-def register_rule(rule: Any, replace_existing: bool = False) -> PoseRule:
-    """Adds ``rule`` (a :class:`PoseRule` class or instance) to :data:`RULES`; a taken name is
-    a ``ValueError`` unless ``replace_existing``. Returns the instance."""
-    rule = rule() if isinstance(rule, type) else rule
-    if not isinstance(rule, PoseRule) or not isinstance(rule.name, str) or not rule.name:
-        raise TypeError(f"Expected a PoseRule with a name (got {rule!r})")
-    if (rule.name in RULES and not replace_existing) or rule.name in METHOD_RULES:
-        raise ValueError(f"Expected a new rule name (got {rule.name!r}, which is taken; "
-                         "replace_existing=True replaces a registered rule)")
-    RULES[rule.name] = rule
-    return rule
-
-
-def unregister_rule(name: str) -> PoseRule:
-    """Removes the rule ``name`` from :data:`RULES` (``KeyError`` naming the rules if absent)."""
-    if name not in RULES:
-        raise KeyError(f"Expected one of the rules {sorted(RULES)} (got {name!r})")
-    return RULES.pop(name)
-
-
-def rules_table() -> str:
-    """A markdown table of every rule: the registry's, then the method-level ones."""
-    lines = ["| rule | runs on | decides | what |", "|---|---|---|---|"]
-    for r in ordered_rules():
-        lines.append(f"| `{r.name}` | the recommended pose | {r.decides} | {r.summary} |")
-    for name, what in METHOD_RULES.items():
-        lines.append(f"| `{name}` | each method's pose | {what.split(': ')[-1]} | "
-                     f"{what.split(': ')[0]} |")
-    return "\n".join(lines)
+# the registry's tables (RULES, ENTRY_POINT_GROUP, METHOD_RULES) are read from
+# strl_pyg.inference.rules.registry
+__all__ = ["PoseRule", "builtin_rules", "register_rule", "unregister_rule", "ordered_rules",
+           "rules_table", "apply_rules"]
