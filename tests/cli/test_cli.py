@@ -60,6 +60,7 @@ def test_demo_prints_pose_and_writes_png(checkpoint, tmp_path, capsys):
     assert img is not None and img.shape[0] > 100 and img.std() > 5
 
 
+@pytest.mark.slow
 def test_predict_real_kitti_pair_json(checkpoint, kitti_pair, capsys):
     img0, img1, calib, poses = kitti_pair
     code = cli.main(["predict", img0, img1, "--K", calib, "--checkpoint", checkpoint, "--json",

@@ -118,6 +118,7 @@ def test_the_picture_is_in_colour_and_its_header_fits(tmp_path, held_out_pair, c
                for t in lines if " " in t)
 
 
+@pytest.mark.slow
 def test_explain_draws_the_importance(pair_files, capsys):
     d, K = pair_files
     code = cli_main(["predict", str(d / "0.png"), str(d / "1.png"), "--K", K, "--json",

@@ -188,6 +188,7 @@ def test_evaluate_refuses_a_corrupt_checkpoint_in_one_line(tmp_path, capsys):
     assert "weights_only" not in err and "allow_pickle" not in err
 
 
+@pytest.mark.slow
 def test_python_dash_m_runs_the_command_line(tmp_path):
     res = subprocess.run([sys.executable, "-m", "strl_pyg.evaluation.run", "--checkpoint",
                           str(tmp_path / "nope.pt")], capture_output=True, text=True,
@@ -319,6 +320,7 @@ def test_sequences_take_commas_as_train_sequences_do(tiny_checkpoint):
         assert args.sequences == ["06", "07"], given
 
 
+@pytest.mark.slow
 def test_evaluate_on_posed_photographs(shared_data, tiny_checkpoint, tmp_path, capsys):
     """Before: `strl-pose evaluate --dataset posed` was refused ('invalid choice')."""
     from strl_pyg import cli

@@ -188,6 +188,7 @@ def test_a_classical_dependency_is_the_solver_asked_for():
     assert methods_needed(["fused"])[:2] == ("regression", classical_method())
 
 
+@pytest.mark.slow
 def test_the_face_gives_the_registry_with_its_built_in_methods():
     """Before: in a fresh process ``from strl_pyg.inference import METHODS`` was an empty
     registry and ``EstimatorConfig(methods="opencv")`` refused every name (the built-in
@@ -228,6 +229,7 @@ def test_a_classical_base_is_the_solver_of_the_run():
         "not calibrated" in w for w in cv.warnings)
 
 
+@pytest.mark.slow
 def test_the_registry_fills_itself_without_the_estimator():
     """Before: the built-in methods were registered by importing the estimator, so the registry
     read alone (``strl_pyg.inference.registry.METHODS``) was empty. Now it holds them from its
@@ -293,6 +295,7 @@ class QuickSolver(PoseMethod):
 '''
 
 
+@pytest.mark.slow
 def test_a_new_solver_is_one_module(tmp_path):
     """A package that declares one module in the ``strl-pyg.methods`` entry-point group adds
     a solver: ``strl-pose methods`` lists it, ``predict --methods`` runs it, its record is in

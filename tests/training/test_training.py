@@ -39,6 +39,7 @@ def states_equal(a, b):
     return all(torch.equal(a[k], b[k]) for k in a) and a.keys() == b.keys()
 
 
+@pytest.mark.slow
 def test_resume_equals_uninterrupted(tmp_path):
     full = train(tiny_config(tmp_path / "full"), progress=False)
     assert full["step"] == 4 and (tmp_path / "full" / "log.csv").exists()

@@ -267,6 +267,7 @@ def test_a_file_that_is_not_a_skipped_step_is_one_line(tmp_path):
         load_skipped_step(tmp_path / "x.pt")
 
 
+@pytest.mark.slow
 def test_resume_takes_what_the_command_line_left_out_from_the_run(tmp_path):
     # reproduction: `train.py --out RUN --resume --steps 6` was refused with every option the
     # run was started with listed as a difference: resuming meant retyping the whole command
