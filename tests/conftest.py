@@ -73,3 +73,33 @@ def held_out_pair():
     from strl_pyg.synthetic import generate_pair
 
     return generate_pair(2_000_017)
+
+
+@pytest.fixture
+def plugin_cli(tmp_path):
+    """``plugin_cli(module, source, group, entry)``: a one-module package declaring ``entry``
+    (``name = module:Object``) in the entry-point ``group``, installed in ``tmp_path``; returns
+    ``cli(*argv, code=0)``, which runs ``python -m strl_pyg.cli`` with it on the path and
+    returns its stdout, asserting the exit code."""
+    import subprocess
+    import sys
+
+    def install(module: str, source: str, group: str, entry: str):
+        (tmp_path / f"{module}.py").write_text(source)
+        info = tmp_path / f"{module}-0.1.dist-info"
+        info.mkdir()
+        (info / "METADATA").write_text(
+            f"Metadata-Version: 2.1\nName: {module.replace('_', '-')}\nVersion: 0.1\n")
+        (info / "entry_points.txt").write_text(f"[{group}]\n{entry}\n")
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+            [str(tmp_path), os.environ.get("PYTHONPATH", "")])}
+
+        def cli(*argv, code=0):
+            out = subprocess.run([sys.executable, "-m", "strl_pyg.cli", *argv], env=env,
+                                 capture_output=True, text=True, timeout=300)
+            assert out.returncode == code, out.stderr[-800:]
+            return out.stdout
+
+        return cli
+
+    return install

@@ -47,26 +47,14 @@ def _installed_methods() -> list[PoseMethod]:
     (:mod:`strl_pyg.inference.methods`, :mod:`strl_pyg.inference.record`) and the lower
     floors (:mod:`strl_pyg.estimation`, :mod:`strl_pyg.geometry`, :mod:`strl_pyg.data`),
     not the estimator or its configuration, and registers nothing itself."""
-    import warnings
-    from importlib.metadata import entry_points
+    from strl_pyg.utils.plugins import load_plugins
 
-    out = []
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            obj = ep.load()
-            method = obj() if isinstance(obj, type) else obj
-            if not isinstance(method, PoseMethod) or not isinstance(method.name, str) \
-                    or not method.name:
-                raise TypeError(f"expected a PoseMethod with a name, got {obj!r}")
-            _check_new(method.name, replace_existing=False)
-            if any(m.name == method.name for m in out):
-                raise ValueError(f"another plugin already took the name {method.name!r}")
-        except Exception as err:  # a third party's plugin must not break the package
-            warnings.warn(f"pose method entry point {ep.name!r} ({ep.value}) not loaded: "
-                          f"{type(err).__name__}: {err}", stacklevel=2)
-            continue
-        out.append(method)
-    return out
+    def check(method: PoseMethod, loaded: list) -> None:
+        _check_new(method.name, replace_existing=False)
+        if any(m.name == method.name for m in loaded):
+            raise ValueError(f"another plugin already took the name {method.name!r}")
+
+    return load_plugins(ENTRY_POINT_GROUP, PoseMethod, "pose method", check)
 
 
 def register_method(name: str | PoseMethod, fn: MethodFn | None = None, *,

@@ -18,7 +18,20 @@ from typing import Any
 __all__ = ["Status", "Action", "Verdict", "STATUSES"]
 
 
-class Status(str, enum.Enum):
+class _Named(str, enum.Enum):
+    """A str enum that reads, formats and hashes as its value (``Status.OK == "ok"``, and a
+    dict keyed by ``"ok"`` finds ``Status.OK``)."""
+
+    def __str__(self) -> str:
+        return self.value
+
+    def __format__(self, spec: str) -> str:
+        return format(self.value, spec)
+
+    __hash__ = str.__hash__
+
+
+class Status(_Named):
     """What a pose record is (``strl_pyg.inference.record``'s module docstring)."""
 
     #: a pose to use, with its sigma
@@ -33,15 +46,6 @@ class Status(str, enum.Enum):
     FAILED = "failed"
     #: a method's record only: the input lacks what the method reads
     SKIPPED = "skipped"
-
-    def __str__(self) -> str:
-        return self.value
-
-    def __format__(self, spec: str) -> str:
-        return format(self.value, spec)
-
-    # equal to its string, so hashed as it: a dict keyed by "ok" finds Status.OK
-    __hash__ = str.__hash__
 
     @classmethod
     def of(cls, value: Any) -> Status:
@@ -62,7 +66,7 @@ class Status(str, enum.Enum):
 STATUSES: tuple[str, ...] = tuple(s.value for s in Status)
 
 
-class Action(str, enum.Enum):
+class Action(_Named):
     """What a rule's verdict did to the pose."""
 
     #: the pose was refused: its status is the verdict's (no ``T_0to1``)
@@ -73,9 +77,6 @@ class Action(str, enum.Enum):
     REPORTED = "reported"
     #: the pose was replaced by another answer (a pure rotation's rotation)
     REPLACED = "replaced"
-
-    def __str__(self) -> str:
-        return self.value
 
 
 @dataclass(frozen=True)

@@ -296,31 +296,15 @@ class QuickSolver(PoseMethod):
 
 
 @pytest.mark.slow
-def test_a_new_solver_is_one_module(tmp_path):
+def test_a_new_solver_is_one_module(tmp_path, plugin_cli):
     """A package that declares one module in the ``strl-pyg.methods`` entry-point group adds
     a solver: ``strl-pose methods`` lists it, ``predict --methods`` runs it, its record is in
     the JSON, support-checked like the built-in solvers."""
     import json
-    import os
-    import subprocess
-    import sys
 
-    (tmp_path / "quick_solver.py").write_text(PLUGIN)
-    info = tmp_path / "quick_solver-0.1.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: quick-solver\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text(
-        "[strl-pyg.methods]\nquick = quick_solver:QuickSolver\n")
-    pair = generate_pair(2_000_017).matches
-    pair.save(tmp_path / "pair.npz")
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
-        [str(tmp_path), os.environ.get("PYTHONPATH", "")])}
-
-    def cli(*argv, code=0):
-        out = subprocess.run([sys.executable, "-m", "strl_pyg.cli", *argv], env=env,
-                             capture_output=True, text=True, timeout=300)
-        assert out.returncode == code, out.stderr[-800:]
-        return out.stdout
+    cli = plugin_cli("quick_solver", PLUGIN, "strl-pyg.methods",
+                     "quick = quick_solver:QuickSolver")
+    generate_pair(2_000_017).matches.save(tmp_path / "pair.npz")
 
     listed = cli("methods")
     assert "| `quick` | OpenCV's essential matrix with a fixed budget of 200 RANSAC" in listed

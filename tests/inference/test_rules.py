@@ -147,31 +147,15 @@ class FewInliers(PoseRule):
 
 
 @pytest.mark.slow
-def test_a_new_rule_is_one_module(tmp_path):
+def test_a_new_rule_is_one_module(tmp_path, plugin_cli):
     """A package that declares one module in the ``strl-pyg.rules`` entry-point group adds a
     rule: ``strl-pose rules`` lists it, ``predict`` applies it and its name is the record's
     ``rule``."""
-    import os
-    import subprocess
-    import sys
-
     from strl_pyg.synthetic import generate_pair
 
-    (tmp_path / "few_inliers.py").write_text(PLUGIN)
-    info = tmp_path / "few_inliers-0.1.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: few-inliers\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text(
-        "[strl-pyg.rules]\nfew_inliers = few_inliers:FewInliers\n")
+    cli = plugin_cli("few_inliers", PLUGIN, "strl-pyg.rules",
+                     "few_inliers = few_inliers:FewInliers")
     generate_pair(2_000_017).matches.save(tmp_path / "pair.npz")
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
-        [str(tmp_path), os.environ.get("PYTHONPATH", "")])}
-
-    def cli(*argv, code=0):
-        out = subprocess.run([sys.executable, "-m", "strl_pyg.cli", *argv], env=env,
-                             capture_output=True, text=True, timeout=300)
-        assert out.returncode == code, out.stderr[-800:]
-        return out.stdout
 
     assert "| `few_inliers` | the recommended pose | refuse |" in cli("rules")
     record = json.loads(cli("predict", "--matches", str(tmp_path / "pair.npz"), "--methods",

@@ -48,11 +48,13 @@ def segregation(points: np.ndarray, group: np.ndarray, k: int = 5) -> float:
     if g < 2 or g >= n:
         return float("nan")
     k = min(k, n - 1)
-    d = np.linalg.norm(points[group][:, None, :] - points[None, :, :], axis=2)
-    d[np.arange(g), np.flatnonzero(group)] = np.inf  # not itself
-    nearest = np.argpartition(d, k - 1, axis=1)[:, :k]
-    same = float(group[nearest].mean())
-    return same / ((g - 1) / (n - 1))
+    rows, same = np.flatnonzero(group), 0
+    for start in range(0, g, 256):  # 256 rows of distances at a time: memory bounded in n
+        idx = rows[start:start + 256]
+        d = np.linalg.norm(points[idx][:, None, :] - points[None, :, :], axis=2)
+        d[np.arange(len(idx)), idx] = np.inf  # not itself
+        same += int(group[np.argpartition(d, k - 1, axis=1)[:, :k]].sum())
+    return (same / (g * k)) / ((g - 1) / (n - 1))
 
 #: The second motion refuses the pose where its inliers are at least this share of the pose's.
 #: Chosen on the real_scenes training scenes, leave-one-scene-out

@@ -46,26 +46,14 @@ def builtin_rules() -> tuple[PoseRule, ...]:
 def _installed_rules(taken: set[str]) -> list[PoseRule]:
     """The rules installed packages declare (:data:`ENTRY_POINT_GROUP`); one that does not
     load, or whose name is taken, is left out with a one-line warning naming it."""
-    import warnings
-    from importlib.metadata import entry_points
+    from strl_pyg.utils.plugins import load_plugins
 
-    out: list[PoseRule] = []
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            obj = ep.load()
-            rule = obj() if isinstance(obj, type) else obj
-            if not isinstance(rule, PoseRule) or not isinstance(rule.name, str) \
-                    or not rule.name:
-                raise TypeError(f"expected a PoseRule with a name, got {obj!r}")
-            if rule.name in taken or rule.name in METHOD_RULES or \
-                    any(r.name == rule.name for r in out):
-                raise ValueError(f"the name {rule.name!r} is taken")
-        except Exception as err:  # a third party's plugin must not break the package
-            warnings.warn(f"pose rule entry point {ep.name!r} ({ep.value}) not loaded: "
-                          f"{type(err).__name__}: {err}", stacklevel=2)
-            continue
-        out.append(rule)
-    return out
+    def check(rule: PoseRule, loaded: list) -> None:
+        if rule.name in taken or rule.name in METHOD_RULES or \
+                any(r.name == rule.name for r in loaded):
+            raise ValueError(f"the name {rule.name!r} is taken")
+
+    return load_plugins(ENTRY_POINT_GROUP, PoseRule, "pose rule", check)
 
 
 def _build() -> dict[str, PoseRule]:
