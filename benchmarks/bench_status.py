@@ -63,6 +63,8 @@ def perturbed(m, variant: str):
         return m
     if variant == "dup":  # every point match twice (a matcher run on both orders, say)
         return m.select(point_index=np.tile(np.arange(m.num_points), 2))
+    if variant not in VARIANTS:
+        raise ValueError(f"Expected a variant among {VARIANTS} (got {variant!r})")
     K0, K1 = (np.asarray(K, float).copy() for K in (m.K0, m.K1))
     for K in (K0, K1):
         if variant in ("f/2", "2f"):
@@ -416,6 +418,19 @@ def plot(rows, path: Path) -> None:
     plt.close(fig)
 
 
+def _variants(text: str) -> tuple[str, ...]:
+    """``--variants``: comma-separated names of :data:`VARIANTS` (an unknown one would be
+    perturbed as a swap: refused in one line instead)."""
+    import argparse
+
+    names = tuple(v.strip() for v in text.split(",") if v.strip())
+    bad = [v for v in names if v not in VARIANTS]
+    if bad or not names:
+        raise argparse.ArgumentTypeError(f"Expected variants among {','.join(VARIANTS)} (got "
+                                         f"{text!r})")
+    return names
+
+
 def main(argv=None) -> int:
     ap = run_report_parser(__doc__, "benchmarks/results_real_scenes/status/val")
     ap.add_argument("--scenes", choices=("val", "train"), default="val")
@@ -423,7 +438,7 @@ def main(argv=None) -> int:
     ap.add_argument("--focal-range", type=float, default=None,
                     help="the estimator's focal_range (default: EstimatorConfig's)")
     ap.add_argument("--cache", default="outputs/bench_status_cache")
-    ap.add_argument("--variants", type=lambda v: tuple(v.split(",")), default=VARIANTS,
+    ap.add_argument("--variants", type=_variants, default=VARIANTS,
                     help=f"comma-separated variants to run (default {','.join(VARIANTS)})")
     ap.add_argument("--replay-fit", action="store_true",
                     help="report: rows of run --fit, with MULTIPLE's shipped threshold applied")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import bench_inlier_ranking as bir
 import bench_status as bs
 import numpy as np
+import pytest
 
 
 def test_each_refusal_names_its_rule():
@@ -40,6 +41,10 @@ def test_perturbed_intrinsics():
     sw = bs.perturbed(m, "swap").K0
     assert (sw[0, 2], sw[1, 2]) == (240, 320)
     assert bs.perturbed(m, "true") is m
+    with pytest.raises(ValueError, match="Expected a variant among"):
+        bs.perturbed(m, "half")
+    with pytest.raises(SystemExit):
+        bs.main(["run", "--variants", "true,half", "--out", "/nonexistent"])
 
 
 def test_consensus_of_one_motion_and_of_random_matches():
