@@ -307,6 +307,11 @@ def build_parser() -> argparse.ArgumentParser:
     add_train_arguments(p)
     sub.add_parser("evaluate", help="evaluate a checkpoint (see examples/evaluate.py)",
                    add_help=False)
+    p = sub.add_parser("scene", help="a photo collection: a pose per pair, a table and a COLMAP "
+                                     "database for COLMAP's / GLOMAP's mappers")
+    from strl_pyg.cli.scene import add_scene_arguments
+
+    add_scene_arguments(p)
     p = sub.add_parser("bench", help="time the pipeline stages on this machine")
     p.add_argument("--checkpoint", default=None)
     p.add_argument("--repeat", type=int, default=20)
@@ -352,6 +357,10 @@ def _dispatch(argv: list[str]) -> int:
         from strl_pyg.cli.bench import cmd_bench
 
         return cmd_bench(args)
+    if args.command == "scene":
+        from strl_pyg.cli.scene import cmd_scene
+
+        return cmd_scene(args)
     if args.command == "export":
         from strl_pyg.cli.export import cmd_export
 

@@ -11,6 +11,7 @@ import argparse
 import os
 import sys
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -52,10 +53,11 @@ def _K_from_numbers(values: list[float], source: str) -> np.ndarray:
                      f"{source} (got {len(values)})")
 
 
-def _colmap_K(text: str, source: str) -> np.ndarray:
-    """K of the one camera of a COLMAP ``cameras.txt`` (``CAMERA_ID MODEL WIDTH HEIGHT
-    PARAMS[]``), in this package's pixel convention: COLMAP puts the centre of the top-left
-    pixel at (0.5, 0.5), OpenCV and this package at (0, 0), so ``c = c_colmap - 0.5``."""
+def _colmap_camera(text: str, source: str):
+    """The one camera of a COLMAP ``cameras.txt`` (``CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]``)
+    as a :class:`~strl_pyg.geometry.Camera`, in this package's pixel convention: COLMAP puts
+    the centre of the top-left pixel at (0.5, 0.5), OpenCV and this package at (0, 0), so
+    ``c = c_colmap - 0.5``."""
     cams = [ln.split() for ln in text.splitlines() if ln.strip() and not ln.startswith("#")]
     distinct = {tuple(c[1:]) for c in cams}
     if len(distinct) != 1:
@@ -64,20 +66,41 @@ def _colmap_K(text: str, source: str) -> np.ndarray:
     from strl_pyg.geometry.camera import Camera
 
     try:
-        cam = Camera.from_colmap(cams[0][1], cams[0][4:], where=source)
+        return Camera.from_colmap(cams[0][1], cams[0][4:], where=source)
     except ValueError as err:
         raise UsageError(str(err)) from None
-    if cam.distorted:
-        print(f"note: {cam.model} distortion parameters in {source} are not applied: the "
-              "matches must come from undistorted images", file=sys.stderr)
-    return cam.K
+
+
+class _Lens(NamedTuple):
+    """An image's camera as a flag gives it: ``K`` ``[3, 3]`` (pixels of the image as read),
+    its COLMAP ``model`` and ``distortion`` terms (pinhole: ``"PINHOLE"``, ``()``) and where
+    it was read (for messages)."""
+
+    K: np.ndarray
+    model: str = "PINHOLE"
+    distortion: tuple[float, ...] = ()
+    source: str = "the flag"
+
+    @property
+    def distorted(self) -> bool:
+        return any(abs(d) > 1e-9 for d in self.distortion)
 
 
 def read_intrinsics(text_or_path: str) -> np.ndarray:
     """Intrinsics from ``"fx,fy,cx,cy"``, nine comma-separated numbers, or a file holding a
     3x3 matrix (DeMoN ``cam.txt``), a 3x4 projection, KITTI ``calib.txt`` (``P0:`` row), a
     COLMAP ``cameras.txt`` (one camera) or a Strecha ``.camera`` file (K, then distortion,
-    R, centre and size: the first nine numbers)."""
+    R, centre and size: the first nine numbers). A COLMAP camera's distortion is not applied
+    here (a note says so; :func:`read_pair` undistorts the images it reads)."""
+    lens = _read_lens(text_or_path)
+    if lens.distorted:
+        print(f"note: {lens.model} distortion parameters in {lens.source} are not applied: the "
+              "matches must come from undistorted images", file=sys.stderr)
+    return lens.K
+
+
+def _read_lens(text_or_path: str) -> _Lens:
+    """:func:`read_intrinsics` with a COLMAP camera's model and distortion terms."""
     path = Path(text_or_path)
     if path.is_dir():
         raise UsageError(f"Expected an intrinsics file or 'fx,fy,cx,cy' (got the folder "
@@ -91,13 +114,8 @@ def read_intrinsics(text_or_path: str) -> np.ndarray:
         first = next((ln.split() for ln in text.splitlines()
                       if ln.strip() and not ln.startswith("#")), [])
         if len(first) >= 5 and first[0].isdigit() and first[1].replace("_", "").isalpha():
-            K = _colmap_K(text, f"'{path}'")
-            from strl_pyg.data.checks import check_K
-
-            try:
-                return check_K(K, "K")
-            except ValueError as err:
-                raise UsageError(str(err)) from err
+            cam = _colmap_camera(text, f"'{path}'")
+            return _Lens(_checked_K(cam.K), cam.model, cam.distortion, f"'{path}'")
         if path.suffix == ".camera":  # Strecha: K (3 rows), distortion, R, centre, W H
             nums = text.split()
             if len(nums) < 9:
@@ -126,7 +144,10 @@ def read_intrinsics(text_or_path: str) -> np.ndarray:
         raise UsageError(f"Expected numbers for intrinsics in {source} (got {err})") from err
     if not all(np.isfinite(values)):
         raise UsageError(f"Expected finite numbers for intrinsics in {source} (got {values})")
-    K = _K_from_numbers(values, source)
+    return _Lens(_checked_K(_K_from_numbers(values, source)), source=source)
+
+
+def _checked_K(K: np.ndarray) -> np.ndarray:
     from strl_pyg.data.checks import check_K
 
     try:
@@ -212,7 +233,22 @@ def scene_intrinsics(source: str, image: str | os.PathLike,
     of :mod:`strl_pyg.datasets.camera_files`, in their documented conventions): the camera
     whose image is this file, else the one camera whose image has this file name (two with
     the name are refused). With ``size`` ``(H, W)`` of the image as read, a K stored for
-    another resolution of the same aspect is scaled to it (e.g. LLFF's ``images_4``)."""
+    another resolution of the same aspect is scaled to it (e.g. LLFF's ``images_4``).
+    A camera with lens distortion is refused: K alone would not describe the image
+    (:func:`read_pair` undistorts the images it reads instead)."""
+    lens = _scene_lens(source, image, size)
+    if lens.distorted:
+        raise UsageError(f"Expected pinhole images in {lens.source} (got {lens.model} "
+                         f"distortion {lens.distortion} for '{Path(image).name}'): undistort "
+                         "them first, with strl_pyg.geometry.undistort_image or colmap "
+                         "image_undistorter, or give strl-pose the images to undistort")
+    return lens.K
+
+
+def _scene_lens(source: str, image: str | os.PathLike, size: tuple[int, int] | None = None
+                ) -> _Lens:
+    """:func:`scene_intrinsics` with the camera's model and distortion terms (unchanged by
+    the scaling: they act on normalised coordinates)."""
     path, image = Path(source), Path(image)
     try:
         images, listed = _scene_cameras(path, image.name)
@@ -230,12 +266,6 @@ def scene_intrinsics(source: str, image: str | os.PathLike,
                          f"{len(found)}: {', '.join(im.path for im in found[:3])}); give the "
                          "image's path as the cameras list it")
     im = found[0]
-    from strl_pyg.datasets.camera_files import check_pinhole
-
-    try:
-        check_pinhole(im, f"'{path}'")
-    except ValueError as err:
-        raise UsageError(str(err)) from None
     K = np.array(im.K, dtype=np.float64)
     if size is not None and tuple(size) != tuple(im.size):
         sy, sx = size[0] / im.size[0], size[1] / im.size[1]
@@ -246,30 +276,68 @@ def scene_intrinsics(source: str, image: str | os.PathLike,
         # pixel centres: x' + 0.5 = s (x + 0.5)
         K[0, 0], K[0, 2] = K[0, 0] * sx, (K[0, 2] + 0.5) * sx - 0.5
         K[1, 1], K[1, 2] = K[1, 1] * sy, (K[1, 2] + 0.5) * sy - 0.5
-    return K
+    return _Lens(K, im.model, tuple(im.distortion), f"'{path}'")
 
 
 def intrinsics_from_args(args, sizes: tuple | None = None
                          ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """K0 and K1 of ``--K`` / ``--K0`` / ``--K1``: one K each, or a posed scene's cameras
     (:func:`is_scene_cameras`) read for ``args.image0`` / ``args.image1``
-    (:func:`scene_intrinsics`, ``sizes``: the images' ``(H, W)`` as read)."""
+    (:func:`scene_intrinsics`, ``sizes``: the images' ``(H, W)`` as read). For K alone: a
+    scene camera with distortion is refused, a COLMAP file's is noted as not applied."""
+    return _per_image(args, sizes, scene_intrinsics, read_intrinsics)
+
+
+def _per_image(args, sizes: tuple | None, scene, single) -> tuple:
+    """``(of image 0, of image 1)`` from ``--K`` / ``--K0`` / ``--K1``: ``scene(source, image,
+    size)`` for a posed scene's cameras, ``single(value)`` for one camera; ``None`` where no
+    flag gives one."""
     images = (getattr(args, "image0", None), getattr(args, "image1", None))
 
-    def one(flag: str, value: str, k: int) -> np.ndarray:
+    def one(flag: str, value: str, k: int):
         if is_scene_cameras(value):
             if images[k] is None:
                 raise UsageError(f"Expected images to look up in the cameras of {flag} "
                                  f"'{value}' (got none)")
-            return scene_intrinsics(value, images[k], None if sizes is None else sizes[k])
-        return read_intrinsics(value)
+            return scene(value, images[k], None if sizes is None else sizes[k])
+        return single(value)
 
     if args.K:
         return one("--K", args.K, 0), one("--K", args.K, 1)
-    K0 = one("--K0", args.K0, 0) if args.K0 else None
-    K1 = one("--K1", args.K1, 1) if args.K1 else (
-        one("--K0", args.K0, 1) if args.K0 and is_scene_cameras(args.K0) else K0)
-    return K0, K1
+    first = one("--K0", args.K0, 0) if args.K0 else None
+    second = one("--K1", args.K1, 1) if args.K1 else (
+        one("--K0", args.K0, 1) if args.K0 and is_scene_cameras(args.K0) else first)
+    return first, second
+
+
+def _undistorted(image: np.ndarray, lens: _Lens | None, name: str
+                 ) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(image, K)`` as a pinhole camera of ``K`` sees it: a distorted image undistorted
+    (:func:`strl_pyg.geometry.undistort_image`, same K and size; one line on stderr); a model
+    outside :data:`~strl_pyg.geometry.DISTORTION_MODELS` is refused."""
+    if lens is None or not lens.distorted:
+        return image, None if lens is None else lens.K
+    from strl_pyg.geometry.distortion import (
+        DISTORTION_MODELS,
+        opencv_coefficients,
+        undistort_image,
+    )
+
+    if lens.model not in DISTORTION_MODELS:
+        raise UsageError(f"Expected a camera model among {', '.join(DISTORTION_MODELS)} to "
+                         f"undistort '{Path(name).name}' in {lens.source} (got {lens.model} "
+                         "distortion): undistort the images first, e.g. with colmap "
+                         "image_undistorter")
+    try:
+        coeffs = opencv_coefficients(lens.model, lens.distortion)
+        out = undistort_image(image, lens.K, coeffs)
+    except ValueError as err:
+        raise UsageError(f"{err} for '{Path(name).name}' in {lens.source}") from None
+    terms = " ".join(f"{t}={v:g}" for t, v in zip(DISTORTION_MODELS[lens.model],
+                                                   lens.distortion, strict=True))
+    print(f"note: undistorted {Path(name).name} ({lens.model} {terms}) before matching",
+          file=sys.stderr)
+    return out, lens.K
 
 
 def downscale_for_matching(image: np.ndarray, K: np.ndarray | None, max_side: int
@@ -356,9 +424,13 @@ def check_input_file(path: str | os.PathLike, what: str) -> None:
 
 
 def read_pair(args) -> PairInputs:
-    """Reads the pair's images and intrinsics and downscales them to ``--max-side``."""
+    """Reads the pair's images and intrinsics, undistorts an image whose camera has lens
+    distortion (a COLMAP model or NeRF ``k1, k2, p1, p2``: the pinhole image of the same K
+    and size, :func:`_undistorted`) and downscales them to ``--max-side``."""
     img0, img1 = read_image_file(args.image0), read_image_file(args.image1)
-    K0, K1 = intrinsics_from_args(args, (img0.shape[:2], img1.shape[:2]))
+    lens0, lens1 = _per_image(args, (img0.shape[:2], img1.shape[:2]), _scene_lens, _read_lens)
+    img0, K0 = _undistorted(img0, lens0, args.image0)
+    img1, K1 = _undistorted(img1, lens1, args.image1)
     max_side = getattr(args, "max_side", MAX_SIDE)
     small0, sK0, s0 = downscale_for_matching(img0, K0, max_side)
     small1, sK1, s1 = downscale_for_matching(img1, K1, max_side)

@@ -37,8 +37,16 @@ class PosedImage:
         K: ``[3, 3]`` intrinsics in pixels of that file.
         T_c2w: ``[4, 4]`` camera-to-world pose.
         size: ``(H, W)`` of the file when the format states it, else ``None``.
-        distortion: Lens distortion coefficients of the format's model (empty: pinhole).
+        distortion: Lens distortion terms of ``model``, in COLMAP's order for it (empty:
+            pinhole). ``K`` is the pinhole part; the matches of a distorted image come from
+            it undistorted (:func:`strl_pyg.geometry.undistort_image` with ``K`` and
+            ``opencv_coefficients(model, distortion)``, for the models in
+            :data:`strl_pyg.geometry.DISTORTION_MODELS`).
         points: Ids of the 3D points the image observes (COLMAP models), else ``None``.
+        model: The camera model, by COLMAP's name: the COLMAP model's own; ``"OPENCV"`` for a
+            NeRF frame with ``k1, k2, p1, p2`` (``"FULL_OPENCV"`` with ``k3`` too,
+            ``"OPENCV_FISHEYE"`` for a nerfstudio fisheye: ``k1 .. k4``); ``"PINHOLE"``
+            otherwise.
     """
 
     path: str
@@ -47,6 +55,7 @@ class PosedImage:
     size: tuple[int, int] | None = None
     distortion: tuple[float, ...] = ()
     points: frozenset[int] | None = field(default=None, repr=False)
+    model: str = "PINHOLE"
 
     @property
     def name(self) -> str:
@@ -254,10 +263,10 @@ def read_colmap_model(model_dir: str | os.PathLike,
         if cam not in cams:
             raise ValueError(f"Expected camera {cam} of image '{name}' in the COLMAP model at "
                              f"'{model_dir}' (got cameras {sorted(cams)})")
-        _, size, K, dist = cams[cam]
+        model, size, K, dist = cams[cam]
         T = _check_pose(_w2c_to_c2w(q, t), f"COLMAP image '{name}'")
         out.append(PosedImage(str(Path(image_dir) / name), K, T, size, dist,
-                              frozenset(ids) if tracks else None))
+                              points=frozenset(ids) if tracks else None, model=model))
     return out
 
 
@@ -286,6 +295,28 @@ def _resolve_image(folder: Path, file_path: str) -> Path:
             if p.with_name(p.name + ext).is_file():
                 return p.with_name(p.name + ext)
     return p
+
+
+def _nerf_lens(cam: dict, where: str) -> tuple[str, tuple[float, ...]]:
+    """``(model, distortion)`` of a NeRF / nerfstudio camera as a COLMAP model
+    (:attr:`PosedImage.model`): OpenCV's ``k1, k2, p1, p2`` (``k3`` makes it FULL_OPENCV's
+    eight terms); nerfstudio's ``OPENCV_FISHEYE`` keeps its ``k1 .. k4``."""
+    try:
+        k = {n: float(cam.get(n, 0.0)) for n in ("k1", "k2", "k3", "k4", "p1", "p2")}
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"Expected numbers as the distortion terms in {where} (got "
+                         f"{err})") from None
+    if not all(np.isfinite(v) for v in k.values()):
+        raise ValueError(f"Expected finite distortion terms in {where} (got {k})")
+    if cam.get("camera_model") == "OPENCV_FISHEYE":
+        return "OPENCV_FISHEYE", (k["k1"], k["k2"], k["k3"], k["k4"])
+    if k["k4"]:  # nerfstudio's perspective k4 is an r^8 term: no COLMAP model has one
+        raise ValueError(f"Expected k4 = 0 for a perspective camera in {where} (got "
+                         f"{k['k4']:g}): undistort the images first")
+    opencv = (k["k1"], k["k2"], k["p1"], k["p2"])
+    if k["k3"]:
+        return "FULL_OPENCV", (*opencv, k["k3"], 0.0, 0.0, 0.0)
+    return ("OPENCV", opencv) if any(opencv) else ("PINHOLE", ())
 
 
 def read_nerf_transforms(path: str | os.PathLike,
@@ -323,11 +354,11 @@ def read_nerf_transforms(path: str | os.PathLike,
             raise ValueError(f"Expected fl_x or camera_angle_x in {where} (got neither)")
         cx = float(cam.get("cx", w / 2)) - 0.5
         cy = float(cam.get("cy", h / 2)) - 0.5
-        dist = tuple(float(cam.get(k, 0.0)) for k in ("k1", "k2", "p1", "p2"))
+        model, dist = _nerf_lens(cam, where)
         T = np.asarray(fr["transform_matrix"], dtype=np.float64)
         T = _check_pose(T @ _GL_TO_CV if T.shape == (4, 4) else T, where)  # else: its error
         out.append(PosedImage(str(file), _check_K(_pinhole(fx, fy, cx, cy), where), T, size,
-                              dist if any(dist) else ()))
+                              dist, model=model))
     return out
 
 
@@ -378,11 +409,12 @@ def read_llff_poses(path: str | os.PathLike,
 
 
 def check_pinhole(image: PosedImage, where: str) -> None:
-    """A ``ValueError`` for a camera with lens distortion: the package's geometry is pinhole."""
+    """A ``ValueError`` for a camera with lens distortion, for callers that take the image
+    files as pinhole views (the training datasets)."""
     if image.distortion and any(abs(d) > 1e-9 for d in image.distortion):
-        raise ValueError(f"Expected pinhole images in {where} (got distortion "
-                         f"{image.distortion} for '{image.name}'): undistort them first, e.g. "
-                         "with colmap image_undistorter")
+        raise ValueError(f"Expected pinhole images in {where} (got {image.model} distortion "
+                         f"{image.distortion} for '{image.name}'): undistort them first, with "
+                         "strl_pyg.geometry.undistort_image or colmap image_undistorter")
 
 
 def _colmap_dir(folder: Path) -> Path | None:

@@ -37,6 +37,7 @@ def match_images(
     K0: Any = None,
     K1: Any = None,
     config: FrontendConfig | None = None,
+    features: tuple[Any, Any] | None = None,
 ) -> PairMatches:
     """Matches points and line segments between two images.
 
@@ -46,6 +47,9 @@ def match_images(
             two may have different sizes.
         K0, K1: optional intrinsics ``[3, 3]`` (pixels), attached to the result (both or none).
         config: :class:`FrontendConfig` (default ``FrontendConfig()``).
+        features: the two images' feature sources (:mod:`strl_pyg.frontend.features`):
+            keypoints, descriptors and segments computed once per image and setting (a photo
+            collection), used instead of detecting them here; the same matches as without.
 
     Returns:
         :class:`PairMatches` with ``points0/1 [Np, 2]``, ``lines0/1 [Nl, 2, 2]`` (endpoint ``k``
@@ -69,12 +73,13 @@ def match_images(
     gray0 = check_frontend_image(image0, "image0")
     gray1 = check_frontend_image(image1, "image1")
     t_start = time.perf_counter()
-    p0, p1, p_scores, F, inl, stats, timings = _points(gray0, gray1, cfg)
+    p0, p1, p_scores, F, inl, stats, timings = _points(gray0, gray1, cfg, features)
     if cfg.thorough_below > 0 and int(inl.sum()) < cfg.thorough_below:
         # too few inliers for an easy pair: the thorough settings, once (the second pass
         # replaces the first, whose keypoints are a subset of its own)
         first = int(inl.sum())
-        p0, p1, p_scores, F, inl, stats, more = _points(gray0, gray1, thorough_points(cfg))
+        p0, p1, p_scores, F, inl, stats, more = _points(gray0, gray1, thorough_points(cfg),
+                                                       features)
         timings = {k: timings.get(k, 0.0) + more.get(k, 0.0) for k in {*timings, *more}}
         stats["second_pass"] = {"first_pass_inliers": first,
                                 "reason": f"fewer than thorough_below={cfg.thorough_below} "
@@ -85,7 +90,7 @@ def match_images(
         p0, p1, p_scores, inl = p0[inl], p1[inl], p_scores[inl], inl[inl]
 
     l0, l1, l_scores, seg0, seg1, status = _lines(gray0, gray1, F, p0[inl], p1[inl], cfg,
-                                                  timings)
+                                                  timings, features)
     timings["total"] = 1e3 * (time.perf_counter() - t_start)
 
     if len(p0) == 0 and len(l0) == 0:
@@ -130,10 +135,11 @@ def thorough_points(cfg: FrontendConfig) -> FrontendConfig:
                    upsample_below=max(int(cfg.upsample_below), t["upsample_below"]))
 
 
-def _points(gray0: np.ndarray, gray1: np.ndarray, cfg: FrontendConfig):
+def _points(gray0: np.ndarray, gray1: np.ndarray, cfg: FrontendConfig,
+            features: tuple[Any, Any] | None = None):
     """Point matches without repeats, their fundamental matrix and inliers, counts and
     timings: ``(p0, p1, scores, F, inliers, stats, timings_ms)``."""
-    p0, p1, p_scores, stats = match_points(gray0, gray1, cfg)
+    p0, p1, p_scores, stats = match_points(gray0, gray1, cfg, features=features)
     timings = dict(stats.pop("timings_ms"))
     # SIFT keeps one keypoint per dominant orientation at a location: two such keypoints that
     # match two such keypoints are one correspondence listed twice (~10 % of KITTI's matches)
@@ -147,12 +153,15 @@ def _points(gray0: np.ndarray, gray1: np.ndarray, cfg: FrontendConfig):
 
 
 def _lines(gray0: np.ndarray, gray1: np.ndarray, F: np.ndarray | None, guide0: np.ndarray,
-           guide1: np.ndarray, cfg: FrontendConfig, timings: dict):
+           guide1: np.ndarray, cfg: FrontendConfig, timings: dict,
+           features: tuple[Any, Any] | None = None):
     """Detects and matches the line segments (``cfg.lines``) under ``F`` with the inlier
     points ``guide0/1``; returns ``(l0, l1, scores, seg0, seg1, status)`` and fills the
     ``lines_detect`` / ``lines_match`` timings."""
     t = time.perf_counter()
-    if cfg.lines:
+    if cfg.lines and features is not None:
+        seg0, seg1 = features[0].lines(cfg), features[1].lines(cfg)
+    elif cfg.lines:
         seg0, seg1 = on_both(lambda g: detect_lines(g, cfg), gray0, gray1, cfg.concurrent)
     else:
         seg0 = seg1 = np.zeros((0, 2, 2))
@@ -175,11 +184,13 @@ def _lines(gray0: np.ndarray, gray1: np.ndarray, F: np.ndarray | None, guide0: n
     return l0, l1, l_scores, seg0, seg1, status
 
 
-def add_lines(matches: PairMatches, config: FrontendConfig | None = None) -> PairMatches:
+def add_lines(matches: PairMatches, config: FrontendConfig | None = None,
+              features: tuple[Any, Any] | None = None) -> PairMatches:
     """The line matches of a pair matched with ``lines=False`` by :func:`match_images`, added
     without detecting or matching the points again: the same result as matching the images
     with ``lines=True`` (the points, their fundamental matrix and inliers are the ones
-    ``matches.info`` stores). ``matches`` must come from :func:`match_images` with its images.
+    ``matches.info`` stores). ``matches`` must come from :func:`match_images` with its images;
+    ``features`` as there.
     """
     cfg = config if config is not None else FrontendConfig()
     if not cfg.lines:
@@ -201,7 +212,7 @@ def add_lines(matches: PairMatches, config: FrontendConfig | None = None) -> Pai
     t0 = time.perf_counter()
     l0, l1, l_scores, seg0, seg1, status = _lines(
         matches.image0, matches.image1, F, matches.points0[inl], matches.points1[inl], cfg,
-        timings)
+        timings, features)
     timings["total"] = timings.get("total", 0.0) + 1e3 * (time.perf_counter() - t0)
     info.update(timings_ms=timings, segments0=len(seg0), segments1=len(seg1),
                 lines_status=status, config=asdict(cfg))

@@ -4,6 +4,7 @@ check, and the MAGSAC fundamental matrix that guides the line matcher."""
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import cv2
 import numpy as np
@@ -129,7 +130,7 @@ def _top2_l2(d0: np.ndarray, d1: np.ndarray):
 
 def match_points(
     gray0: np.ndarray, gray1: np.ndarray, cfg: FrontendConfig | None = None,
-    reference: bool = False,
+    reference: bool = False, features: tuple[Any, Any] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     """Detects and matches keypoints.
 
@@ -139,6 +140,8 @@ def match_points(
         reference: match SIFT descriptors with OpenCV's brute-force k-NN (twice, one per
             direction) instead of one matrix product with top-2 (:func:`_top2_l2`); the two
             agree up to float rounding of near ties.
+        features: the two images' feature sources (:mod:`strl_pyg.frontend.features`)
+            whose keypoints and descriptors for ``cfg`` are used instead of detecting them.
 
     Returns:
         ``points0 [M, 2]``, ``points1 [M, 2]`` pixels, ``scores [M]`` (``1 - ratio``, higher is
@@ -147,9 +150,12 @@ def match_points(
     cfg = cfg or FrontendConfig()
     t0 = time.perf_counter()
     norm = _detector(cfg)[1]
-    # one detector per image: an OpenCV feature object is not shared between threads
-    (kp0, d0), (kp1, d1) = on_both(lambda g: detect_points(g, cfg), gray0, gray1,
-                                   cfg.concurrent)
+    if features is not None:
+        f0, f1 = (f.points(cfg) for f in features)
+        (kp0, d0), (kp1, d1) = (f0.keypoints, f0.descriptors), (f1.keypoints, f1.descriptors)
+    else:  # one detector per image: an OpenCV feature object is not shared between threads
+        (kp0, d0), (kp1, d1) = on_both(lambda g: detect_points(g, cfg), gray0, gray1,
+                                       cfg.concurrent)
     t1 = time.perf_counter()
     stats = {"keypoints0": len(kp0), "keypoints1": len(kp1)}
     empty = np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)

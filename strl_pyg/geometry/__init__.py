@@ -19,22 +19,28 @@ arrays or nested lists (converted at the boundary: float numpy keeps its precisi
 else becomes float64). Results are torch tensors unless documented otherwise.
 
 Modules: :mod:`~strl_pyg.geometry.pose` (tensor boundary, rotations, :class:`Pose`),
-:mod:`~strl_pyg.geometry.manifold` (``[w]_x``, SO(3) and sphere maps, tangent bases) and
-:mod:`~strl_pyg.geometry.epipolar` (``E``, ``F``, normalisation, projection, Sampson errors) and
-:mod:`~strl_pyg.geometry.essential` (the weighted eight-point solve, imported by its path);
-every name is importable from ``strl_pyg.geometry``. Needs numpy and torch only (kornia is
-imported on the first quaternion conversion).
+:mod:`~strl_pyg.geometry.manifold` (``[w]_x``, SO(3) and sphere maps, tangent bases),
+:mod:`~strl_pyg.geometry.epipolar` (``E``, ``F``, normalisation, projection, Sampson errors),
+:mod:`~strl_pyg.geometry.camera` (the pinhole :class:`Camera`, COLMAP's models),
+:mod:`~strl_pyg.geometry.distortion` (radial and OpenCV lens distortion of points and images,
+numpy in and out) and :mod:`~strl_pyg.geometry.essential` (the weighted eight-point solve,
+imported by its path); every other name is importable from ``strl_pyg.geometry``. Needs numpy
+and torch only (kornia is imported on the first quaternion conversion, OpenCV on the first
+undistortion).
 """
 
 from __future__ import annotations
 
 from strl_pyg.geometry import camera as _camera
+from strl_pyg.geometry import distortion as _distortion
 from strl_pyg.geometry import epipolar as _epipolar
 from strl_pyg.geometry import manifold as _manifold
 from strl_pyg.geometry import pose as _pose
 from strl_pyg.geometry.camera import *  # noqa: F403
+from strl_pyg.geometry.distortion import *  # noqa: F403
 from strl_pyg.geometry.epipolar import *  # noqa: F403
 from strl_pyg.geometry.manifold import *  # noqa: F403
 from strl_pyg.geometry.pose import *  # noqa: F403
 
-__all__ = [*_pose.__all__, *_manifold.__all__, *_epipolar.__all__, *_camera.__all__]
+__all__ = [*_pose.__all__, *_manifold.__all__, *_epipolar.__all__, *_camera.__all__,
+           *_distortion.__all__]

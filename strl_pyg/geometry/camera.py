@@ -1,6 +1,8 @@
 """One pinhole camera for the command line and the datasets: intrinsics in this package's
 pixel convention (OpenCV's: the centre of the top-left pixel at ``(0, 0)``), the image size,
-COLMAP's camera models read in one place, and the one rescale of K for a resized image.
+COLMAP's camera models read in one place, and the one rescale of K for a resized image
+(its distortion terms are unchanged: they act on normalised coordinates,
+:mod:`~strl_pyg.geometry.distortion`).
 
 COLMAP puts the centre of the top-left pixel at ``(0.5, 0.5)``, so a COLMAP principal point
 is ``c = c_colmap - 0.5`` here. A resize by ``(s_x, s_y)`` maps ``x' = (x + 0.5) s_x - 0.5``:
@@ -14,6 +16,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from strl_pyg.geometry.distortion import opencv_coefficients
 
 __all__ = ["Camera", "COLMAP_CAMERA_MODELS", "scale_intrinsics"]
 
@@ -44,8 +48,11 @@ class Camera:
         fx, fy, cx, cy: focal lengths and principal point, pixels.
         size: the image's ``(H, W)``, or ``None`` where unknown.
         model: the camera model it was read as (COLMAP's names; ``"PINHOLE"`` otherwise).
-        distortion: the model's distortion terms, as given (not applied: matches must come
-            from undistorted images).
+        distortion: the model's distortion terms in COLMAP's order, as given. ``K`` is the
+            pinhole part: matches must come from undistorted images, which
+            :func:`~strl_pyg.geometry.distortion.undistort_image` makes with ``K`` and
+            :attr:`opencv_distortion` (models in
+            :data:`~strl_pyg.geometry.distortion.DISTORTION_MODELS`).
     """
 
     fx: float
@@ -63,6 +70,13 @@ class Camera:
     @property
     def distorted(self) -> bool:
         return any(abs(d) > 0 for d in self.distortion)
+
+    @property
+    def opencv_distortion(self) -> np.ndarray:
+        """OpenCV's ``[k1, k2, p1, p2]`` of :attr:`distortion`
+        (:func:`~strl_pyg.geometry.distortion.opencv_coefficients`: a one-line
+        ``ValueError`` for a model outside ``DISTORTION_MODELS``)."""
+        return opencv_coefficients(self.model, self.distortion)
 
     @classmethod
     def from_K(cls, K: Any, size: tuple[int, int] | None = None) -> Camera:

@@ -237,12 +237,14 @@ class PoseEstimator:
 
     def estimate_images(self, image0: np.ndarray, image1: np.ndarray, K0: Any = None,
                         K1: Any = None, frontend_config: Any = None,
-                        methods: Any = None, original: Any = None) -> PoseEstimate:
+                        methods: Any = None, original: Any = None,
+                        features: Any = None) -> PoseEstimate:
         """Matches two images with :func:`~strl_pyg.frontend.match_images`, then
         :meth:`estimate` (``methods`` as there): :func:`strl_pyg.inference.images.
         estimate_images` (``K1`` defaults to ``K0``; no matches at all: ``"degenerate"``;
-        ``original``: the sizes and K of images matched resized)."""
+        ``original``: the sizes and K of images matched resized; ``features``: the images'
+        feature sources, :mod:`strl_pyg.frontend.features`)."""
         from strl_pyg.inference.images import estimate_images
 
         return estimate_images(self, image0, image1, K0, K1, frontend_config, methods,
-                               original)
+                               original, features)

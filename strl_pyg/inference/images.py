@@ -20,7 +20,7 @@ __all__ = ["estimate_images"]
 
 def estimate_images(estimator: Any, image0: np.ndarray, image1: np.ndarray, K0: Any = None,
                     K1: Any = None, frontend_config: Any = None, methods: Any = None,
-                    original: Any = None) -> PoseEstimate:
+                    original: Any = None, features: Any = None) -> PoseEstimate:
     """Matches two images with :func:`~strl_pyg.frontend.match_images`, then
     :meth:`estimator.estimate <strl_pyg.inference.estimator.PoseEstimator.estimate>`
     (``methods`` as there). ``K1`` defaults to ``K0`` (one camera). No matches at all gives
@@ -30,7 +30,9 @@ def estimate_images(estimator: Any, image0: np.ndarray, image1: np.ndarray, K0: 
     :data:`RECOMMENDED`, the images
     are matched once: the points first, the line segments added to them (without
     detecting the points again) only when a method that reads lines is about to run and
-    ``frontend_config.lines`` is on."""
+    ``frontend_config.lines`` is on. ``features``: the two images' feature sources
+    (:mod:`strl_pyg.frontend.features`), as :func:`~strl_pyg.frontend.match_images` takes
+    them."""
     from strl_pyg.data.checks import check_K
     from strl_pyg.frontend import FrontendConfig, NoMatchesError, match_images
     from strl_pyg.frontend.pipeline import add_lines
@@ -52,7 +54,8 @@ def estimate_images(estimator: Any, image0: np.ndarray, image1: np.ndarray, K0: 
     else:
         first = cfg
     try:
-        matches = match_images(image0, image1, K0=K0, K1=K1, config=first)
+        matches = match_images(image0, image1, K0=K0, K1=K1, config=first,
+                               features=features)
         if original is not None:
             matches.info["original_frame"] = dict(original)
     except NoMatchesError as err:
@@ -66,6 +69,6 @@ def estimate_images(estimator: Any, image0: np.ndarray, image1: np.ndarray, K0: 
                                            warnings=warnings), records, 0, 0, None)
     if not recommended:
         return estimator.estimate(matches, methods=names)
-    more = (lambda: add_lines(matches, cfg)) if cfg.lines and not first.lines else None
+    more = (lambda: add_lines(matches, cfg, features)) if cfg.lines and not first.lines else None
     return estimator._recommended(estimator._pair(matches), more)
 
