@@ -55,6 +55,7 @@ FLOORS: dict[str, int] = {
     "training": 7,    # the loop, config, data, loss, checkpoints
     "evaluation": 8,  # the evaluate command on the inference registry
     "explain": 8,     # which matches and lines drove the network's pose (PyG explainers)
+    "collection": 8,  # photo collections: features once, every pair, COLMAP databases
     "cli": 9,         # strl-pose
     "": 10,           # the package root: __init__ (the lazy face)
 }
