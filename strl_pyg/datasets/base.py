@@ -12,6 +12,7 @@ from __future__ import annotations
 import functools
 import os
 import warnings
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, is_dataclass, replace
 from pathlib import Path
@@ -157,16 +158,46 @@ def _config_dict(config: Any) -> Any:
     raise TypeError(f"Expected a FrontendConfig dataclass or a dict (got {type(config).__name__})")
 
 
+#: Images whose features a process keeps (:func:`image_features`): posed pairs (i, i + k)
+#: for gaps up to 16 revisit an image within about this many pairs.
+FEATURE_CACHE_IMAGES = 48
+_FEATURES: OrderedDict[tuple, Any] = OrderedDict()
+
+
+def image_features(source: ImageSource, image: np.ndarray, image_size: Any,
+                   grayscale: bool) -> Any:
+    """The front end's feature source of one image as the cache builder read it
+    (:class:`~strl_pyg.frontend.features.Detect`: keypoints, descriptors and segments detected
+    once per setting): an image in several pairs is detected once per process while it stays
+    among the last :data:`FEATURE_CACHE_IMAGES` read."""
+    from strl_pyg.frontend.features import Detect
+    from strl_pyg.frontend.pipeline import check_frontend_image
+
+    key = (str(source), None if image_size is None else tuple(image_size), bool(grayscale),
+           image.shape)
+    if key in _FEATURES:
+        _FEATURES.move_to_end(key)
+        return _FEATURES[key]
+    det = Detect(check_frontend_image(image, str(source)), str(source))
+    _FEATURES[key] = det
+    while len(_FEATURES) > FEATURE_CACHE_IMAGES:
+        _FEATURES.popitem(last=False)
+    return det
+
+
 def _match_record(
     record: PairRecord, image_size: tuple[int, int] | None, grayscale: bool, config: Any
 ) -> PairMatches:
     """Worker job: front-end matches of one pair, with K and the images as read and resized
     (colour unless ``grayscale``; the front end attaches the grey copies it matched on, which
-    gave 1-channel patches for colour data such as DeMoN)."""
+    gave 1-channel patches for colour data such as DeMoN). Each image's features come from
+    :func:`image_features` (the same matches as detecting them per pair)."""
     from strl_pyg.frontend import match_images
 
     img0, img1, K0, K1 = load_pair_images(record, image_size, grayscale)
-    matches = match_images(img0, img1, K0=K0, K1=K1, config=config)
+    features = (image_features(record.source0, img0, image_size, grayscale),
+                image_features(record.source1, img1, image_size, grayscale))
+    matches = match_images(img0, img1, K0=K0, K1=K1, config=config, features=features)
     info = {**matches.info, PAIR_ID: record.pair_id, SUBSET: record.subset}
     return replace(matches, K0=K0, K1=K1, info=info, image0=img0, image1=img1)
 

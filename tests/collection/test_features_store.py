@@ -130,3 +130,22 @@ def test_an_unreadable_file_is_moved_aside_with_a_warning(tmp_path, pair):
     store.close()
     with pytest.raises(FileNotFoundError, match="feature store folder"):
         FeatureStore(tmp_path / "none", writable=False)
+
+
+def test_the_training_cache_detects_each_image_once_per_process(pair):
+    from strl_pyg.datasets import base
+    from strl_pyg.datasets.base import ImageSource, image_features
+
+    base._FEATURES.clear()
+    a, b = ImageSource("a.png"), ImageSource("b.png")
+    first = image_features(a, pair.image0, None, True)
+    assert image_features(a, pair.image0, None, True) is first
+    assert image_features(b, pair.image1, None, True) is not first
+    assert image_features(a, pair.image0, (96, 320), True) is not first  # another size
+    cfg = FrontendConfig()
+    first.points(cfg)
+    assert list(first.cache) == [settings_key(POINTS, cfg)]
+    for k in range(base.FEATURE_CACHE_IMAGES + 1):  # the oldest leaves the cache
+        image_features(ImageSource(f"{k}.png"), pair.image1, None, True)
+    assert image_features(a, pair.image0, None, True) is not first
+    base._FEATURES.clear()
