@@ -122,8 +122,12 @@ def _epipolar_terms(M: Any, x0: Any, x1: Any):
     M, x0, x1 = _common(M, x0, x1)
     h0 = torch.cat([x0, torch.ones_like(x0[..., :1])], dim=-1)
     h1 = torch.cat([x1, torch.ones_like(x1[..., :1])], dim=-1)
-    Mx0 = h0 @ M.transpose(-1, -2)  # rows: M h0, the epipolar lines in image 1
-    Mtx1 = h1 @ M  # rows: M^T h1, the epipolar lines in image 0
+    # products with a 3x3 matrix as broadcast sums, not matmul: a (N, 3) @ (3, 3) product goes
+    # through the intra-op thread pool, which took 16 ms instead of 0.03 ms for 745 points
+    # whenever another process kept one of two cores busy (the threads wait on each other)
+    Ms = M.unsqueeze(-3)  # (*, 1, 3, 3)
+    Mx0 = (Ms * h0.unsqueeze(-2)).sum(-1)  # rows: M h0, the epipolar lines in image 1
+    Mtx1 = (Ms * h1.unsqueeze(-1)).sum(-2)  # rows: M^T h1, the epipolar lines in image 0
     r = (h1 * Mx0).sum(-1)
     return r, Mx0, Mtx1
 

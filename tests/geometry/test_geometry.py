@@ -258,3 +258,24 @@ def test_epipolar_bad_input():
         sampson_error(np.eye(3), np.zeros((3, 3)), np.zeros((3, 2)))
     with pytest.raises(ValueError, match="Expected 't'"):
         essential_from_pose(np.eye(3))
+
+
+def test_epipolar_terms_equal_the_matrix_products_batched():
+    """The broadcast sums of ``_epipolar_terms`` (its fast path: no intra-op thread pool)
+    against the plain matrix products, batched, with gradients."""
+    from strl_pyg.geometry.epipolar import _epipolar_terms
+
+    g = torch.Generator().manual_seed(0)
+    M = torch.randn(4, 3, 3, dtype=torch.float64, generator=g, requires_grad=True)
+    x0 = torch.randn(4, 50, 2, dtype=torch.float64, generator=g)
+    x1 = torch.randn(4, 50, 2, dtype=torch.float64, generator=g)
+    r, Mx0, Mtx1 = _epipolar_terms(M, x0, x1)
+    h0 = torch.cat([x0, torch.ones_like(x0[..., :1])], -1)
+    h1 = torch.cat([x1, torch.ones_like(x1[..., :1])], -1)
+    ref0, ref1 = h0 @ M.transpose(-1, -2), h1 @ M
+    torch.testing.assert_close(Mx0, ref0, rtol=0, atol=1e-12)
+    torch.testing.assert_close(Mtx1, ref1, rtol=0, atol=1e-12)
+    torch.testing.assert_close(r, (h1 * ref0).sum(-1), rtol=0, atol=1e-12)
+    (g1,) = torch.autograd.grad((r.sum() + Mx0.sum() + Mtx1.sum()), M)
+    (g2,) = torch.autograd.grad(((h1 * ref0).sum() + ref0.sum() + ref1.sum()), M)
+    torch.testing.assert_close(g1, g2, rtol=0, atol=1e-10)
