@@ -3,6 +3,7 @@ folder named by ``STRL_PYG_DATA``, and skip with a reason where it is absent."""
 
 from __future__ import annotations
 
+import copy
 import os
 from pathlib import Path
 
@@ -66,13 +67,31 @@ def method_registry():
     registry.METHODS.update(saved)
 
 
+@pytest.fixture(scope="session")
+def generated_pair():
+    """``generated_pair(seed, config=None)``: ``generate_pair(seed, config)``, generated once per
+    test session for each seed and config (a street pair takes ~0.8 s; many modules run on the
+    same ones). Every call returns its own deep copy, so a test may change what it gets. Tests
+    of the generator itself call ``generate_pair``."""
+    from strl_pyg.synthetic import SceneConfig, generate_pair
+
+    made: dict = {}
+
+    def get(seed: int, config=None):
+        # SceneConfig is a plain (unhashable) dataclass; None is its defaults
+        key = (seed, repr(SceneConfig() if config is None else config))
+        if key not in made:
+            made[key] = generate_pair(seed, config)
+        return copy.deepcopy(made[key])
+
+    return get
+
+
 @pytest.fixture(scope="module")
-def held_out_pair():
+def held_out_pair(generated_pair):
     """The generated pair of seed 2_000_017 (held out from training; ``pair`` in
     tests/inference/test_inference.py), for the other modules' tests that run on it."""
-    from strl_pyg.synthetic import generate_pair
-
-    return generate_pair(2_000_017)
+    return generated_pair(2_000_017)
 
 
 @pytest.fixture

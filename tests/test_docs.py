@@ -382,17 +382,20 @@ json.dump(out, open(sys.argv[2], "w"))
 """
 
 
-def _trains(block: Block) -> bool:
-    return "train(" in block.text
+def _slow(block: Block) -> bool:
+    """A block that trains, or that starts worker processes (``num_workers=`` above 0: each
+    re-imports the script, which is where a missing ``if __name__ == "__main__":`` guard
+    fails), is in the slow tier and runs in a process of its own."""
+    return "train(" in block.text or re.search(r"num_workers\s*=\s*[1-9]", block.text) is not None
 
 
 @pytest.fixture(scope="module")
 def block_runs(tmp_path_factory):
-    """``where -> None`` (ran) or the failure, for every runnable block that does not train
-    (a block that trains is in the slow tier and runs in its own process)."""
+    """``where -> None`` (ran) or the failure, for every runnable block of the fast tier (one
+    that trains or starts workers is in the slow tier and runs in its own process)."""
     root = tmp_path_factory.mktemp("blocks")
     plan = []
-    for i, block in enumerate(b for b in RUNNABLE if not _trains(b) and b.lang == "python"):
+    for i, block in enumerate(b for b in RUNNABLE if not _slow(b) and b.lang == "python"):
         (root / str(i)).mkdir()
         script = root / str(i) / "snippet.py"
         script.write_text(block.text)
@@ -408,11 +411,11 @@ def block_runs(tmp_path_factory):
 
 
 @pytest.mark.parametrize("block", [
-    pytest.param(b, marks=pytest.mark.slow) if _trains(b) else b for b in RUNNABLE
-], ids=[b.where for b in RUNNABLE])  # a block that trains is in the slow tier
+    pytest.param(b, marks=pytest.mark.slow) if _slow(b) else b for b in RUNNABLE
+], ids=[b.where for b in RUNNABLE])  # a block that trains or starts workers: the slow tier
 def test_marked_python_block_runs_as_a_script(block, tmp_path, request):
     assert block.lang == "python", f"{block.where}: {RUN_MARKER} before a {block.lang!r} block"
-    if not _trains(block):
+    if not _slow(block):
         failure = request.getfixturevalue("block_runs")[block.where]
         assert failure is None, f"{block.where} failed:\n{failure}"
         return

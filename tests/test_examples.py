@@ -30,14 +30,14 @@ def test_reuse_layers_dense_equals_explicit(capsys):
     assert diff < 1e-5
 
 
-def test_pose_from_matches_on_a_saved_file(tmp_path, capsys):
+def test_pose_from_matches_on_a_saved_file(tmp_path, capsys, generated_pair):
     from strl_pyg.model import StrLPoseConfig
     from strl_pyg.model.strl_pose import StrLPose
-    from strl_pyg.synthetic import SceneConfig, generate_pair
+    from strl_pyg.synthetic import SceneConfig
 
     ckpt = tmp_path / "tiny.pt"
     StrLPose(StrLPoseConfig(hidden=32, layers=1, heads=2, patch_features=1)).save(ckpt)
-    pair = generate_pair(5, SceneConfig(kind="boxes", image_size=(96, 128)))
+    pair = generated_pair(5, SceneConfig(kind="boxes", image_size=(96, 128)))
     npz = pair.matches.save(tmp_path / "m.npz")
     assert load("pose_from_matches").main(["--npz", str(npz), "--checkpoint", str(ckpt)]) == 0
     out = capsys.readouterr().out
@@ -45,7 +45,7 @@ def test_pose_from_matches_on_a_saved_file(tmp_path, capsys):
 
 
 @pytest.fixture(scope="module")
-def generated_pair_files(tmp_path_factory):
+def generated_pair_files(tmp_path_factory, generated_pair):
     """A generated pair written as another tool would: images as PNG, a SuperGlue
     ``match_pairs.py`` npz (no sizes) and a LightGlue dict (batched, sizes as (W, H))."""
     import cv2
@@ -53,10 +53,10 @@ def generated_pair_files(tmp_path_factory):
 
     from strl_pyg.model import StrLPoseConfig
     from strl_pyg.model.strl_pose import StrLPose
-    from strl_pyg.synthetic import SceneConfig, generate_pair
+    from strl_pyg.synthetic import SceneConfig
 
     root = tmp_path_factory.mktemp("pair")
-    pair = generate_pair(5, SceneConfig(kind="boxes", image_size=(96, 128)))
+    pair = generated_pair(5, SceneConfig(kind="boxes", image_size=(96, 128)))
     m = pair.matches
     for i, img in enumerate((m.image0, m.image1)):
         cv2.imwrite(str(root / f"im{i}.png"), img)

@@ -208,6 +208,12 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
 
 
 # ----------------------------------------------------------------------------- the package
+@pytest.fixture(scope="module")
+def package_edges() -> list[Edge]:
+    """``all_edges()`` of the package, walked once for the four rules that read it."""
+    return all_edges()
+
+
 def test_the_root_holds_only_the_face():
     assert sorted(p.name for p in PACKAGE.glob("*.py")) == ["__init__.py"]
 
@@ -219,15 +225,15 @@ def test_every_folder_has_a_floor_and_a_face_that_says_what_lives_there():
         assert doc and len(doc.splitlines()) >= 2, f"{path.name}/__init__.py: no docstring"
 
 
-def test_imports_only_go_down():
-    edges = all_edges()
+def test_imports_only_go_down(package_edges):
+    edges = package_edges
     assert any(e.local for e in edges) and any(e.lazy for e in edges)  # the walk sees both
     bad = floor_violations(edges)
     assert not bad, "imports that do not go down:\n" + "\n".join(sorted(bad))
 
 
-def test_no_private_name_crosses_a_folder():
-    bad = private_violations(all_edges())
+def test_no_private_name_crosses_a_folder(package_edges):
+    bad = private_violations(package_edges)
     assert not bad, "private names imported across folders:\n" + "\n".join(sorted(bad))
 
 
@@ -242,10 +248,10 @@ def import_graph(edges: list[Edge]) -> dict[str, set[str]]:
     return graph
 
 
-def test_no_import_cycle_between_modules_even_inside_functions():
+def test_no_import_cycle_between_modules_even_inside_functions(package_edges):
     """Before: 7 cycles hidden by imports inside functions (cli/{bench,commands,export},
     data/matches <-> data/external, inference/{config,estimator,methods,support})."""
-    cycle = find_cycle(import_graph(all_edges()))
+    cycle = find_cycle(import_graph(package_edges))
     assert cycle is None, f"import cycle: {' -> '.join(cycle)}"
 
 
@@ -259,8 +265,8 @@ def test_a_planted_cycle_inside_a_folder_is_caught(tmp_path):
     assert cycle and set(cycle) == {"strl_pyg.inference.a", "strl_pyg.inference.b"}
 
 
-def test_no_module_level_import_cycle():
-    cycle = find_cycle(module_level_graph(all_edges()))
+def test_no_module_level_import_cycle(package_edges):
+    cycle = find_cycle(module_level_graph(package_edges))
     assert cycle is None, f"module-level import cycle: {' -> '.join(cycle)}"
 
 

@@ -38,7 +38,9 @@ def add_scene_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--matcher", choices=MATCHER_PRESETS, default=None,
                    help="front-end preset (default: the FrontendConfig defaults, adaptive)")
     p.add_argument("--detector", choices=("sift", "orb"), default="sift")
-    p.add_argument("--verified", default="ok",
+    from strl_pyg.inference.status import Status
+
+    p.add_argument("--verified", default=Status.OK.value,
                    help="comma-separated statuses written to the database as verified "
                         "two-view geometries (default 'ok'; e.g. 'ok,unreliable')")
     p.add_argument("--no-database", action="store_true",

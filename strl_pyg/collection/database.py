@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from strl_pyg.collection.files import pair_key
+from strl_pyg.collection.files import STATUS_TO_VERIFY, pair_key
 from strl_pyg.collection.images import CollectionImage
 from strl_pyg.collection.pairs import Pair
 from strl_pyg.frontend.config import FrontendConfig
@@ -111,7 +111,7 @@ def _geometry(rec: dict, inlier_matches: np.ndarray, K0: np.ndarray | None,
 def write_database(path: str | os.PathLike, images: list[CollectionImage], pairs: list[Pair],
                    records: dict[tuple[str, str], dict], store: FeatureStore,
                    matches_path: str | os.PathLike, cfg: FrontendConfig,
-                   verified: tuple[str, ...] = ("ok",)) -> Path:
+                   verified: tuple[str, ...] = STATUS_TO_VERIFY) -> Path:
     """Writes the COLMAP database of a scene run (module docstring) and returns its path.
 
     Args:

@@ -6,7 +6,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-__all__ = ["pair_key", "read_done"]
+from strl_pyg.inference.status import Status
+
+__all__ = ["pair_key", "read_done", "STATUS_TO_VERIFY"]
+
+#: The statuses whose pose and inlier matches become verified two-view geometries by default.
+STATUS_TO_VERIFY = (Status.OK.value,)
 
 
 def pair_key(name0: str, name1: str) -> str:

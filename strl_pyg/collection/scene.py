@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from strl_pyg.collection.files import pair_key, read_done
+from strl_pyg.collection.files import STATUS_TO_VERIFY, pair_key, read_done
 from strl_pyg.collection.images import CollectionImage
 from strl_pyg.collection.pairs import Pair
 from strl_pyg.collection.work import features_task, init_worker, pair_task
@@ -46,8 +46,6 @@ from strl_pyg.frontend.store import FeatureStore
 __all__ = ["SceneOptions", "SceneSummary", "run_scene", "check_settings", "pair_task_of",
            "PoolRunner", "STATUS_TO_VERIFY"]
 
-#: The statuses whose pose and inlier matches become verified two-view geometries by default.
-STATUS_TO_VERIFY = ("ok",)
 
 
 @dataclass

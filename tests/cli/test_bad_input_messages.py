@@ -17,7 +17,6 @@ from strl_pyg import cli
 from strl_pyg.inference.estimator import PoseEstimator
 from strl_pyg.model import StrLPoseConfig
 from strl_pyg.model.strl_pose import StrLPose
-from strl_pyg.synthetic import generate_pair
 from strl_pyg.training.checkpoints import (
     CHECKPOINT_VERSION,
     init_weights,
@@ -61,9 +60,9 @@ def test_a_training_checkpoint_where_a_model_is_expected_says_how_to_get_the_mod
         PoseEstimator(str(path))
 
 
-def test_a_training_checkpoint_for_predict_is_one_line(tmp_path, capsys):
+def test_a_training_checkpoint_for_predict_is_one_line(tmp_path, capsys, generated_pair):
     path = _last_pt(tmp_path, tiny())
-    pair = generate_pair(0)
+    pair = generated_pair(0)
     for name, img in (("a.png", pair.image0), ("b.png", pair.image1)):
         cv2.imwrite(str(tmp_path / name), img)
     argv = ["predict", str(tmp_path / "a.png"), str(tmp_path / "b.png"), "--checkpoint",
@@ -109,10 +108,10 @@ def test_one_method_name_as_a_str_is_one_method():
 
 # ----------------------------------------------------------------------------- command line
 @pytest.mark.slow
-def test_a_closed_stdout_ends_quietly(tmp_path):
+def test_a_closed_stdout_ends_quietly(tmp_path, generated_pair):
     """Before: ``strl-pose predict --json | head`` ended with "error: Expected a usable path
     (got Broken pipe)", blaming a path."""
-    pair = generate_pair(2_000_017)
+    pair = generated_pair(2_000_017)
     for name, img in (("a.png", pair.image0), ("b.png", pair.image1)):
         cv2.imwrite(str(tmp_path / name), img)
     K = pair.K
@@ -165,7 +164,7 @@ def test_match_out_naming_a_folder_is_refused_with_the_file_to_add(flag, tmp_pat
     assert not (tmp_path / "outdir").exists()
 
 
-def test_uint16_images_agree_between_the_command_line_and_the_api(tmp_path):
+def test_uint16_images_agree_between_the_command_line_and_the_api(tmp_path, generated_pair):
     """Before: a 16-bit PNG was read (scaled to 8 bits) by the CLI and a uint16 array refused
     by the API (PairMatches, the front end): now both scale alike, v // 257."""
     rng = np.random.default_rng(0)
@@ -180,7 +179,7 @@ def test_uint16_images_agree_between_the_command_line_and_the_api(tmp_path):
     rgb = rng.integers(0, 65536, (48, 64, 3), dtype=np.uint16)
     assert check_image(rgb, "x", grayscale=True).shape == (48, 64)
     # a pair given as uint16 arrays is matched like its 8-bit files
-    pair = generate_pair(2_000_017)
+    pair = generated_pair(2_000_017)
     est = PoseEstimator(methods="opencv").estimate_images(
         pair.image0.astype(np.uint16) * 257, pair.image1.astype(np.uint16) * 257, K0=pair.K)
     ref = PoseEstimator(methods="opencv").estimate_images(pair.image0, pair.image1, K0=pair.K)

@@ -176,10 +176,18 @@ def _run_python(code: str) -> tuple[str, float]:
 HEAVY = ("torch", "torch_geometric", "cv2", "kornia", "strl_pyg.training.loop")
 
 
+def _in_a_subprocess_slow(*argv_code):
+    """A new interpreter per case (~0.4 s each): the fast tier runs ``--help`` and one argument
+    error, the slow tier every case."""
+    return pytest.param(*argv_code, marks=pytest.mark.slow)
+
+
 @pytest.mark.parametrize("argv, code", [
-    (["--help"], 0), (["train", "--help"], 0), (["predict", "--help"], 0),
-    (["bench", "--repeat", "x"], 2), (["predict"], 2), (["frobnicate"], 2),
-    (["train", "--steps", "ten"], 2), (["match", "a.png", "b.png", "--max-side", "-1"], 2),
+    (["--help"], 0), _in_a_subprocess_slow(["train", "--help"], 0),
+    _in_a_subprocess_slow(["predict", "--help"], 0),
+    _in_a_subprocess_slow(["bench", "--repeat", "x"], 2), (["predict"], 2),
+    _in_a_subprocess_slow(["frobnicate"], 2), _in_a_subprocess_slow(["train", "--steps", "ten"], 2),
+    _in_a_subprocess_slow(["match", "a.png", "b.png", "--max-side", "-1"], 2),
 ])
 def test_help_and_argument_errors_do_not_import_torch(argv, code):
     out, seconds = _run_python(
@@ -328,6 +336,9 @@ def test_downscale_scales_K_under_the_pixel_centre_convention():
     assert same is img and K_same is K and s == (1.0, 1.0)
 
 
+@pytest.mark.slow  # two front-end passes on real frames, one 3x upscaled: the fast tier's
+# guards are test_downscale_scales_K_under_the_pixel_centre_convention and
+# test_a_downscaled_pair_checks_its_intrinsics_once_in_the_users_frame
 def test_match_of_a_large_pair_reports_the_original_frame(kitti_pair, tmp_path, capsys):
     """KITTI frames upscaled 3x (nearest) are downscaled back exactly by --max-side: the
     matches equal those of the original frames, mapped as x_big = 3 x + 1."""
@@ -395,6 +406,8 @@ def test_readme_training_command_runs_on_defaults(tmp_path):
     assert (tmp_path / "run" / "last.pt").is_file() and (tmp_path / "run" / "model.pt").is_file()
 
 
+@pytest.mark.slow  # two predicts on a real KITTI pair: the fast tier's case is
+# test_predict_on_a_match_file_says_when_the_given_checkpoint_was_not_run
 def test_predict_says_when_the_given_checkpoint_was_not_run(checkpoint, kitti_pair, capsys):
     # reproduction: `predict ... --checkpoint MY_RUN/model.pt` printed PoseLib's pose alone and
     # nothing said the user's network had not been run
@@ -403,6 +416,19 @@ def test_predict_says_when_the_given_checkpoint_was_not_run(checkpoint, kitti_pa
     out = capsys.readouterr().out
     assert "note: the recommended pose did not need the network" in out and checkpoint in out
     assert cli.main(["predict", img0, img1, "--K", calib, "--checkpoint", checkpoint,
+                     "--methods", "regression"]) in (0, 3)
+    assert "note:" not in capsys.readouterr().out
+
+
+def test_predict_on_a_match_file_says_when_the_given_checkpoint_was_not_run(
+        checkpoint, held_out_pair, tmp_path, capsys):
+    """The fast tier's case of test_predict_says_when_the_given_checkpoint_was_not_run: the
+    held-out pair's match file instead of a KITTI pair's images (no front end)."""
+    path = held_out_pair.matches.save(tmp_path / "m.npz")
+    assert cli.main(["predict", "--matches", str(path), "--checkpoint", checkpoint]) == 0
+    out = capsys.readouterr().out
+    assert "note: the recommended pose did not need the network" in out and checkpoint in out
+    assert cli.main(["predict", "--matches", str(path), "--checkpoint", checkpoint,
                      "--methods", "regression"]) in (0, 3)
     assert "note:" not in capsys.readouterr().out
 

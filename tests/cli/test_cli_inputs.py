@@ -38,13 +38,13 @@ def test_method_names_ignore_case():
 
 
 @pytest.fixture(scope="module")
-def image_dir(tmp_path_factory):
+def image_dir(tmp_path_factory, generated_pair):
     import cv2
 
-    from strl_pyg.synthetic import SceneConfig, generate_pair
+    from strl_pyg.synthetic import SceneConfig
 
     d = tmp_path_factory.mktemp("imgs")
-    p = generate_pair(7, SceneConfig(kind="street"))
+    p = generated_pair(7, SceneConfig(kind="street"))
     cv2.imwrite(str(d / "a.png"), p.image0)
     cv2.imwrite(str(d / "b.png"), p.image1)
     K = p.K

@@ -10,12 +10,11 @@ import torch_geometric.transforms as T
 
 from strl_pyg import PairMatches
 from strl_pyg.data import build_pair_graph, materialize_complete_edges
-from strl_pyg.synthetic import generate_pair
 
 
 @pytest.fixture(scope="module")
-def graph():
-    p = generate_pair(2_000_017)
+def graph(generated_pair):
+    p = generated_pair(2_000_017)
     m = p.matches
     pm = PairMatches(m.points0[:30], m.points1[:30], m.lines0[:5], m.lines1[:5], K0=p.K,
                      K1=p.K, image_size0=p.image0.shape[:2], image_size1=p.image1.shape[:2])

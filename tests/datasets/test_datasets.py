@@ -42,7 +42,7 @@ from strl_pyg.geometry import (
     relative_pose_from_c2w,
     sampson_error,
 )
-from strl_pyg.synthetic import SceneConfig, generate_pair
+from strl_pyg.synthetic import SceneConfig
 
 
 def sampson_px(T, K0, K1, x0, x1) -> np.ndarray:
@@ -305,13 +305,13 @@ def _write_demon_h5(path, groups):
             f[f"{name}/frames/t0"].attrs["viewpoint_pairs"] = np.array([0, 1, 1, 0], np.int32)
 
 
-def test_demon_hdf5_round_trip(tmp_path):
+def test_demon_hdf5_round_trip(tmp_path, generated_pair):
     """A file written in the DeMoN layout reads back exactly: images (lossless webp), K, and
     T_0to1 = W1 inv(W0) from the column-major R; then the full pipeline on a generated scene
     gives matches that agree with that pose."""
     pytest.importorskip("h5py")
     cfg = SceneConfig(kind="indoor", image_size=(120, 160))
-    pairs = [generate_pair(s, cfg) for s in (3, 4)]
+    pairs = [generated_pair(s, cfg) for s in (3, 4)]
     groups = {}
     for s, p in zip((3, 4), pairs, strict=True):
         views = []
@@ -456,14 +456,14 @@ def test_synthetic_infinite_stream_splits_seeds_across_workers():
     assert batch.num_graphs == 2 and batch[PAIR_ID] == ids[:2]
 
 
-def test_synthetic_frontend_matches_are_cached(tmp_path):
+def test_synthetic_frontend_matches_are_cached(tmp_path, generated_pair):
     cfg = SceneConfig(kind="street", image_size=(128, 320))
     ds = SyntheticPairs(2, seed=0, scene_config=cfg, matches="frontend", cache_dir=tmp_path)
     with pytest.raises(FileNotFoundError, match="build the cache first"):
         ds[0]
     assert ds.build_cache(progress=False).computed == 2
     g = ds[0]
-    np.testing.assert_allclose(g[K.T_0TO1][0].numpy(), generate_pair(0, cfg).T_0to1, atol=1e-6)
+    np.testing.assert_allclose(g[K.T_0TO1][0].numpy(), generated_pair(0, cfg).T_0to1, atol=1e-6)
     pts, _ = graph_residuals(g)
     assert (pts < 1.0).mean() >= 0.8  # measured ~0.95
     with pytest.raises(ValueError, match="Expected a cache_dir"):

@@ -34,12 +34,12 @@ from strl_pyg.geometry import (
     tangent_basis,
 )
 from strl_pyg.metrics.two_view import relative_pose_error
-from strl_pyg.synthetic import SceneConfig, generate_pair
+from strl_pyg.synthetic import SceneConfig
 
 
 @pytest.fixture(scope="module")
-def noisy_pair():
-    pair = generate_pair(7, SceneConfig(kind="indoor", noise_px=1.0, outlier_fraction=0.3))
+def noisy_pair(generated_pair):
+    pair = generated_pair(7, SceneConfig(kind="indoor", noise_px=1.0, outlier_fraction=0.3))
     classical = estimate_relative_pose(pair.matches, "opencv", seed=0)
     assert classical.success and classical.num_inliers > 50
     return pair, classical
@@ -242,7 +242,7 @@ def test_gate_fuses_a_consistent_network_pose(noisy_pair):
     assert f.info["gate"]["d2"] <= GATE_CHI2
 
 
-def test_estimator_fusion_uses_the_checkpoints_inflation():
+def test_estimator_fusion_uses_the_checkpoints_inflation(generated_pair):
     """``metadata["fusion_inflation"]`` (fitted by bench_pose --calibrate) multiplies the
     regression's calibrated variance in the fused record; absent, it is 1."""
     import copy
@@ -252,9 +252,9 @@ def test_estimator_fusion_uses_the_checkpoints_inflation():
     from strl_pyg.inference.estimator import PoseEstimator
     from strl_pyg.inference.methods import swap_term
     from strl_pyg.model.strl_pose import StrLPose
-    from strl_pyg.synthetic import SceneConfig, generate_pair
+    from strl_pyg.synthetic import SceneConfig
 
-    pair = generate_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.5))
+    pair = generated_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.5))
     model = StrLPose.from_pretrained()
     s_reg = model.metadata["calibration"]["regression"]
     for k in (None, 8.0):

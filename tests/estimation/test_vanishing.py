@@ -4,6 +4,8 @@ recommended order."""
 
 from __future__ import annotations
 
+import copy
+
 import cv2
 import numpy as np
 import pytest
@@ -454,6 +456,19 @@ def _errors_T(T, R, t) -> tuple[float, float]:
 
 
 # ----------------------------------------------------------------------------- vp_checked
+@pytest.fixture(scope="module")
+def _vp_on_pair_1():
+    m, R, t = manhattan_pair(1, n_points=15, noise=0.3)
+    return m, R, t, PoseEstimator(methods=("vp",), bootstrap=0).estimate(m).methods["vp"]
+
+
+@pytest.fixture
+def vp_on_pair_1(_vp_on_pair_1):
+    """``(matches, R, t, vp's record)`` of ``manhattan_pair(1, n_points=15, noise=0.3)``, the
+    estimate run once for the vp_checked tests that read it (a copy for each test)."""
+    return copy.deepcopy(_vp_on_pair_1)
+
+
 def _base() -> str:
     from strl_pyg.estimation.classical import have_poselib
 
@@ -472,7 +487,7 @@ def _rot_err(T: np.ndarray, R: np.ndarray) -> float:
     return float(rotation_angle_deg(torch.from_numpy(np.asarray(T)[:3, :3].T @ R)))
 
 
-def test_vp_checked_takes_vp_where_the_classical_rotation_contradicts_the_lines():
+def test_vp_checked_takes_vp_where_the_classical_rotation_contradicts_the_lines(vp_on_pair_1):
     """A planted classical pose 20 deg off (as a 5-point solve on a handful of points may be)
     and as well supported as vp's: the lines' vanishing direction contradicts it, so
     vp_checked answers with vp's pose; a right classical pose is kept as it is."""
@@ -480,9 +495,8 @@ def test_vp_checked_takes_vp_where_the_classical_rotation_contradicts_the_lines(
     from strl_pyg.inference.methods import VP_CHECK_ANGLE_DEG, VanishingPointChecked
     from strl_pyg.inference.methods.context import MethodContext
 
-    m, R, t = manhattan_pair(1, n_points=15, noise=0.3)
+    m, R, t, vp = vp_on_pair_1
     ctx = MethodContext(EstimatorConfig(bootstrap=0))
-    vp = PoseEstimator(methods=("vp",), bootstrap=0).estimate(m).methods["vp"]
     assert vp.status == "ok" and _rot_err(vp.T_0to1, R) < 2.0
     off = cv2.Rodrigues(np.array([0.0, np.radians(20.0), 0.0]))[0] @ R
     ctx.results = {_base(): _planted(_base(), off, t, vp.info["support_inliers"]), "vp": vp}
@@ -497,13 +511,12 @@ def test_vp_checked_takes_vp_where_the_classical_rotation_contradicts_the_lines(
     np.testing.assert_array_equal(res.T_0to1, ctx.results[_base()].T_0to1)
 
 
-def test_vp_checked_keeps_a_classical_pose_that_fits_clearly_more_points():
+def test_vp_checked_keeps_a_classical_pose_that_fits_clearly_more_points(vp_on_pair_1):
     from strl_pyg.inference.config import EstimatorConfig
     from strl_pyg.inference.methods import VP_CHECK_SUPPORT_SLACK, VanishingPointChecked
     from strl_pyg.inference.methods.context import MethodContext
 
-    m, R, t = manhattan_pair(1, n_points=15, noise=0.3)
-    vp = PoseEstimator(methods=("vp",), bootstrap=0).estimate(m).methods["vp"]
+    m, R, t, vp = vp_on_pair_1
     off = cv2.Rodrigues(np.array([0.0, np.radians(20.0), 0.0]))[0] @ R
     more = vp.info["support_inliers"] + VP_CHECK_SUPPORT_SLACK + 1
     planted = _planted(_base(), off, t, more)

@@ -10,7 +10,7 @@ from strl_pyg.data import PairMatches
 from strl_pyg.data.external import load_external_matches
 from strl_pyg.frontend import FrontendConfig, NoMatchesError, match_images, match_lines
 from strl_pyg.geometry import epipolar_residuals
-from strl_pyg.synthetic import SceneConfig, evaluate_matches, generate_pair
+from strl_pyg.synthetic import SceneConfig, evaluate_matches
 
 # Thresholds, measured first (benchmarks/results_frontend/generated.md, 18 generated pairs at
 # 192x640):
@@ -22,9 +22,9 @@ MIN_LINE_PRECISION = 0.7
 
 
 @pytest.fixture(scope="module", params=[("street", 0), ("indoor", 1), ("boxes", 0)])
-def synthetic_run(request):
+def synthetic_run(request, generated_pair):
     kind, seed = request.param
-    pair = generate_pair(seed, SceneConfig(kind=kind))
+    pair = generated_pair(seed, SceneConfig(kind=kind))
     return pair, match_images(pair.image0, pair.image1, pair.K, pair.K)
 
 
@@ -52,12 +52,12 @@ def test_result_container(synthetic_run):
     assert length.min() >= FrontendConfig().min_matched_length - 1e-6
 
 
-def test_line_matcher_with_true_geometry():
+def test_line_matcher_with_true_geometry(generated_pair):
     """Reference path: given the ground-truth segments as detections and the true F, the
     matcher must pair (almost) every segment with its own counterpart."""
     from strl_pyg.geometry import fundamental_from_pose
 
-    pair = generate_pair(4, SceneConfig(kind="boxes", max_lines=80))
+    pair = generated_pair(4, SceneConfig(kind="boxes", max_lines=80))
     F = fundamental_from_pose(pair.T_0to1, pair.K, pair.K)
     g0, g1 = pair.lines_clean0, pair.lines_clean1
     perm = np.random.default_rng(0).permutation(len(g1))
@@ -71,16 +71,16 @@ def test_line_matcher_with_true_geometry():
     assert np.mean(line_transfer_error(pair, l0, l1) < 2.0) >= 0.85
 
 
-def test_deterministic():
-    pair = generate_pair(7, SceneConfig(kind="indoor"))
+def test_deterministic(generated_pair):
+    pair = generated_pair(7, SceneConfig(kind="indoor"))
     a = match_images(pair.image0, pair.image1)
     b = match_images(pair.image0, pair.image1)
     for name in ("points0", "points1", "lines0", "lines1", "point_scores", "line_scores"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
 
 
-def test_orb_and_caps():
-    pair = generate_pair(0, SceneConfig(kind="boxes"))
+def test_orb_and_caps(generated_pair):
+    pair = generated_pair(0, SceneConfig(kind="boxes"))
     cfg = FrontendConfig(detector="orb", max_points=50, max_lines=10)
     m = match_images(pair.image0, pair.image1, config=cfg)
     assert 0 < m.num_points <= 50 and m.num_lines <= 10
@@ -90,8 +90,8 @@ def test_orb_and_caps():
     assert np.mean(pe < 2.0) > 0.8
 
 
-def test_colour_and_different_sizes():
-    pair = generate_pair(0, SceneConfig(kind="indoor", image_size=(240, 320)))
+def test_colour_and_different_sizes(generated_pair):
+    pair = generated_pair(0, SceneConfig(kind="indoor", image_size=(240, 320)))
     rgb0 = np.repeat(pair.image0[..., None], 3, axis=2)
     crop1 = np.ascontiguousarray(pair.image1[:200, :300])  # same camera, cropped: K unchanged
     m = match_images(rgb0, crop1, pair.K, pair.K)
@@ -113,8 +113,8 @@ def test_colour_and_different_sizes():
         ([[0] * 64] * 64, TypeError, "numpy array or torch tensor"),
     ],
 )
-def test_bad_images(img, exc, match):
-    good = generate_pair(0, SceneConfig(kind="boxes", image_size=(64, 96))).image0
+def test_bad_images(img, exc, match, generated_pair):
+    good = generated_pair(0, SceneConfig(kind="boxes", image_size=(64, 96))).image0
     with pytest.raises(exc, match=match):
         match_images(img, good)
     with pytest.raises(exc, match=match.replace("image0", "image1")):
@@ -126,10 +126,10 @@ def test_bad_images(img, exc, match):
     [np.zeros((0, 64), np.uint8), np.zeros((64, 64), np.int16), np.full((64, 64), 2.0),
      np.zeros((64, 64, 4), np.uint8), [[0] * 64] * 64],
 )
-def test_one_image_check_for_frontend_and_pair_matches(img):
+def test_one_image_check_for_frontend_and_pair_matches(img, generated_pair):
     """The front end and PairMatches refuse the same images with the same message (one
     check, strl_pyg.utils.images.check_image); they differ only by the front end's 16 px minimum."""
-    good = generate_pair(0, SceneConfig(kind="boxes", image_size=(64, 96))).image0
+    good = generated_pair(0, SceneConfig(kind="boxes", image_size=(64, 96))).image0
     with pytest.raises((TypeError, ValueError)) as fe:
         match_images(img, good)
     with pytest.raises((TypeError, ValueError)) as pm:
@@ -141,23 +141,23 @@ def test_one_image_check_for_frontend_and_pair_matches(img):
                        image_size1=(8, 64)).image_size0 == (8, 64)
 
 
-def test_float_and_tensor_images_match_like_uint8():
+def test_float_and_tensor_images_match_like_uint8(generated_pair):
     """Float images in [0, 1] and torch tensors pass the same check as uint8 arrays (they were
     refused before): the same matches as the uint8 image they come from."""
     import torch
 
-    pair = generate_pair(1, SceneConfig(kind="boxes", image_size=(96, 160)))
+    pair = generated_pair(1, SceneConfig(kind="boxes", image_size=(96, 160)))
     ref = match_images(pair.image0, pair.image1)
     as_float = match_images(pair.image0.astype(np.float32) / 255.0, torch.from_numpy(pair.image1))
     for name in ("points0", "points1", "lines0", "lines1", "line_scores"):
         np.testing.assert_array_equal(getattr(as_float, name), getattr(ref, name))
 
 
-def test_all_black_raises_no_matches():
+def test_all_black_raises_no_matches(generated_pair):
     black = np.zeros((120, 160), np.uint8)
     with pytest.raises(NoMatchesError, match="featureless"):
         match_images(black, black)
-    textured = generate_pair(0, SceneConfig(kind="boxes", image_size=(120, 160))).image0
+    textured = generated_pair(0, SceneConfig(kind="boxes", image_size=(120, 160))).image0
     with pytest.raises(NoMatchesError):
         match_images(black, textured)
     assert issubclass(NoMatchesError, ValueError)
@@ -172,9 +172,9 @@ def test_config_validation():
         match_images(np.zeros((32, 32), np.uint8), np.zeros((32, 32), np.uint8), config={})
 
 
-def test_external_matches_round_trip(tmp_path):
+def test_external_matches_round_trip(tmp_path, generated_pair):
     """Front-end output and GlueStick/LightGlue-style arrays load into the same container."""
-    pair = generate_pair(1, SceneConfig(kind="boxes", image_size=(96, 160)))
+    pair = generated_pair(1, SceneConfig(kind="boxes", image_size=(96, 160)))
     m = match_images(pair.image0, pair.image1, pair.K, pair.K)
     path = m.save(tmp_path / "m.npz")
     back = load_external_matches(path)
@@ -212,16 +212,15 @@ def test_kitti_epipolar_residuals(kitti_root):
     assert np.median(pe) < 1.0
 
 
-def test_add_lines_equals_matching_with_lines():
+def test_add_lines_equals_matching_with_lines(generated_pair):
     """One pass per pair: the lines added to a points-only result are the lines of a full
     match (the same points, fundamental matrix and inliers), without a second SIFT pass."""
     from dataclasses import replace as dc_replace
 
     from strl_pyg.frontend import FrontendConfig, match_images
     from strl_pyg.frontend.pipeline import add_lines
-    from strl_pyg.synthetic import generate_pair
 
-    p = generate_pair(3)
+    p = generated_pair(3)
     full = match_images(p.image0, p.image1, p.K, p.K, FrontendConfig())
     points = match_images(p.image0, p.image1, p.K, p.K, FrontendConfig(lines=False))
     assert points.num_lines == 0

@@ -7,7 +7,6 @@ import numpy as np
 
 from strl_pyg.frontend.config import FrontendConfig
 from strl_pyg.frontend.points import _knn2, _top2_l2, match_points
-from strl_pyg.synthetic import generate_pair
 
 
 def _grey(img: np.ndarray) -> np.ndarray:
@@ -28,8 +27,8 @@ def test_top2_matrix_product_equals_opencv_knn():
     assert (ratio01[:200] < 0.5).all() and (ratio01[200:] > 0.7).all()  # the planted matches
 
 
-def test_match_points_fast_equals_reference_on_a_pair():
-    pair = generate_pair(3)
+def test_match_points_fast_equals_reference_on_a_pair(generated_pair):
+    pair = generated_pair(3)
     g0, g1 = _grey(pair.image0), _grey(pair.image1)
     fast = match_points(g0, g1, FrontendConfig())
     ref = match_points(g0, g1, FrontendConfig(), reference=True)
@@ -66,10 +65,10 @@ def test_single_train_descriptor():
     assert nn10.shape == (1,)
 
 
-def test_concurrent_detection_gives_the_same_matches():
+def test_concurrent_detection_gives_the_same_matches(generated_pair):
     from strl_pyg.frontend import match_images
 
-    pair = generate_pair(4)
+    pair = generated_pair(4)
     for detector in ("sift", "orb"):
         a = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K,
                          config=FrontendConfig(detector=detector))
@@ -146,12 +145,12 @@ def test_products_through_torch_equal_numpys():
     np.testing.assert_allclose(matmul(a.astype(">f8"), b), a @ b, rtol=1e-12, atol=1e-12)
 
 
-def test_line_candidates_through_torch_equal_numpys_products(monkeypatch):
+def test_line_candidates_through_torch_equal_numpys_products(monkeypatch, generated_pair):
     from strl_pyg.frontend import lines as fl
     from strl_pyg.frontend.lines import candidate_pairs, detect_lines
     from strl_pyg.frontend.points import fit_fundamental
 
-    pair = generate_pair(5)
+    pair = generated_pair(5)
     cfg = FrontendConfig()
     g0, g1 = _grey(pair.image0), _grey(pair.image1)
     p0, p1, _, _ = match_points(g0, g1, cfg)

@@ -9,7 +9,6 @@ import pytest
 from strl_pyg.frontend import FrontendConfig
 from strl_pyg.frontend.line_descriptors import band_descriptors
 from strl_pyg.frontend.lines import detect_lines, match_lines_by_descriptor
-from strl_pyg.synthetic import generate_pair
 
 #: sha1 of the default FrontendConfig's result fields before the descriptor matcher was added
 DEFAULT_FIELDS_SHA = "3fdee2614eec"
@@ -36,11 +35,11 @@ def test_band_descriptors_shape_norm_and_empty():
     assert band_descriptors(np.zeros((0, 2, 2)), g).shape == (0, 72)
 
 
-def test_a_fragment_describes_like_its_segment():
+def test_a_fragment_describes_like_its_segment(generated_pair):
     # the descriptor pools along the segment: the middle 60 % of an edge is closer to the whole
     # edge than any other segment is (on a rendered scene: the plain step edges of _scene all
     # describe alike, a limit of any band descriptor)
-    img = generate_pair(5).image0
+    img = generated_pair(5).image0
     g = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img
     segs = detect_lines(g)[:40]
     frag = segs[:, :1] + np.array([0.2, 0.8])[None, :, None] * (segs[:, 1:] - segs[:, :1])
@@ -90,8 +89,8 @@ def test_band_descriptors_bad_input_is_one_line(bad, msg):
         band_descriptors(detect_lines(g)[:3], np.dstack([g, g, g]))
 
 
-def test_guidance_narrows_the_candidates_and_keeps_the_ratio_test():
-    pair = generate_pair(5)
+def test_guidance_narrows_the_candidates_and_keeps_the_ratio_test(generated_pair):
+    pair = generated_pair(5)
     g0 = cv2.cvtColor(pair.image0, cv2.COLOR_RGB2GRAY) if pair.image0.ndim == 3 else pair.image0
     g1 = cv2.cvtColor(pair.image1, cv2.COLOR_RGB2GRAY) if pair.image1.ndim == 3 else pair.image1
     s0, s1 = detect_lines(g0), detect_lines(g1)
@@ -128,10 +127,10 @@ def test_config_line_matcher_and_cache_key():
         FrontendConfig(line_matcher="lbd")
 
 
-def test_match_images_descriptor_matcher_below_eight_points():
+def test_match_images_descriptor_matcher_below_eight_points(generated_pair):
     from strl_pyg.frontend import match_images
 
-    pair = generate_pair(5)
+    pair = generated_pair(5)
     few = dict(max_keypoints=12, thorough_below=0)  # a point-poor front end
     epi = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K,
                        config=FrontendConfig(**few))
@@ -143,13 +142,13 @@ def test_match_images_descriptor_matcher_below_eight_points():
     assert epi.info["line_endpoints"] == "corresponding"
 
 
-def test_network_methods_refuse_descriptor_lines():
+def test_network_methods_refuse_descriptor_lines(generated_pair):
     from dataclasses import replace
 
     from strl_pyg.frontend import match_images
     from strl_pyg.inference import PoseEstimator
 
-    pair = generate_pair(6)
+    pair = generated_pair(6)
     m = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K,
                      config=FrontendConfig(line_matcher="descriptor"))
     assert m.num_points >= 8 and m.num_lines > 0
@@ -163,7 +162,7 @@ def test_network_methods_refuse_descriptor_lines():
     assert ok.methods["regression"].status == "ok"
 
 
-def test_graph_and_datasets_refuse_descriptor_lines(tmp_path):
+def test_graph_and_datasets_refuse_descriptor_lines(tmp_path, generated_pair):
     # every path into the network, not only PoseEstimator: prepare_graph (network_pose, the
     # evaluation, the CLI) and the training datasets
     from strl_pyg.datasets.synthetic import SyntheticPairs
@@ -171,7 +170,7 @@ def test_graph_and_datasets_refuse_descriptor_lines(tmp_path):
     from strl_pyg.inference.network import prepare_graph
     from strl_pyg.model.strl_pose import StrLPose
 
-    pair = generate_pair(6)
+    pair = generated_pair(6)
     m = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K,
                      config=FrontendConfig(line_matcher="descriptor"))
     assert not m.line_endpoints_correspond and pair.matches.line_endpoints_correspond
@@ -182,7 +181,7 @@ def test_graph_and_datasets_refuse_descriptor_lines(tmp_path):
                              frontend_config=FrontendConfig(line_matcher="descriptor"))
 
 
-def test_endpoint_residuals_are_undefined_for_descriptor_lines():
+def test_endpoint_residuals_are_undefined_for_descriptor_lines(generated_pair):
     # endpoint k of a descriptor-matched segment is not endpoint k of its match: no epipolar
     # residual (NaN) and no endpoint-based match quality, instead of numbers that look real
     from dataclasses import replace
@@ -191,7 +190,7 @@ def test_endpoint_residuals_are_undefined_for_descriptor_lines():
     from strl_pyg.geometry.epipolar import epipolar_residuals
     from strl_pyg.synthetic.match_quality import evaluate_matches
 
-    pair = generate_pair(6)
+    pair = generated_pair(6)
     m = match_images(pair.image0, pair.image1, K0=pair.K, K1=pair.K,
                      config=FrontendConfig(line_matcher="descriptor"))
     assert m.num_lines > 0

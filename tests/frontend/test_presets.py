@@ -13,7 +13,6 @@ from strl_pyg.frontend import FrontendConfig, match_images, match_points
 from strl_pyg.frontend.config import PRESETS
 from strl_pyg.frontend.pipeline import thorough_points
 from strl_pyg.frontend.points import detect_points, root_sift, upsample_factor
-from strl_pyg.synthetic import generate_pair
 
 
 def _textured(seed: int = 0, size=(240, 320)) -> np.ndarray:
@@ -105,8 +104,8 @@ def test_cache_keys_name_every_setting_that_changes_matches():
     assert "concurrent" not in keys["thorough"]
 
 
-def test_adaptive_second_pass_replaces_a_short_first_pass():
-    pair = generate_pair(2_000_017)
+def test_adaptive_second_pass_replaces_a_short_first_pass(generated_pair):
+    pair = generated_pair(2_000_017)
     base = FrontendConfig.preset("fast", lines=False)
     once = match_images(pair.image0, pair.image1, pair.K, pair.K, config=base)
     assert once.info["second_pass"] is None

@@ -28,15 +28,14 @@ from strl_pyg.inference import estimator as inference
 from strl_pyg.inference.estimator import PoseEstimator
 from strl_pyg.inference.methods import FunctionMethod
 from strl_pyg.metrics.two_view import relative_pose_error
-from strl_pyg.synthetic import generate_pair
 
 SEED = 2_000_017  # held out from training
 DINO = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "middlebury_dino"
 
 
 @pytest.fixture(scope="module")
-def pair():
-    return generate_pair(SEED)
+def pair(generated_pair):
+    return generated_pair(SEED)
 
 
 def _swapped(K):
@@ -177,6 +176,8 @@ def test_a_pose_whose_matches_lie_behind_a_camera_is_unreliable(model):
         PoseEstimator(model, min_in_front=1.5)
 
 
+@pytest.mark.slow  # real photographs end to end (front end, solvers): the fast tier's
+# guard is test_a_pose_whose_matches_lie_behind_a_camera_is_unreliable
 @pytest.mark.skipif(not DINO.is_dir(), reason="shared/data/middlebury_dino not present")
 def test_geometric_on_dino_pairs_is_never_ok_and_far_off(model):
     """Dino pairs 6, 24 and 33 (in name order) gave the geometric head 'ok' poses 92, 149 and

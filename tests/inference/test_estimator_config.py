@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from strl_pyg.inference import CheckpointSettings, EstimatorConfig, PoseEstimator
-from strl_pyg.synthetic import generate_pair
 
 
 @pytest.mark.parametrize("options, message", [
@@ -53,19 +52,19 @@ def test_checkpoint_settings_read_what_the_metadata_says_and_default_the_rest():
     assert CheckpointSettings.from_metadata({"calibration": {}}).has_calibration
 
 
-def test_the_settings_are_read_once_per_estimator(monkeypatch):
+def test_the_settings_are_read_once_per_estimator(monkeypatch, generated_pair):
     calls = []
     real = CheckpointSettings.of.__func__
     monkeypatch.setattr(CheckpointSettings, "of",
                         classmethod(lambda cls, m: calls.append(1) or real(cls, m)))
     est = PoseEstimator(methods=("opencv", "poselib"))
     for seed in (2_000_001, 2_000_002):
-        assert est.estimate(generate_pair(seed).matches).status == "ok"
+        assert est.estimate(generated_pair(seed).matches).status == "ok"
     assert len(calls) == 1
 
 
-def test_a_subset_of_methods_runs_with_the_estimators_configuration():
-    m = generate_pair(2_000_003).matches
+def test_a_subset_of_methods_runs_with_the_estimators_configuration(generated_pair):
+    m = generated_pair(2_000_003).matches
     est = PoseEstimator(methods=("opencv", "poselib"), bootstrap=0, seed=3)
     sub = est.estimate(m, methods="poselib")
     assert list(sub.methods) == ["poselib"]
@@ -76,8 +75,8 @@ def test_a_subset_of_methods_runs_with_the_estimators_configuration():
         est.estimate(m, methods="poselibb")
 
 
-def test_swapped_matches_exchange_the_images_and_twice_is_the_pair():
-    m = generate_pair(2_000_004).matches
+def test_swapped_matches_exchange_the_images_and_twice_is_the_pair(generated_pair):
+    m = generated_pair(2_000_004).matches
     m = type(m)(**{**m.__dict__, "info": {**m.info, "fundamental": [[0.0] * 3] * 3,
                                           "fundamental_inliers": [0, 1], "source": "x"}})
     s = m.swapped()
@@ -106,10 +105,10 @@ def _assert_widened_by(on, off, key: str, covariance) -> None:
         atol=1e-12)
 
 
-def test_the_swap_check_widens_the_regression_covariance_by_the_disagreement():
+def test_the_swap_check_widens_the_regression_covariance_by_the_disagreement(generated_pair):
     from strl_pyg.estimation.uncertainty import swap_covariance
 
-    m = generate_pair(2_000_005).matches
+    m = generated_pair(2_000_005).matches
     on = PoseEstimator(methods="regression", data_check=False).estimate(m).methods["regression"]
     off = PoseEstimator(methods="regression", swap_check=False,
                         data_check=False).estimate(m).methods["regression"]
@@ -121,10 +120,11 @@ def test_the_swap_check_widens_the_regression_covariance_by_the_disagreement():
     assert np.count_nonzero(cov - np.diag(np.diag(cov))) == 0  # isotropic per block
 
 
-def test_the_data_check_widens_the_regression_covariance_by_its_distance_to_the_classical():
+def test_the_data_check_widens_the_regression_covariance_by_its_distance_to_the_classical(
+        generated_pair):
     from strl_pyg.estimation.uncertainty import data_covariance
 
-    m = generate_pair(2_000_005).matches
+    m = generated_pair(2_000_005).matches
     on = PoseEstimator(methods="regression").estimate(m).methods["regression"]
     off = PoseEstimator(methods="regression", data_check=False).estimate(m).methods["regression"]
     _assert_widened_by(on, off, "data_disagreement_deg", data_covariance)
@@ -143,7 +143,8 @@ def _ctx():
     return MethodContext(EstimatorConfig(seed=0, threshold_px=1.0, bootstrap=0))
 
 
-def test_the_data_check_measures_how_far_a_wrong_pose_is_from_what_the_matches_support():
+def test_the_data_check_measures_how_far_a_wrong_pose_is_from_what_the_matches_support(
+        generated_pair):
     """A pose 6 deg off in rotation and 25 deg off in translation direction, on clean matches:
     the classical pose is the true one to a fraction of a degree, so the distance is the
     error itself; a backward translation (the network's typical failure on forward motion)
@@ -154,7 +155,7 @@ def test_the_data_check_measures_how_far_a_wrong_pose_is_from_what_the_matches_s
     from strl_pyg.inference.methods.regression import _data_disagreement
     from strl_pyg.synthetic import SceneConfig
 
-    p = generate_pair(2_000_011, SceneConfig(kind="indoor", noise_px=0.3))
+    p = generated_pair(2_000_011, SceneConfig(kind="indoor", noise_px=0.3))
     true = Pose.from_matrix(torch.as_tensor(p.T_0to1, dtype=torch.float64))
     axis = torch.tensor([0.3, -0.8, 0.5], dtype=torch.float64)
     R = so3_exp((np.radians(6.0) * axis / axis.norm())[None])[0] @ true.R.double()
@@ -170,7 +171,7 @@ def test_the_data_check_measures_how_far_a_wrong_pose_is_from_what_the_matches_s
     assert np.degrees(rot) < 0.3 and np.degrees(trans) < 2.0
 
 
-def test_the_data_check_and_the_classical_method_share_one_solve(monkeypatch):
+def test_the_data_check_and_the_classical_method_share_one_solve(monkeypatch, generated_pair):
     from strl_pyg.estimation.classical import have_poselib
     from strl_pyg.inference.methods import context as methods  # the pair's one solve
 
@@ -184,7 +185,7 @@ def test_the_data_check_and_the_classical_method_share_one_solve(monkeypatch):
     monkeypatch.setattr(methods, "estimate_relative_pose", counting)
     name = "poselib" if have_poselib() else "opencv"
     est = PoseEstimator(methods=["regression", name], bootstrap=0).estimate(
-        generate_pair(2_000_005).matches)
+        generated_pair(2_000_005).matches)
     assert calls == [name]
     reg, cls = est.methods["regression"], est.methods[name]
     d = reg.info["data_disagreement_deg"]
@@ -193,7 +194,7 @@ def test_the_data_check_and_the_classical_method_share_one_solve(monkeypatch):
     assert d["rotation"] == pytest.approx(expect, abs=1e-6)
 
 
-def test_the_data_check_says_why_it_did_not_run():
+def test_the_data_check_says_why_it_did_not_run(generated_pair):
     from dataclasses import replace
 
     import torch
@@ -201,7 +202,7 @@ def test_the_data_check_says_why_it_did_not_run():
     from strl_pyg.geometry import Pose
     from strl_pyg.inference.methods.regression import _data_disagreement
 
-    p = generate_pair(2_000_005)
+    p = generated_pair(2_000_005)
     pose = Pose.from_matrix(torch.as_tensor(p.T_0to1, dtype=torch.float64))
     m = p.matches
     assert _data_disagreement(replace(m, K0=None, K1=None), pose, _ctx()) == "no intrinsics"
@@ -213,7 +214,7 @@ def test_the_data_check_says_why_it_did_not_run():
     assert _data_disagreement(rep, pose, _ctx()) == "4 distinct point matches (fewer than 8)"
 
 
-def test_the_regression_says_when_its_data_check_did_not_run(monkeypatch):
+def test_the_regression_says_when_its_data_check_did_not_run(monkeypatch, generated_pair):
     from strl_pyg.inference.methods import regression as methods
 
     def broken(*args):
@@ -221,7 +222,7 @@ def test_the_regression_says_when_its_data_check_did_not_run(monkeypatch):
 
     monkeypatch.setattr(methods, "_data_disagreement", broken)
     rec = PoseEstimator(methods="regression").estimate(
-        generate_pair(2_000_005).matches).methods["regression"]
+        generated_pair(2_000_005).matches).methods["regression"]
     assert rec.status == "ok" and rec.info["data_check"] == "not run: RuntimeError: planted"
     assert any("no data check (RuntimeError: planted)" in w for w in rec.warnings)
 
@@ -238,14 +239,14 @@ def test_numpy_scalars_are_options_as_python_ones():
         EstimatorConfig(methods=("poselibb",))
 
 
-def test_a_failing_swap_pass_leaves_the_regression_with_a_warning(monkeypatch):
+def test_a_failing_swap_pass_leaves_the_regression_with_a_warning(monkeypatch, generated_pair):
     import strl_pyg.inference.methods.regression as methods
 
     def boom(*a, **k):
         raise RuntimeError("out of memory\nmore")
 
     monkeypatch.setattr(methods, "_swap_disagreement", boom)
-    m = generate_pair(2_000_005).matches
+    m = generated_pair(2_000_005).matches
     rec = PoseEstimator(methods="regression").estimate(m).methods["regression"]
     off = PoseEstimator(methods="regression", swap_check=False).estimate(m).methods["regression"]
     assert rec.status == "ok" and "swap_disagreement_deg" not in rec.info

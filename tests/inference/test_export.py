@@ -18,12 +18,11 @@ from strl_pyg.inference.export import (
 )
 from strl_pyg.inference.network import forward_pose, prepare_graph
 from strl_pyg.model.strl_pose import StrLPose
-from strl_pyg.synthetic import generate_pair
 
 
 @pytest.fixture(scope="module")
-def graph(model):
-    return prepare_graph(generate_pair(7).matches, model)
+def graph(model, generated_pair):
+    return prepare_graph(generated_pair(7).matches, model)
 
 
 def test_wrapper_equals_the_model_forward(model, graph):
@@ -41,13 +40,13 @@ def test_inputs_have_the_resampled_sizes(model, graph):
     assert shapes[2] == (2 * lines,) and shapes[3][0] == 2
 
 
-def test_onnxruntime_equals_pytorch(model, graph, tmp_path):
+def test_onnxruntime_equals_pytorch(model, graph, tmp_path, generated_pair):
     ort = pytest.importorskip("onnxruntime")
     pytest.importorskip("onnx")
     path = export_onnx(model, tmp_path / "m.onnx", example=graph)
     assert path.is_file() and not list(tmp_path.glob("*.part"))
     # another pair than the example: the graph is not specialised to the traced values
-    other = prepare_graph(generate_pair(11).matches, model)
+    other = prepare_graph(generated_pair(11).matches, model)
     ref = forward_pose(model, other)
     opts = ort.SessionOptions()
     opts.intra_op_num_threads = 1
@@ -57,7 +56,7 @@ def test_onnxruntime_equals_pytorch(model, graph, tmp_path):
     for o, r in zip(outs, (ref.quaternion, ref.translation, ref.log_var), strict=True):
         np.testing.assert_allclose(o, r.numpy(), atol=1e-4)
     assert float(np.abs(outs[1] - forward_pose(model, prepare_graph(
-        generate_pair(7).matches, model)).translation.numpy()).max()) > 1e-3  # inputs matter
+        generated_pair(7).matches, model)).translation.numpy()).max()) > 1e-3  # inputs matter
 
 
 def test_bad_path_and_cnn_rows_are_refused(model, tmp_path):
@@ -96,7 +95,7 @@ def test_a_failed_export_leaves_no_file(model, graph, tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("inputs", ["flow", "flow2", "parallax"])
-def test_onnxruntime_equals_pytorch_for_the_flow_inputs(inputs, tmp_path):
+def test_onnxruntime_equals_pytorch_for_the_flow_inputs(inputs, tmp_path, generated_pair):
     """The flow inputs' products and standardisation are part of the exported graph."""
     ort = pytest.importorskip("onnxruntime")
     pytest.importorskip("onnx")
@@ -105,9 +104,9 @@ def test_onnxruntime_equals_pytorch_for_the_flow_inputs(inputs, tmp_path):
     torch.manual_seed(0)
     m = StrLPose(StrLPoseConfig.ablation("full", hidden=16, layers=1, heads=2, inputs=inputs,
                                          patch_features=1)).eval()
-    g = prepare_graph(generate_pair(7).matches, m)
+    g = prepare_graph(generated_pair(7).matches, m)
     path = export_onnx(m, tmp_path / "m.onnx", example=g)
-    other = prepare_graph(generate_pair(11).matches, m)
+    other = prepare_graph(generated_pair(11).matches, m)
     ref = forward_pose(m, other)
     sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
     outs = sess.run(None, {n: x.numpy() for n, x in zip(INPUT_NAMES, onnx_inputs(m, other),

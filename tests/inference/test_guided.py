@@ -13,13 +13,13 @@ from strl_pyg.geometry import epipolar_residuals
 from strl_pyg.metrics.two_view import relative_pose_error
 from strl_pyg.model import ABLATIONS, StrLPoseConfig
 from strl_pyg.model.strl_pose import StrLPose
-from strl_pyg.synthetic import SceneConfig, generate_pair
+from strl_pyg.synthetic import SceneConfig
 from strl_pyg.training.loss import GeometricLoss
 
 
 @pytest.fixture(scope="module")
-def outlier_pair():
-    p = generate_pair(2_000_100, SceneConfig(noise_px=1.0, outlier_fraction=0.5))
+def outlier_pair(generated_pair):
+    p = generated_pair(2_000_100, SceneConfig(noise_px=1.0, outlier_fraction=0.5))
     return p, estimate_relative_pose(p.matches, "opencv")
 
 
@@ -57,13 +57,13 @@ def test_guided_rejects_bad_weights(outlier_pair):
         guided_estimate(p.matches, np.ones(n), keep=0.0)
 
 
-def _graph(seed=3, **scene):
-    p = generate_pair(seed, SceneConfig(**scene))
+def _graph(generated_pair, seed=3, **scene):
+    p = generated_pair(seed, SceneConfig(**scene))
     return p, build_pair_graph(p.matches, T_0to1=p.T_0to1)
 
 
-def test_geometric_head_recovers_the_exact_pose_with_uniform_weights():
-    p, g = _graph()
+def test_geometric_head_recovers_the_exact_pose_with_uniform_weights(generated_pair):
+    p, g = _graph(generated_pair)
     cfg = StrLPoseConfig.ablation("full", hidden=16, layers=1, patch_features=1, geometric=True)
     model = StrLPose(cfg).eval()
     with torch.no_grad():  # constant logit: every node weighs the same
@@ -80,8 +80,9 @@ def test_geometric_head_recovers_the_exact_pose_with_uniform_weights():
     assert geo.endpoint_logits.shape == (2 * p.matches.num_lines,)
 
 
-def test_geometric_head_storage_order_survives_batching():
-    gs = [FixedSizeResample(40 + 10 * i, 8, seed=i)(_graph(seed=i)[1]) for i in range(3)]
+def test_geometric_head_storage_order_survives_batching(generated_pair):
+    gs = [FixedSizeResample(40 + 10 * i, 8, seed=i)(_graph(generated_pair, seed=i)[1])
+          for i in range(3)]
     from torch_geometric.loader.dataloader import Collater
 
     b = Collater(None)(gs)
@@ -95,8 +96,8 @@ def test_geometric_head_storage_order_survives_batching():
     assert torch.allclose(out_b.R, torch.cat([s.R for s in singles]), atol=1e-6)
 
 
-def test_geometric_head_reports_too_few_matches_as_degenerate():
-    p, g = _graph()
+def test_geometric_head_reports_too_few_matches_as_degenerate(generated_pair):
+    p, g = _graph(generated_pair)
     g = FixedSizeResample(5, 1, seed=0)(g)  # 5 points + 2 endpoints < 8
     cfg = StrLPoseConfig.ablation("baseline", hidden=16, layers=1, geometric=True)
     out = StrLPose(cfg)(g)
@@ -105,11 +106,11 @@ def test_geometric_head_reports_too_few_matches_as_degenerate():
 
 
 @pytest.mark.parametrize("row", list(ABLATIONS))
-def test_every_ablation_row_trains_with_and_without_the_geometric_head(row):
-    _, g = _graph(seed=5, noise_px=1.0, outlier_fraction=0.3)
+def test_every_ablation_row_trains_with_and_without_the_geometric_head(row, generated_pair):
+    _, g = _graph(generated_pair, seed=5, noise_px=1.0, outlier_fraction=0.3)
     g = FixedSizeResample(64, 16, seed=0)(g)
     if row in ("R", "LP+R"):
-        p = generate_pair(5, SceneConfig(noise_px=1.0, outlier_fraction=0.3))
+        p = generated_pair(5, SceneConfig(noise_px=1.0, outlier_fraction=0.3))
         g = FixedSizeResample(64, 16, seed=0)(build_pair_graph(
             p.matches, T_0to1=p.T_0to1, keep_images=True))
     for geometric in (False, True):
@@ -134,8 +135,8 @@ def test_regression_checkpoint_loads_without_the_geometric_head(tmp_path):
     assert again.inlier_head is None and again.config.geometric is False
 
 
-def test_geometric_loss_labels_follow_the_true_epipolar_error():
-    p, g = _graph(seed=7, noise_px=0.5, outlier_fraction=0.4)
+def test_geometric_loss_labels_follow_the_true_epipolar_error(generated_pair):
+    p, g = _graph(generated_pair, seed=7, noise_px=0.5, outlier_fraction=0.4)
     cfg = StrLPoseConfig.ablation("baseline", hidden=16, layers=1, geometric=True)
     model = StrLPose(cfg)
     out = model(g)

@@ -33,7 +33,6 @@ from strl_pyg.inference.estimator import PoseEstimator
 from strl_pyg.metrics.two_view import relative_pose_error
 from strl_pyg.model import StrLPoseConfig
 from strl_pyg.model.strl_pose import StrLPose
-from strl_pyg.synthetic import generate_pair
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 SEED = 2_000_017  # held out from training
@@ -55,8 +54,8 @@ SNIPPET = readme_python_block("PoseEstimator")
 
 # ----------------------------------------------------------------------------- fixtures
 @pytest.fixture(scope="module")
-def pair():
-    return generate_pair(SEED)
+def pair(generated_pair):
+    return generated_pair(SEED)
 
 
 @pytest.fixture(scope="module")
@@ -359,6 +358,9 @@ def pngs(pair, tmp_path_factory):
     return d, f"{K[0, 0]},{K[1, 1]},{K[0, 2]},{K[1, 2]}"
 
 
+@pytest.mark.slow  # images to every method through the command line: the fast tier's JSON
+# guards are test_to_dict_is_json_with_the_documented_keys and (images, --json)
+# tests/cli/test_cli.py::test_the_default_predict_does_not_build_the_network
 def test_predict_json_round_trips_with_the_pose_record(pngs, capsys):
     d, K = pngs
     code = cli.main(["predict", str(d / "a.png"), str(d / "b.png"), "--K", K, "--json",
@@ -444,7 +446,7 @@ def test_forward_pose_of_one_graph_equals_the_batch_of_it(pair, row):
             assert after[k].dtype == v.dtype and torch.equal(after[k], v), k
 
 
-def test_a_record_keeps_the_methods_pose_object(monkeypatch):
+def test_a_record_keeps_the_methods_pose_object(monkeypatch, generated_pair):
     """Poses went Pose -> 4x4 -> Pose between a method and the support check (10
     Pose.from_matrix calls on `predict --methods all`); a record now keeps the method's Pose."""
     import numpy as np
@@ -453,9 +455,9 @@ def test_a_record_keeps_the_methods_pose_object(monkeypatch):
     from strl_pyg.geometry import Pose
     from strl_pyg.inference.record import MethodResult
     from strl_pyg.inference.support import check_support
-    from strl_pyg.synthetic import SceneConfig, generate_pair
+    from strl_pyg.synthetic import SceneConfig
 
-    pair = generate_pair(5, SceneConfig(kind="indoor", noise_px=0.5))
+    pair = generated_pair(5, SceneConfig(kind="indoor", noise_px=0.5))
     T = np.asarray(pair.T_0to1, dtype=np.float64)
     t = T[:3, 3] / np.linalg.norm(T[:3, 3])
     pose = Pose(torch.from_numpy(T[:3, :3]), torch.from_numpy(t))

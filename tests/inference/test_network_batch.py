@@ -12,7 +12,6 @@ from strl_pyg.estimation.pose_fusion import network_covariance
 from strl_pyg.geometry import tangent_basis
 from strl_pyg.inference import network_pose, network_poses
 from strl_pyg.model import PoseOutput, StrLPose
-from strl_pyg.synthetic import generate_pair
 
 
 @pytest.fixture(scope="module")
@@ -21,8 +20,8 @@ def model():
 
 
 @pytest.fixture(scope="module")
-def pairs():
-    return [generate_pair(seed).matches for seed in (2_000_017, 2_000_018)]
+def pairs(generated_pair):
+    return [generated_pair(seed).matches for seed in (2_000_017, 2_000_018)]
 
 
 def test_a_batch_gives_the_poses_of_one_pair_at_a_time(model, pairs):

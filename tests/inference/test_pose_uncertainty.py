@@ -11,12 +11,12 @@ import pytest
 from strl_pyg.estimation.classical import estimate_relative_pose
 from strl_pyg.estimation.uncertainty import MAX_SIGMA_DEG, bootstrap_covariance, cap_covariance
 from strl_pyg.inference.estimator import PoseEstimator
-from strl_pyg.synthetic import SceneConfig, generate_pair
+from strl_pyg.synthetic import SceneConfig
 
 
 @pytest.fixture(scope="module")
-def pair():
-    return generate_pair(2_200_000, SceneConfig(kind="indoor", noise_px=0.5))
+def pair(generated_pair):
+    return generated_pair(2_200_000, SceneConfig(kind="indoor", noise_px=0.5))
 
 
 def _psd(c):
@@ -151,7 +151,8 @@ def test_fused_covariance_takes_its_calibration_scale(pair):
 
 
 @pytest.mark.parametrize("kind,seed", [("indoor", 2_200_000), ("indoor", 2_200_001)])
-def test_guided_covariance_is_first_order_plus_the_bootstrap_of_its_solve(kind, seed):
+def test_guided_covariance_is_first_order_plus_the_bootstrap_of_its_solve(kind, seed,
+                                                                          generated_pair):
     """Before, the guided record had the first-order covariance only (2-sigma coverage
     55-66 % on dino, object, low texture in bench_pose); now it adds the bootstrap of the solve
     it kept, like the classical records: on all matches it is the base method's own bootstrap
@@ -161,7 +162,7 @@ def test_guided_covariance_is_first_order_plus_the_bootstrap_of_its_solve(kind, 
     from strl_pyg.model.strl_pose import StrLPose
 
     assert "guided" in BOOTSTRAPPED
-    pair = generate_pair(seed, SceneConfig(kind=kind, noise_px=1.0, outlier_fraction=0.5))
+    pair = generated_pair(seed, SceneConfig(kind=kind, noise_px=1.0, outlier_fraction=0.5))
     model = StrLPose.from_pretrained()
     base = "poselib" if have_poselib() else "opencv"
     est = PoseEstimator(model, methods=[base, "guided"]).estimate(pair.matches).methods

@@ -13,7 +13,6 @@ import torch
 
 from strl_pyg.inference.network import prepare_graph
 from strl_pyg.model import StrLPose, StrLPoseConfig
-from strl_pyg.synthetic import generate_pair
 
 
 def _assert_same_graph(fast, ref):
@@ -32,8 +31,8 @@ def _assert_same_graph(fast, ref):
 
 
 @pytest.fixture(scope="module")
-def pair():
-    return generate_pair(2_000_017).matches
+def pair(generated_pair):
+    return generated_pair(2_000_017).matches
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,7 @@ from strl_pyg.inference import methods_needed
 from strl_pyg.inference.estimator import PoseEstimator
 from strl_pyg.inference.methods import FunctionMethod
 from strl_pyg.inference.recommended import estimate_methods, estimate_recommended
-from strl_pyg.synthetic import SceneConfig, generate_pair
+from strl_pyg.synthetic import SceneConfig
 
 
 @pytest.fixture(scope="module")
@@ -24,8 +24,8 @@ def model():
 
 
 @pytest.fixture(scope="module")
-def pair():
-    return generate_pair(3, SceneConfig(kind="street", image_size=(192, 320)))
+def pair(generated_pair):
+    return generated_pair(3, SceneConfig(kind="street", image_size=(192, 320)))
 
 
 def _with_order(model, order):
@@ -34,8 +34,8 @@ def _with_order(model, order):
     return m
 
 
-def test_points_only_front_end():
-    p = generate_pair(0, SceneConfig(kind="street", image_size=(192, 320)))
+def test_points_only_front_end(generated_pair):
+    p = generated_pair(0, SceneConfig(kind="street", image_size=(192, 320)))
     full = match_images(p.image0, p.image1)
     pts = match_images(p.image0, p.image1, config=FrontendConfig(lines=False))
     assert full.num_lines > 0 and pts.num_lines == 0
@@ -43,7 +43,12 @@ def test_points_only_front_end():
     np.testing.assert_array_equal(pts.points1, full.points1)  # points do not depend on lines
 
 
-@pytest.mark.parametrize("order", [None, ("fused", "opencv"), ("geometric", "regression")])
+@pytest.mark.parametrize("order", [
+    None,  # the shipped order: the fast tier's case
+    # other orders run the front end and every method again (~3 s each): the slow tier
+    pytest.param(("fused", "opencv"), marks=pytest.mark.slow),
+    pytest.param(("geometric", "regression"), marks=pytest.mark.slow),
+])
 def test_same_pose_as_every_method(model, pair, order):
     mdl = model if order is None else _with_order(model, order)
     lazy = estimate_recommended(mdl, pair.image0, pair.image1, pair.K, pair.K)
@@ -57,7 +62,7 @@ def test_same_pose_as_every_method(model, pair, order):
     assert (lazy.num_lines > 0) == reads_lines and full.num_lines > 0
 
 
-def test_few_points_put_the_line_solver_first_with_the_same_pose(model):
+def test_few_points_put_the_line_solver_first_with_the_same_pose(model, generated_pair):
     """At most 30 point matches (the front end limited to 40 keypoints): the lazy path matches
     the points first, then the lines for vp, and gives the pose of the run of every method."""
     import torch
@@ -67,7 +72,7 @@ def test_few_points_put_the_line_solver_first_with_the_same_pose(model):
     from strl_pyg.geometry.pose import rotation_angle_deg
     from strl_pyg.inference import POINT_POOR_MAX_POINTS
 
-    p = generate_pair(2, SceneConfig(kind="street", image_size=(240, 320)))
+    p = generated_pair(2, SceneConfig(kind="street", image_size=(240, 320)))
     cfg = FrontendConfig.preset("legacy", max_keypoints=40)
     calls = []
     real = pipeline.match_images
@@ -112,13 +117,13 @@ def test_no_matches_is_degenerate(model):
     assert est.status == "degenerate" and est.T_0to1 is None
 
 
-def test_without_poselib_opencv_takes_its_place_and_the_record_says_so(monkeypatch):
+def test_without_poselib_opencv_takes_its_place_and_the_record_says_so(monkeypatch, generated_pair):
     """Found by a newcomer trial: a plain `pip install -e .` has no PoseLib, and the shipped
     order ['poselib', 'fused', ...] then recommended `fused` (measured with PoseLib as its base,
     and within the noise of PoseLib on the calibration pairs) without a word."""
     from strl_pyg import inference
     from strl_pyg.model.strl_pose import StrLPose
-    from strl_pyg.synthetic import SceneConfig, generate_pair
+    from strl_pyg.synthetic import SceneConfig
 
     model = StrLPose.from_pretrained()
     assert model.metadata["recommended_order"][0] == "poselib"
@@ -129,7 +134,7 @@ def test_without_poselib_opencv_takes_its_place_and_the_record_says_so(monkeypat
     assert order[0] == "opencv" and "poselib" not in order and order.count("opencv") == 1
     rest = [m for m in model.metadata["recommended_order"] if m not in ("poselib", "opencv")]
     assert [m for m in order if m != "opencv"] == rest
-    pair = generate_pair(2_000_001, SceneConfig(kind="indoor", noise_px=0.5))
+    pair = generated_pair(2_000_001, SceneConfig(kind="indoor", noise_px=0.5))
     est = inference.PoseEstimator(model).estimate(pair.matches)
     assert est.pose.status == "ok" and est.pose.method == "opencv"
     assert inference.POSELIB_MISSING in est.pose.warnings
@@ -223,14 +228,14 @@ def _outliers_checked(est) -> bool:
     return int((~inl).sum()) >= need
 
 
-def test_the_recommended_path_checks_a_point_poor_pair_once(model, monkeypatch):
+def test_the_recommended_path_checks_a_point_poor_pair_once(model, monkeypatch, generated_pair):
     """The point-poor pair used to be checked (deduplicated, intrinsics) once per method
     tried: with vp not "ok", again for PoseLib, the next of the order."""
     from strl_pyg.data.matches import PairMatches
     from strl_pyg.inference import estimator
     from strl_pyg.inference.record import MethodResult
 
-    p = generate_pair(2, SceneConfig(kind="street", image_size=(240, 320)))
+    p = generated_pair(2, SceneConfig(kind="street", image_size=(240, 320)))
     monkeypatch.setitem(estimator.METHODS, "vp", FunctionMethod.like(
         estimator.METHODS["vp"], lambda m, ctx: MethodResult("vp", "failed",
                                                              warnings=["planted"])))
@@ -341,12 +346,12 @@ def test_known_results_are_taken_by_the_recommended_walk(model, pair, monkeypatc
                              methods=("opencv",))
 
 
-def test_the_normalisation_memo_hands_out_copies():
+def test_the_normalisation_memo_hands_out_copies(generated_pair):
     """Found in review: a method writing into the normalised points changed every later
     method's input inside the pair's scope."""
     from strl_pyg.estimation.classical import normalisation_scope, normalised_matches
 
-    p = generate_pair(1, SceneConfig(kind="indoor"))
+    p = generated_pair(1, SceneConfig(kind="indoor"))
     m = p.matches
     ref0, ref1, ref_f = normalised_matches(m)  # the reference path: no scope, no memo
     with normalisation_scope() as memo:
@@ -367,7 +372,7 @@ def torch_equal(a, b) -> bool:
     return bool(torch.equal(a, b))
 
 
-def test_decisions_read_typed_fields_not_info_keys(monkeypatch):
+def test_decisions_read_typed_fields_not_info_keys(monkeypatch, generated_pair):
     """A method that raises is ``failed`` with ``raised`` set (and ``info["raised"]`` in the
     JSON record); the recommended pose names it, whatever its message says."""
     from strl_pyg.inference.methods import FunctionMethod
@@ -378,7 +383,7 @@ def test_decisions_read_typed_fields_not_info_keys(monkeypatch):
         raise RuntimeError("unsupported and raised are words, not decisions")
 
     monkeypatch.setitem(METHODS, "opencv", FunctionMethod.like(METHODS["opencv"], boom))
-    m = generate_pair(2).matches
+    m = generated_pair(2).matches
     est = PoseEstimator(methods=("opencv", "poselib")).estimate(m)
     rec = est.methods["opencv"]
     assert rec.status == "failed" and rec.raised == "RuntimeError" and not rec.unsupported

@@ -10,7 +10,6 @@ import strl_pyg.inference as face
 from strl_pyg.cli import main as cli_main
 from strl_pyg.inference import estimator as est_mod
 from strl_pyg.inference.record import MethodResult
-from strl_pyg.synthetic import generate_pair
 
 
 @pytest.fixture()
@@ -24,7 +23,7 @@ def toy(method_registry):
     return "toy"
 
 
-def test_a_method_registered_once_is_everywhere(toy, tmp_path, capsys):
+def test_a_method_registered_once_is_everywhere(toy, tmp_path, capsys, generated_pair):
     assert toy in face.SUPPORT_CHECKED and toy not in face.BOOTSTRAPPED
     assert toy not in face.NETWORK_METHODS and face.DEPENDENCIES[toy] == ("classical",)
     from strl_pyg.inference import registry
@@ -37,7 +36,7 @@ def test_a_method_registered_once_is_everywhere(toy, tmp_path, capsys):
 
     assert methods_needed([toy])[-1] == toy and len(methods_needed([toy])) == 2
     # predict --methods knows it, runs its dependency, checks its support, prints its label
-    pair = generate_pair(2_000_017)
+    pair = generated_pair(2_000_017)
     path = pair.matches.save(tmp_path / "m.npz")
     code = cli_main(["predict", "--matches", str(path), "--methods", f"{toy},opencv",
                      "--bootstrap", "0"])
@@ -56,13 +55,14 @@ def test_derived_tables_follow_the_specs():
         face.register_method("x", lambda m, c: None, lable="typo")
 
 
-def test_a_classical_only_estimate_reads_the_calibration_without_building_the_network():
+def test_a_classical_only_estimate_reads_the_calibration_without_building_the_network(
+        generated_pair):
     """Before: PoseEstimator(methods="poselib") built the shipped network to read its
     calibration (one pass per pair: the network only when a method needs it)."""
     from strl_pyg.inference import PoseEstimator
     from strl_pyg.model import StrLPose
 
-    pair = generate_pair(2_000_017)
+    pair = generated_pair(2_000_017)
     light = PoseEstimator(methods="poselib")
     est = light.estimate(pair.matches)
     assert light._model is None and est.status == "ok"
@@ -92,7 +92,7 @@ def test_one_name_per_regime_and_per_bound():
         estimator.PoseEstimator(bootstrap=MIN_BOOTSTRAP - 1)
 
 
-def test_a_pose_method_class_registers_with_its_own_spec(method_registry, tmp_path):
+def test_a_pose_method_class_registers_with_its_own_spec(method_registry, tmp_path, generated_pair):
     from strl_pyg.inference import PoseEstimator
     from strl_pyg.inference.methods import PoseMethod
 
@@ -111,7 +111,7 @@ def test_a_pose_method_class_registers_with_its_own_spec(method_registry, tmp_pa
     spec = method_registry.METHODS["identity"]
     assert spec.label == "says identity" and spec.depends_on == ("classical",)
     assert not spec.needs_intrinsics and not spec.support_checked and spec.available()
-    pair = generate_pair(2_000_017)
+    pair = generated_pair(2_000_017)
     est = PoseEstimator(methods=("identity",), bootstrap=0).estimate(pair.matches)
     rec = est.methods["identity"]
     assert rec.status == "ok", (rec.status, rec.warnings)
@@ -142,7 +142,7 @@ def test_the_built_in_methods_are_classes_with_their_needs():
         Classical.of("colmap")
 
 
-def test_calibration_and_bad_intrinsics_are_typed_on_the_record():
+def test_calibration_and_bad_intrinsics_are_typed_on_the_record(generated_pair):
     """Decisions read typed fields, never warning text: a covariance scaled by a measured
     calibration is ``calibrated=True``; one without a scale is ``calibrated=False`` with one
     warning; a pose computed with intrinsics that fail the checks is ``bad_intrinsics``."""
@@ -151,7 +151,7 @@ def test_calibration_and_bad_intrinsics_are_typed_on_the_record():
     from strl_pyg.inference import PoseEstimator
     from strl_pyg.model import StrLPose, StrLPoseConfig
 
-    pair = generate_pair(2_000_017)
+    pair = generated_pair(2_000_017)
     rec = PoseEstimator(methods=("opencv",)).estimate(pair.matches).methods["opencv"]
     assert rec.status == "ok" and rec.calibrated is True and not rec.bad_intrinsics
     rec = PoseEstimator(methods=("opencv",), bootstrap=0).estimate(pair.matches).methods["opencv"]
@@ -168,13 +168,13 @@ def test_calibration_and_bad_intrinsics_are_typed_on_the_record():
     assert rec.bad_intrinsics and rec.status == "unreliable"
 
 
-def test_a_method_asked_for_alone_runs_with_the_methods_it_reads():
+def test_a_method_asked_for_alone_runs_with_the_methods_it_reads(generated_pair):
     """Before: ``PoseEstimator(methods=("fused",))`` ran fused without the regression and the
     classical pose it combines: always ``"failed"`` ("fused needs an 'ok' regression and an
     'ok' classical estimate")."""
     from strl_pyg.inference import PoseEstimator
 
-    pair = generate_pair(2_000_017)
+    pair = generated_pair(2_000_017)
     est = PoseEstimator(methods=("fused",), bootstrap=0).estimate(pair.matches)
     assert list(est.methods) == ["fused"]  # what was asked for, in that order
     assert est.methods["fused"].status == "ok", est.methods["fused"].warnings
@@ -214,12 +214,12 @@ def test_one_parser_of_method_names_with_a_suggestion():
         checked_method_names("poselibb")
 
 
-def test_a_classical_base_is_the_solver_of_the_run():
+def test_a_classical_base_is_the_solver_of_the_run(generated_pair):
     """Before: with only OpenCV asked for, vp_checked (and guided, vp) solved PoseLib on their
     own, uncalibrated and with the support thresholds at 0, beside the OpenCV record."""
     from strl_pyg.inference import PoseEstimator
 
-    pair = generate_pair(2_000_017)
+    pair = generated_pair(2_000_017)
     est = PoseEstimator(methods=("opencv", "vp_checked"), bootstrap=0).estimate(pair.matches)
     vc, cv = est.methods["vp_checked"], est.methods["opencv"]
     assert vc.info["classical"] == "opencv" and vc.info["source"] == "opencv"
@@ -296,7 +296,7 @@ class QuickSolver(PoseMethod):
 
 
 @pytest.mark.slow
-def test_a_new_solver_is_one_module(tmp_path, plugin_cli):
+def test_a_new_solver_is_one_module(tmp_path, plugin_cli, generated_pair):
     """A package that declares one module in the ``strl-pyg.methods`` entry-point group adds
     a solver: ``strl-pose methods`` lists it, ``predict --methods`` runs it, its record is in
     the JSON, support-checked like the built-in solvers."""
@@ -304,7 +304,7 @@ def test_a_new_solver_is_one_module(tmp_path, plugin_cli):
 
     cli = plugin_cli("quick_solver", PLUGIN, "strl-pyg.methods",
                      "quick = quick_solver:QuickSolver")
-    generate_pair(2_000_017).matches.save(tmp_path / "pair.npz")
+    generated_pair(2_000_017).matches.save(tmp_path / "pair.npz")
 
     listed = cli("methods")
     assert "| `quick` | OpenCV's essential matrix with a fixed budget of 200 RANSAC" in listed

@@ -107,15 +107,14 @@ class _Shout(PoseRule):
                        {"n": run.matches.num_points})
 
 
-def test_a_rule_registered_at_run_time_speaks_on_every_pose():
-    from strl_pyg.synthetic import generate_pair
+def test_a_rule_registered_at_run_time_speaks_on_every_pose(generated_pair):
 
     register_rule(_Shout)
     try:
         with pytest.raises(ValueError, match="Expected a new rule name"):
             register_rule(_Shout)
         est = PoseEstimator(methods=("poselib",), bootstrap=0).estimate(
-            generate_pair(2_000_017).matches)
+            generated_pair(2_000_017).matches)
         assert est.pose.status == "ok" and est.pose.verdicts[-1].rule == "shout"
         assert est.pose.verdicts[-1].evidence["n"] == est.matches.num_points
     finally:
@@ -147,15 +146,14 @@ class FewInliers(PoseRule):
 
 
 @pytest.mark.slow
-def test_a_new_rule_is_one_module(tmp_path, plugin_cli):
+def test_a_new_rule_is_one_module(tmp_path, plugin_cli, generated_pair):
     """A package that declares one module in the ``strl-pyg.rules`` entry-point group adds a
     rule: ``strl-pose rules`` lists it, ``predict`` applies it and its name is the record's
     ``rule``."""
-    from strl_pyg.synthetic import generate_pair
 
     cli = plugin_cli("few_inliers", PLUGIN, "strl-pyg.rules",
                      "few_inliers = few_inliers:FewInliers")
-    generate_pair(2_000_017).matches.save(tmp_path / "pair.npz")
+    generated_pair(2_000_017).matches.save(tmp_path / "pair.npz")
 
     assert "| `few_inliers` | the recommended pose | refuse |" in cli("rules")
     record = json.loads(cli("predict", "--matches", str(tmp_path / "pair.npz"), "--methods",

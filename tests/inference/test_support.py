@@ -11,7 +11,7 @@ import torch
 from strl_pyg.data.matches import PairMatches
 from strl_pyg.inference.estimator import PoseEstimator
 from strl_pyg.model.strl_pose import StrLPose
-from strl_pyg.synthetic import SceneConfig, generate_pair
+from strl_pyg.synthetic import SceneConfig
 
 K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
 
@@ -54,12 +54,12 @@ def test_few_random_matches_are_not_supported_either(model):
     assert any("fewer than 12" in w for w in est.methods["opencv"].warnings)
 
 
-def test_few_matches_that_all_agree_keep_their_pose(model):
+def test_few_matches_that_all_agree_keep_their_pose(model, generated_pair):
     """With fewer matches than min_inliers every one must agree: 10 clean matches of a real
     pose pass (the review found that any pair with 5-11 matches was refused)."""
     from strl_pyg.metrics.two_view import relative_pose_error
 
-    pair = generate_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.0))
+    pair = generated_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.0))
     m = pair.matches
     idx = np.linspace(0, m.num_points - 1, 10).astype(int)
     ten = m.select(point_index=idx)
@@ -70,10 +70,10 @@ def test_few_matches_that_all_agree_keep_their_pose(model):
     assert float(rot[0]) < 1.0
 
 
-def test_noisy_matches_with_many_outliers_keep_a_right_pose(model):
+def test_noisy_matches_with_many_outliers_keep_a_right_pose(model, generated_pair):
     """The review's case: 2 px noise and 50 % outliers; at a 1 px count (18 % of the matches)
     the right pose was refused. The 2 px band keeps it."""
-    pair = generate_pair(2_000_000, SceneConfig(kind="indoor", noise_px=2.0,
+    pair = generated_pair(2_000_000, SceneConfig(kind="indoor", noise_px=2.0,
                                                 outlier_fraction=0.5))
     rec = PoseEstimator(model, methods=["opencv"]).estimate(pair.matches).methods["opencv"]
     assert rec.status == "ok" and rec.info["support_inliers"] > 0.2 * pair.matches.num_points
@@ -82,8 +82,8 @@ def test_noisy_matches_with_many_outliers_keep_a_right_pose(model):
             PoseEstimator(model, min_inliers=bad)
 
 
-def test_supported_pairs_keep_their_pose(model):
-    pair = generate_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.5,
+def test_supported_pairs_keep_their_pose(model, generated_pair):
+    pair = generated_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.5,
                                                 outlier_fraction=0.5))
     est = PoseEstimator(model, methods=["opencv", "regression"]).estimate(pair.matches)
     assert est.methods["opencv"].status == "ok" and est.pose.method in ("opencv", "regression")
@@ -104,11 +104,11 @@ def test_a_checkpoint_path_loads_and_a_wrong_one_says_so(tmp_path, model):
         PoseEstimator(42)
 
 
-def test_classical_only_estimator_uses_the_shipped_calibration(model):
+def test_classical_only_estimator_uses_the_shipped_calibration(model, generated_pair):
     """Found while measuring KITTI: PoseEstimator(methods=["poselib"]) without a model gave
     uncalibrated (4x too small) sigmas, silently; None means the shipped model, calibration
     included."""
-    pair = generate_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.5))
+    pair = generated_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.5))
     alone = PoseEstimator(methods=["opencv"]).estimate(pair.matches).methods["opencv"]
     given = PoseEstimator(model, methods=["opencv"]).estimate(pair.matches).methods["opencv"]
     assert alone.info["calibration_scale"] == model.metadata["calibration"]["opencv"]
@@ -116,7 +116,7 @@ def test_classical_only_estimator_uses_the_shipped_calibration(model):
 
 
 @pytest.mark.parametrize("method", ["geometric", "fused", "vp_checked"])
-def test_the_gate_refuses_a_planted_wrong_pose_on_few_points(method):
+def test_the_gate_refuses_a_planted_wrong_pose_on_few_points(method, generated_pair):
     """The support check that PoseEstimator applies to these methods' records: on 15 clean
     point matches the true pose passes and a planted wrong one (10 deg off, another
     translation direction) is refused with a reason (the estimator's wiring of the check is
@@ -128,7 +128,7 @@ def test_the_gate_refuses_a_planted_wrong_pose_on_few_points(method):
     from strl_pyg.inference.record import MethodResult
     from strl_pyg.inference.support import check_support
 
-    pair = generate_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.3))
+    pair = generated_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.3))
     m = pair.matches
     few = m.select(point_index=np.linspace(0, m.num_points - 1, 15).astype(int))
     T = np.asarray(pair.T_0to1, dtype=np.float64)

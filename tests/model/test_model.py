@@ -276,13 +276,12 @@ def test_small_model_overfits_eight_pairs():
 
 
 @pytest.mark.parametrize("dtype", [torch.bfloat16, torch.float64])
-def test_a_model_in_another_dtype_runs_on_a_float32_graph(dtype):
+def test_a_model_in_another_dtype_runs_on_a_float32_graph(dtype, generated_pair):
     from strl_pyg.data import build_pair_graph
     from strl_pyg.model import StrLPoseConfig
     from strl_pyg.model.strl_pose import StrLPose
-    from strl_pyg.synthetic import generate_pair
 
-    p = generate_pair(1)
+    p = generated_pair(1)
     g = build_pair_graph(p.matches)
     torch.manual_seed(0)
     model = StrLPose(StrLPoseConfig.ablation("full", hidden=16, layers=1, heads=2,

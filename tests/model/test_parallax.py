@@ -12,7 +12,6 @@ from torch_geometric.data import Batch
 from strl_pyg.inference.network import prepare_graph
 from strl_pyg.model import StrLPose, StrLPoseConfig
 from strl_pyg.nn import SpatialCoordinateEncoder, flow_features, parallax_features
-from strl_pyg.synthetic import generate_pair
 
 
 def _small_motion(t, w, n=300, seed=0):
@@ -126,14 +125,14 @@ def test_parallax_encoder_fits_sixteen_features_per_pair_and_round_trips(tmp_pat
     torch.testing.assert_close(back.sce.feature_std, model.sce.feature_std)
 
 
-def test_parallax_model_batched_equals_one_graph_at_a_time():
+def test_parallax_model_batched_equals_one_graph_at_a_time(generated_pair):
     """The full model (points and line endpoints) on a batch of two pairs gives each pair's
     own pose: the parallax neighbours stay inside a pair."""
     torch.manual_seed(0)
     m = StrLPose(StrLPoseConfig.ablation("full", hidden=16, layers=1, heads=2,
                                          inputs="parallax", patch_features=1)).eval()
-    g1 = prepare_graph(generate_pair(7).matches, m)
-    g2 = prepare_graph(generate_pair(11).matches, m)
+    g1 = prepare_graph(generated_pair(7).matches, m)
+    g2 = prepare_graph(generated_pair(11).matches, m)
     with torch.no_grad():
         one = [m(g) for g in (g1, g2)]
         both = m(Batch.from_data_list([g1, g2]))
@@ -142,7 +141,7 @@ def test_parallax_model_batched_equals_one_graph_at_a_time():
         torch.testing.assert_close(both.quaternion[k], o.quaternion[0], atol=1e-5, rtol=0)
 
 
-def test_training_fits_the_parallax_statistics_on_pairs_resampled_as_it_trains():
+def test_training_fits_the_parallax_statistics_on_pairs_resampled_as_it_trains(generated_pair):
     """A neighbour's distance depends on the density, so the fit resamples each pair to the
     training size first and reads only the nodes the model reads (parallax only: the flow
     inputs' fit is unchanged)."""
@@ -151,7 +150,7 @@ def test_training_fits_the_parallax_statistics_on_pairs_resampled_as_it_trains()
     from strl_pyg.training.data import fit_input_statistics
 
     m = StrLPose(StrLPoseConfig.ablation("baseline", hidden=16, layers=1, inputs="parallax"))
-    pairs = [prepare_graph(generate_pair(s).matches, m) for s in (1, 2)]
+    pairs = [prepare_graph(generated_pair(s).matches, m) for s in (1, 2)]
     fit_input_statistics(m, pairs, symmetric=False, resample=(64, 16))
     coords, batch = [], []
     for i, g in enumerate(pairs):
@@ -218,7 +217,7 @@ def test_parallax_reads_nodes_in_any_order_and_refuses_what_it_cannot_answer():
         enc.fit_standardisation(c.float())
 
 
-def test_parallax_in_half_precision_is_computed_in_float32():
+def test_parallax_in_half_precision_is_computed_in_float32(generated_pair):
     c = _small_motion(torch.tensor([0.02, 0.0, 0.01], dtype=torch.float64),
                       torch.tensor([0.0, 0.01, 0.0], dtype=torch.float64), n=60, seed=9)
     half = c.float().to(torch.bfloat16)
@@ -228,6 +227,6 @@ def test_parallax_in_half_precision_is_computed_in_float32():
     # of ~0.01 at coordinates of ~0.3: the mode is not meant for half precision)
     torch.testing.assert_close(out, parallax_features(half.float()).to(torch.bfloat16))
     m = StrLPose(StrLPoseConfig.ablation("baseline", hidden=16, layers=1, inputs="parallax"))
-    g = prepare_graph(generate_pair(7).matches, m)
+    g = prepare_graph(generated_pair(7).matches, m)
     with torch.no_grad():
         assert torch.isfinite(m.to(torch.bfloat16)(g).translation.float()).all()

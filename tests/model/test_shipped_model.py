@@ -10,7 +10,7 @@ from strl_pyg.evaluation.run import predict_pose
 from strl_pyg.geometry import Pose
 from strl_pyg.metrics.two_view import rotation_error_deg, translation_angle_error_deg
 from strl_pyg.model.strl_pose import StrLPose
-from strl_pyg.synthetic import SceneConfig, generate_pair
+from strl_pyg.synthetic import SceneConfig
 from strl_pyg.training import DEFAULT_WEIGHTS
 
 # Held-out seeds (training used seeds below 2,000,000), the kinds the model was trained on.
@@ -31,8 +31,8 @@ def model():
 
 
 @pytest.fixture(scope="module")
-def pairs():
-    return [generate_pair(s, SceneConfig(kind=k, noise_px=0.5)) for s, k in SEEDS]
+def pairs(generated_pair):
+    return [generated_pair(s, SceneConfig(kind=k, noise_px=0.5)) for s, k in SEEDS]
 
 
 def swapped(m):

@@ -13,7 +13,6 @@ import torch
 from strl_pyg.datasets import synthetic as synthetic_ds
 from strl_pyg.inference.network import network_pose
 from strl_pyg.model import ABLATIONS
-from strl_pyg.synthetic import generate_pair
 from strl_pyg.synthetic.distributions import scene_distribution
 from strl_pyg.training import TrainConfig, train
 from strl_pyg.training.sampling import StepBatchSampler
@@ -28,7 +27,7 @@ def _tiny(row: str, tmp_path: Path, **kw) -> TrainConfig:
 
 
 @pytest.mark.slow
-def test_every_row_trains_and_infers_on_one_shared_cache(tmp_path, monkeypatch):
+def test_every_row_trains_and_infers_on_one_shared_cache(tmp_path, monkeypatch, generated_pair):
     first = train(_tiny("full", tmp_path), progress=False)
     folders = list((tmp_path / "cache").iterdir())
     assert len(folders) == 1  # one fingerprint: the rows share the matches
@@ -37,7 +36,7 @@ def test_every_row_trains_and_infers_on_one_shared_cache(tmp_path, monkeypatch):
         raise AssertionError("the front end ran again: the cache was not reused")
 
     monkeypatch.setattr(synthetic_ds, "_match_synthetic", no_matching)
-    pair = generate_pair(7, scene_distribution("lines_small").config(7))
+    pair = generated_pair(7, scene_distribution("lines_small").config(7))
     for row in ABLATIONS:
         res = first if row == "full" else train(_tiny(row, tmp_path), progress=False)
         assert res["step"] == 2 and torch.isfinite(torch.tensor(res["rot_err_deg"]))

@@ -110,10 +110,10 @@ def test_examples_train_refuses_a_planted_pickle_in_a_subprocess(tmp_path):
     assert not marker.exists()
 
 
-def test_training_checkpoint_loads_with_weights_only_and_restores_rng(tmp_path):
+def test_training_checkpoint_loads_with_weights_only_and_restores_rng(tmp_path, generated_pair):
     model = tiny_model()
     opt = torch.optim.Adam(model.parameters(), lr=1e-3)
-    model(_one_graph()).quaternion.sum().backward()
+    model(_one_graph(generated_pair)).quaternion.sum().backward()
     opt.step()
     torch.manual_seed(5)
     np.random.seed(6)  # noqa: NPY002
@@ -180,11 +180,10 @@ def test_one_line_drops_advice_to_disable_safe_loading():
     assert one_line("\x1b[1mbold\x1b[0m line\nsecond") == "bold line"
 
 
-def _one_graph():
+def _one_graph(generated_pair):
     from strl_pyg.data import FixedSizeResample, build_pair_graph
-    from strl_pyg.synthetic import generate_pair
 
-    return FixedSizeResample(32, 16, seed=0)(build_pair_graph(generate_pair(0).matches))
+    return FixedSizeResample(32, 16, seed=0)(build_pair_graph(generated_pair(0).matches))
 
 
 def test_a_damaged_copy_is_refused_not_loaded_with_changed_weights(tmp_path):

@@ -12,18 +12,18 @@ import cv2
 import numpy as np
 import pytest
 
-from strl_pyg.synthetic import SceneConfig, generate_pair
+from strl_pyg.synthetic import SceneConfig
 from strl_pyg.training.config import TrainConfig
 from strl_pyg.training.data import build_datasets, posed_scenes
 from strl_pyg.training.loop import best_value, train
 
 
 @pytest.fixture(scope="module")
-def posed_root(tmp_path_factory):
+def posed_root(tmp_path_factory, generated_pair):
     """Three scenes in the real_scenes format, each two generated views of a street."""
     root = tmp_path_factory.mktemp("posed")
     for k, name in enumerate(("a", "b", "c")):
-        p = generate_pair(40 + k, SceneConfig(kind="street", image_size=(96, 256)))
+        p = generated_pair(40 + k, SceneConfig(kind="street", image_size=(96, 256)))
         d = root / name
         (d / "images").mkdir(parents=True)
         T1 = np.linalg.inv(np.asarray(p.T_0to1, dtype=np.float64))  # camera 1 to camera 0

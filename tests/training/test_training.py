@@ -35,6 +35,12 @@ def tiny_config(out_dir, **kw) -> TrainConfig:
     return replace(base, **kw)
 
 
+#: The fewest pairs a run trains and validates on, for the fast tier's runs whose assertions
+#: read no pair count (the slow tier's runs keep tiny_config's sizes, which their
+#: tolerances were set at).
+FEW_PAIRS = {"train_pairs": 2, "val_pairs": 1, "batch_size": 2}
+
+
 def states_equal(a, b):
     return all(torch.equal(a[k], b[k]) for k in a) and a.keys() == b.keys()
 
@@ -62,16 +68,17 @@ def test_resume_equals_uninterrupted(tmp_path):
 
 
 def test_resume_errors(tmp_path):
-    cfg = tiny_config(tmp_path / "run", steps=2)
+    cfg = tiny_config(tmp_path / "run", steps=2, **FEW_PAIRS)
     with pytest.raises(FileNotFoundError, match="checkpoint"):
         train(cfg, resume=True, progress=False)
     (tmp_path / "run").mkdir()
     (tmp_path / "run" / "last.pt").write_bytes(b"\x00garbage")
     with pytest.raises(ValueError, match="readable checkpoint"):
         train(cfg, resume=True, progress=False)
-    train(tiny_config(tmp_path / "ok", steps=2), progress=False)
+    train(tiny_config(tmp_path / "ok", steps=2, **FEW_PAIRS), progress=False)
     with pytest.raises(ValueError, match="config to match"):
-        train(tiny_config(tmp_path / "ok", steps=4, lr=5e-4), resume=True, progress=False)
+        train(tiny_config(tmp_path / "ok", steps=4, lr=5e-4, **FEW_PAIRS), resume=True,
+              progress=False)
 
 
 def test_config_validation():
@@ -262,7 +269,8 @@ def test_init_from_loads_weights_and_rejects_other_architectures(tmp_path):
 
 
 @pytest.mark.slow  # a training run: the slow tier
-def test_geometric_head_trains_on_a_scene_distribution_from_regression_weights(tmp_path):
+def test_geometric_head_trains_on_a_scene_distribution_from_regression_weights(tmp_path,
+                                                                               generated_pair):
     from strl_pyg.model import StrLPoseConfig
     from strl_pyg.model.strl_pose import StrLPose
     from strl_pyg.training import shuffle_point_matches
@@ -281,9 +289,8 @@ def test_geometric_head_trains_on_a_scene_distribution_from_regression_weights(t
     assert res["model"].inlier_head is not None
     # outlier augmentation: some image-1 sides permuted, image-0 side untouched, input intact
     from strl_pyg.data import build_pair_graph
-    from strl_pyg.synthetic import generate_pair
 
-    p = generate_pair(0)
+    p = generated_pair(0)
     g = build_pair_graph(p.matches, T_0to1=p.T_0to1)
     before = g["point"]["pos1"].clone()
     counts = []
@@ -322,7 +329,8 @@ def test_tensorboard_absent_is_said_once_and_recorded(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "torch.utils.tensorboard", None)  # import -> ImportError
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        train(tiny_config(tmp_path / "run", tensorboard=True, steps=2), progress=False)
+        train(tiny_config(tmp_path / "run", tensorboard=True, steps=2, **FEW_PAIRS),
+              progress=False)
     said = [w for w in caught if "TensorBoard is not installed" in str(w.message)]
     assert len(said) == 1 and "--no-tensorboard" in str(said[0].message)
     config = json.loads((tmp_path / "run" / "config.json").read_text())
@@ -509,7 +517,7 @@ def test_roll_augment_on_pairs_without_intrinsics_is_refused_before_training(tmp
     from strl_pyg.data import keys as K
     from strl_pyg.training.data import build_datasets
 
-    cfg = tiny_config(tmp_path / "run", roll_augment=30.0)
+    cfg = tiny_config(tmp_path / "run", roll_augment=30.0, **FEW_PAIRS)
     train_ds, val_ds = build_datasets(cfg, progress=False)
     strip = [g.clone() for g in train_ds]
     for g in strip:

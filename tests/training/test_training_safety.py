@@ -33,6 +33,11 @@ def _cfg(out: Path, **kw) -> TrainConfig:
     return TrainConfig(**{**base, **kw})
 
 
+#: The fewest pairs a run trains and validates on, for the fast tier's runs whose assertions
+#: read no pair count.
+FEW_PAIRS = {"train_pairs": 2, "val_pairs": 1, "batch_size": 2}
+
+
 def _step(path: Path) -> int:
     return int(torch.load(path / "last.pt", weights_only=True)["step"])
 
@@ -44,7 +49,8 @@ def test_last_pt_is_written_every_n_steps_not_only_at_validation(tmp_path, monke
     real = loop.save_checkpoint
     monkeypatch.setattr(loop, "save_checkpoint", lambda p, s: (seen.append(s["step"]),
                                                                real(p, s)))
-    train(_cfg(tmp_path / "run", steps=5, val_every=5, checkpoint_every=2), progress=False)
+    train(_cfg(tmp_path / "run", steps=5, val_every=5, checkpoint_every=2, **FEW_PAIRS),
+          progress=False)
     assert seen == [2, 4, 5]  # every 2 steps, then the validation at the end
 
 
@@ -82,10 +88,11 @@ def test_a_signal_checkpoints_the_step_in_progress_and_resume_continues(tmp_path
 
 def test_an_existing_run_folder_needs_resume_or_overwrite(tmp_path):
     out = tmp_path / "run"
-    train(_cfg(out, steps=2, val_every=2), progress=False)
+    train(_cfg(out, steps=2, val_every=2, **FEW_PAIRS), progress=False)
     with pytest.raises(ValueError, match="--resume to continue / --overwrite to start afresh"):
-        train(_cfg(out, steps=2, val_every=2), progress=False)
-    res = train(_cfg(out, steps=2, val_every=2, seed=1), progress=False, overwrite=True)
+        train(_cfg(out, steps=2, val_every=2, **FEW_PAIRS), progress=False)
+    res = train(_cfg(out, steps=2, val_every=2, seed=1, **FEW_PAIRS), progress=False,
+                overwrite=True)
     assert res["step"] == 2
     check_run_folder(tmp_path / "empty")  # a new folder is fine
 
@@ -199,7 +206,7 @@ def test_steps_without_finite_gradients_stop_the_run_with_one_line(tmp_path, mon
     monkeypatch.setattr(loop, "MAX_SKIPPED_STEPS", 2)
     plant_nan_gradients({-1})
     with pytest.raises(loop.TrainingDiverged, match="2 steps in a row"):
-        train(_tiny(tmp_path / "run"), progress=False)
+        train(_tiny(tmp_path / "run", **FEW_PAIRS), progress=False)
 
 
 @pytest.mark.slow  # a training run: the slow tier

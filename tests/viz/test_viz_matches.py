@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from strl_pyg.data import PairMatches
-from strl_pyg.synthetic import SceneConfig, generate_pair
+from strl_pyg.synthetic import SceneConfig
 from strl_pyg.viz.matches import OUTLIER_COLOUR, draw_matches, save_matches_png
 
 
 @pytest.fixture(scope="module")
-def pair():
-    return generate_pair(0, SceneConfig(kind="boxes", image_size=(96, 160),
+def pair(generated_pair):
+    return generated_pair(0, SceneConfig(kind="boxes", image_size=(96, 160),
                                         outlier_fraction=0.3, max_points=40, max_lines=20))
 
 
