@@ -14,9 +14,9 @@ The training scenes choose (``--verified``: which statuses become verified geome
 validation scenes are scored once with the choice. Both pipelines use the same cores: ours with
 ``--workers`` processes, COLMAP's with its own threads (all cores). Nothing else should run.
 
-    python benchmarks/bench_scene.py run --split train --out benchmarks/results_scene/train
-    python benchmarks/bench_scene.py run --split val --out benchmarks/results_scene/val
-    python benchmarks/bench_scene.py report --out benchmarks/results_scene/val
+    python benchmarks/bench_scene.py run --split train --out benchmarks/results_real_scenes/scene/train
+    python benchmarks/bench_scene.py run --split val --out benchmarks/results_real_scenes/scene/val
+    python benchmarks/bench_scene.py report --out benchmarks/results_real_scenes/scene/val
 """
 
 from __future__ import annotations
@@ -51,14 +51,18 @@ def subset(scene: str, n: int):
     return [posed[k] for k in keep]
 
 
-def ours(scene: str, posed, work: Path, workers: int, verified: tuple[str, ...]):
+def ours(scene: str, posed, work: Path, workers: int, verified: tuple[str, ...],
+         matcher: str | None = None):
     from strl_pyg.collection import SceneOptions, exhaustive_pairs, read_collection, run_scene
+    from strl_pyg.frontend import FrontendConfig
 
     names = [Path(p.path).name for p in posed]
     images = read_collection(DATA / scene / "images", names=names, cameras=DATA / scene)
     t = time.perf_counter()
     summary = run_scene(images, exhaustive_pairs(len(images)), work / "ours",
-                        SceneOptions(workers=workers, verified=verified, progress=False))
+                        SceneOptions(workers=workers, verified=verified, progress=False,
+                                     frontend=FrontendConfig.preset(matcher) if matcher
+                                     else FrontendConfig()))
     seconds = time.perf_counter() - t
     rows = [json.loads(line) for line in (work / "ours" / "pairs.jsonl").read_text()
             .splitlines()]
@@ -168,9 +172,11 @@ def run(args) -> None:
         posed = subset(scene, args.images)
         work = Path(tempfile.mkdtemp(prefix=f"scene_{scene}_"))
         try:
-            db_ours, t_ours, statuses = ours(scene, posed, work, args.workers, verified)
+            db_ours, t_ours, statuses = ours(scene, posed, work, args.workers, verified,
+                                             args.matcher)
             db_colmap, t_colmap, configs = colmap(scene, posed, work)
             row = {"scene": scene, "images": len(posed), "verified": list(verified),
+                   "matcher": args.matcher or "default (adaptive)",
                    "frontend_seconds": {"ours": t_ours, "colmap": t_colmap},
                    "ours": reconstruct(db_ours, scene, work, posed),
                    "colmap": reconstruct(db_colmap, scene, work, posed),
@@ -262,12 +268,14 @@ def _plot(rows: list[dict], out: Path) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("what", choices=("run", "report"))
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results_scene" / "val"))
+    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results_real_scenes" / "scene" / "val"))
     ap.add_argument("--split", choices=tuple(SPLITS), default="val")
     ap.add_argument("--scenes", nargs="*", help="instead of the split's scenes")
     ap.add_argument("--images", type=int, default=16, help="images per scene (default 16)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--verified", default="ok", help="statuses written as verified geometries")
+    ap.add_argument("--matcher", default=None, choices=("fast", "thorough", "adaptive", "legacy"),
+                    help="our front-end preset (default: FrontendConfig(), adaptive)")
     args = ap.parse_args()
     if args.what == "run":
         run(args)
