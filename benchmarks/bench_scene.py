@@ -14,7 +14,8 @@ The training scenes choose (``--verified``: which statuses become verified geome
 validation scenes are scored once with the choice. Both pipelines use the same cores: ours with
 ``--workers`` processes, COLMAP's with its own threads (all cores). Nothing else should run.
 
-    python benchmarks/bench_scene.py run --split train --out benchmarks/results_real_scenes/scene/train
+    python benchmarks/bench_scene.py run --split train \
+        --out benchmarks/results_real_scenes/scene/train_ok
     python benchmarks/bench_scene.py run --split val --out benchmarks/results_real_scenes/scene/val
     python benchmarks/bench_scene.py report --out benchmarks/results_real_scenes/scene/val
 """
@@ -268,7 +269,8 @@ def _plot(rows: list[dict], out: Path) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("what", choices=("run", "report"))
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results_real_scenes" / "scene" / "val"))
+    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results_real_scenes" / "scene"
+                                         / "val"))
     ap.add_argument("--split", choices=tuple(SPLITS), default="val")
     ap.add_argument("--scenes", nargs="*", help="instead of the split's scenes")
     ap.add_argument("--images", type=int, default=16, help="images per scene (default 16)")

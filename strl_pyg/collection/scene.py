@@ -44,7 +44,7 @@ from strl_pyg.frontend.pipeline import thorough_points
 from strl_pyg.frontend.store import FeatureStore
 
 __all__ = ["SceneOptions", "SceneSummary", "run_scene", "check_settings", "pair_task_of",
-           "PoolRunner", "STATUS_TO_VERIFY"]
+           "PoolRunner"]
 
 
 
