@@ -8,7 +8,7 @@
   COLMAP's own extractor guesses without EXIF), which the mappers refine;
 - **rigs and frames**: one single-camera rig per camera and one frame per image, as COLMAP's
   feature extractor writes them;
-- **images** (names relative to the image folder) and **keypoints**: the stored keypoints of
+- **images** of the pairs (names relative to the image folder) and **keypoints**: the stored keypoints of
   every pass the image took part in (first pass, then the adaptive second), in the file's
   pixels (distorted back where the camera has distortion) and COLMAP's convention;
 - **matches**: every point match of each pair;
@@ -133,7 +133,8 @@ def write_database(path: str | os.PathLike, images: list[CollectionImage], pairs
     offsets: dict[str, dict[str, int]] = {}
     cams: dict[tuple, int] = {}
     with pycolmap.Database.open(str(tmp)) as db, h5py.File(matches_path, "r") as mh5:
-        for im in images:
+        used = {k for p in pairs for k in (p.i, p.j)}
+        for im in (images[k] for k in sorted(used)):  # the images of the pairs
             xy, offsets[im.name] = _keypoints(store, im, cfg)
             size = _size(store, im, cfg)
             model, params = colmap_camera(im.camera, size)
@@ -184,6 +185,4 @@ def _size(store: FeatureStore, image: CollectionImage, cfg: FrontendConfig) -> t
     """The image's ``(H, W)``: its camera's, else the stored features'."""
     if image.camera is not None and image.camera.size is not None:
         return (int(image.camera.size[0]), int(image.camera.size[1]))
-    f = store._file(POINTS, cfg, create=False)
-    w, h = (int(v) for v in f[image.name]["image_size"])
-    return (h, w)
+    return store.image_size(image.name, cfg)

@@ -27,6 +27,7 @@ import os
 import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from contextlib import nullcontext
 from dataclasses import asdict, dataclass, field
 from multiprocessing import get_context
 from pathlib import Path
@@ -200,10 +201,12 @@ def _store_arrays(store: FeatureStore, name: str, size: tuple[int, int],
         store.put(kind, name, cfg, value, size)
 
 
-def _first_needs(store: FeatureStore, images: list[CollectionImage],
-                 cfg: FrontendConfig) -> dict[int, list[tuple[str, dict]]]:
+def _first_needs(store: FeatureStore, images: list[CollectionImage], cfg: FrontendConfig,
+                 used: set[int]) -> dict[int, list[tuple[str, dict]]]:
+    """The first pass's features (and segments) missing for the images ``used`` by a pair."""
     needs: dict[int, list[tuple[str, dict]]] = {}
-    for k, im in enumerate(images):
+    for k in sorted(used):
+        im = images[k]
         want = [(POINTS, cfg)] + ([(LINES, cfg)] if cfg.lines else [])
         miss = [(kind, asdict(c)) for kind, c in want if not store.has(kind, im.name, c)]
         if miss:
@@ -341,14 +344,15 @@ def _run_phases(runner: Any, images: list[CollectionImage], pairs: list[Pair], o
     done_names = runner.agree(set(done)) if hasattr(runner, "agree") else set(done)
     store = runner.store(out / "features", writing=True)
     counts = {POINTS: 0, LINES: 0}
-    needs = _first_needs(store, images, cfg) if runner.writer else {}
+    used = {k for p in pairs for k in (p.i, p.j)}
+    needs = _first_needs(store, images, cfg, used) if runner.writer else {}
     if hasattr(runner, "agree"):
         needs = runner.agree(needs)
     _compute_features(runner, store, images, needs, options, counts)
     todo = [p for p in pairs if (images[p.i].name, images[p.j].name) not in done_names]
     computed = 0
-    with (h5py.File(out / "matches.h5", "a") if runner.writer else _nothing()) as mh5, \
-            (open(jsonl_path, "a") if runner.writer else _nothing()) as jsonl, \
+    with (h5py.File(out / "matches.h5", "a") if runner.writer else nullcontext()) as mh5, \
+            (open(jsonl_path, "a") if runner.writer else nullcontext()) as jsonl, \
             _bar(options if runner.writer else _QUIET, len(pairs), "pairs") as bar:
         bar.update(len(pairs) - len(todo))
         while todo:
@@ -377,14 +381,6 @@ def _run_phases(runner: Any, images: list[CollectionImage], pairs: list[Pair], o
             _compute_features(runner, store, images, needs, options, counts)
             todo = waiting
     return done, (computed, counts), store
-
-
-class _nothing:
-    def __enter__(self) -> None:
-        return None
-
-    def __exit__(self, *exc: Any) -> None:
-        pass
 
 
 _QUIET = SceneOptions(progress=False)

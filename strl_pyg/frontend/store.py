@@ -138,6 +138,12 @@ class FeatureStore:
                            f"'{self.root}' (got none)")
         return f[name]
 
+    def image_size(self, name: str, cfg: FrontendConfig) -> tuple[int, int]:
+        """The ``(H, W)`` of the image whose point features of ``cfg`` are stored (``KeyError``
+        when absent)."""
+        w, h = (int(v) for v in self._group(POINTS, name, cfg)["image_size"])
+        return h, w
+
     def arrays(self, name: str, configs: list[FrontendConfig]) -> dict[str, Any]:
         """Every stored feature of ``name`` among the settings of ``configs``, by
         :func:`settings_key`: what :class:`~strl_pyg.frontend.features.Precomputed` takes."""

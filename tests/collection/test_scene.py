@@ -323,3 +323,18 @@ def test_a_distorted_pair_is_as_accurate_as_its_undistorted_copy(tmp_path):
                                           np.asarray(p.T_0to1)[:3, :3])
         assert summary.outputs["database"]
     assert errors["distorted"] <= errors["pinhole"] + 0.25, errors
+
+
+def test_only_the_pairs_images_are_detected_and_written(generated, tmp_path):
+    """Images outside every pair are neither detected nor written; without cameras the
+    database guesses one (this raised a KeyError for the unpaired images before)."""
+    pycolmap = pytest.importorskip("pycolmap")
+    from strl_pyg.collection import Pair
+
+    folder = generated[0]
+    images = read_collection(folder / "images")  # no cameras
+    s = run_scene(images, [Pair(0, 1)], tmp_path / "o", FAST)
+    assert s.features_computed[LINES] == 2
+    with pycolmap.Database.open(s.outputs["database"]) as db:
+        assert sorted(im.name for im in db.read_all_images()) == ["s0_0.png", "s0_1.png"]
+        assert db.read_all_cameras()[0].model.name == "SIMPLE_RADIAL"
