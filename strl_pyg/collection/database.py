@@ -8,8 +8,8 @@
   COLMAP's own extractor guesses without EXIF), which the mappers refine;
 - **rigs and frames**: one single-camera rig per camera and one frame per image, as COLMAP's
   feature extractor writes them;
-- **images** of the pairs (names relative to the image folder) and **keypoints**: the stored keypoints of
-  every pass the image took part in (first pass, then the adaptive second), in the file's
+- **images** of the pairs (names relative to the image folder) and **keypoints**: the stored
+  keypoints of every pass the image took part in (first pass, then the adaptive second), in the file's
   pixels (distorted back where the camera has distortion) and COLMAP's convention;
 - **matches**: every point match of each pair;
 - **two-view geometries**: for pairs whose recommended pose has a status in ``verified``, its
