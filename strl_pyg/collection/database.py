@@ -9,8 +9,8 @@
 - **rigs and frames**: one single-camera rig per camera and one frame per image, as COLMAP's
   feature extractor writes them;
 - **images** of the pairs (names relative to the image folder) and **keypoints**: the stored
-  keypoints of every pass the image took part in (first pass, then the adaptive second), in the file's
-  pixels (distorted back where the camera has distortion) and COLMAP's convention;
+  keypoints of every pass the image took part in (first pass, then the adaptive second), in
+  the file's pixels (distorted back where the camera has distortion) and COLMAP's convention;
 - **matches**: every point match of each pair;
 - **two-view geometries**: for pairs whose recommended pose has a status in ``verified``, its
   inlier matches, ``cam2_from_cam1`` (our ``T_0to1``, unit translation), ``E``, ``F`` and the
