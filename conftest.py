@@ -59,3 +59,69 @@ def plant_nan_gradients(monkeypatch):
         monkeypatch.setattr(loop, "losses_for", losses)
 
     return plant
+
+
+# --------------------------------------------------------------------------- scripts' --help
+_HELP_RUNNER = r"""
+import contextlib, io, json, os, runpy, sys, traceback
+repo, plan, dest = sys.argv[1:4]
+base_path, base_modules = list(sys.path[1:]), set(sys.modules)
+out = {}
+for script in json.load(open(plan)):
+    stdout, stderr, code = io.StringIO(), io.StringIO(), 0
+    sys.argv = [script, "--help"]
+    sys.path[:] = [os.path.dirname(script), *base_path]  # as `python SCRIPT`: its folder first
+    try:
+        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+            runpy.run_path(script, run_name="__main__")
+    except SystemExit as err:
+        code = err.code if isinstance(err.code, int) else int(err.code is not None)
+    except BaseException:
+        code = 1
+        stderr.write(traceback.format_exc())
+    # a script's own helpers leave with it (the next script must find its own); the package,
+    # the standard library and installed modules stay imported
+    keep = (os.path.join(repo, "strl_pyg") + os.sep, sys.prefix + os.sep,
+            sys.base_prefix + os.sep)
+    for name in [m for m in sys.modules if m not in base_modules]:
+        path = getattr(sys.modules[name], "__file__", None) or ""
+        if path and not path.startswith(keep):
+            del sys.modules[name]
+    out[script] = [code, stdout.getvalue(), stderr.getvalue()]
+json.dump(out, open(dest, "w"))
+"""
+
+
+@pytest.fixture(scope="session")
+def script_help(tmp_path_factory):
+    """``script_help(paths) -> {path: (returncode, stdout, stderr)}`` of ``python PATH --help``
+    from the repository root: every script not asked before runs in one process (the imports of
+    torch and the package once, not once per script), each with its own folder first on the
+    import path as ``python PATH`` has it, and the modules it imported from this checkout
+    outside the package dropped before the next (each must find its own helpers)."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parent
+    known: dict[str, tuple[int, str, str]] = {}
+    root = tmp_path_factory.mktemp("help")
+
+    def run(paths) -> dict:
+        paths = [str(Path(p).resolve()) for p in paths]
+        todo = [p for p in dict.fromkeys(paths) if p not in known]
+        if todo:
+            n = len(known)
+            plan, dest = root / f"plan{n}.json", root / f"out{n}.json"
+            plan.write_text(json.dumps(todo))
+            (root / "runner.py").write_text(_HELP_RUNNER)
+            env = {**os.environ, "PYTHONPATH": str(repo)}
+            res = subprocess.run([sys.executable, str(root / "runner.py"), str(repo), str(plan),
+                                  str(dest)], cwd=repo, env=env, capture_output=True,
+                                 text=True, timeout=900)
+            assert res.returncode == 0, f"the --help runner failed:\n{res.stderr[-3000:]}"
+            known.update({k: tuple(v) for k, v in json.loads(dest.read_text()).items()})
+        return {Path(p): known[p] for p in paths}
+
+    return run

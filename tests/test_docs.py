@@ -218,16 +218,14 @@ def strl_pose_flags() -> dict[str | None, set[str]]:
     return table
 
 
-@functools.cache
-def script_flags(script: str) -> frozenset[str]:
-    """The ``--flags`` in ``python SCRIPT --help``."""
-    res = subprocess.run([sys.executable, str(REPO_ROOT / script), "--help"], cwd=REPO_ROOT,
-                         capture_output=True, text=True, timeout=300)
-    assert res.returncode == 0, f"{script} --help failed: {res.stderr[-1500:]}"
-    return frozenset(_FLAG.findall(res.stdout))
+def script_flags(script: str, script_help) -> frozenset[str]:
+    """The ``--flags`` in ``python SCRIPT --help`` (the root conftest's ``script_help``)."""
+    code, stdout, stderr = script_help([REPO_ROOT / script])[REPO_ROOT / script]
+    assert code == 0, f"{script} --help failed: {stderr[-1500:]}"
+    return frozenset(_FLAG.findall(stdout))
 
 
-def command_errors(cmd: Command) -> list[str]:
+def command_errors(cmd: Command, script_help) -> list[str]:
     bad = []
     if cmd.program == "strl-pose":
         table = strl_pose_flags()
@@ -241,7 +239,7 @@ def command_errors(cmd: Command) -> list[str]:
             return [f"{cmd.where}: no script {cmd.program} in: {cmd.text}"]
         if not cmd.flags:
             return []
-        known = script_flags(cmd.program)
+        known = script_flags(cmd.program, script_help)
         name = cmd.program
     for flag in cmd.flags:
         if flag not in known:
@@ -433,10 +431,12 @@ def test_every_python_block_compiles_and_imports_existing_names():
 
 
 @pytest.mark.slow
-def test_every_command_uses_only_flags_its_parser_knows():
+def test_every_command_uses_only_flags_its_parser_knows(script_help):
     cmds = [c for page in PAGES for c in page_commands(page)]
     assert len(cmds) >= 10, [c.text for c in cmds]
-    bad = [e for c in cmds for e in command_errors(c)]
+    script_help([REPO_ROOT / c.program for c in cmds  # every script's --help in one process
+                 if c.program != "strl-pose" and c.flags and (REPO_ROOT / c.program).is_file()])
+    bad = [e for c in cmds for e in command_errors(c, script_help)]
     assert not bad, "\n".join(bad)
 
 
@@ -476,7 +476,8 @@ def test_every_named_module_attribute_and_path_exists():
     assert not bad, "\n".join(bad)
 
 
-def test_the_checks_catch_a_renamed_flag_a_bad_subcommand_and_a_broken_link(tmp_path):
+def test_the_checks_catch_a_renamed_flag_a_bad_subcommand_and_a_broken_link(tmp_path,
+                                                                        script_help):
     """The checker itself: a planted bad flag, subcommand, script flag and link are found."""
     page_path = tmp_path / "page.md"
     text = (
@@ -491,7 +492,8 @@ def test_the_checks_catch_a_renamed_flag_a_bad_subcommand_and_a_broken_link(tmp_
     )
     page_path.write_text(text)
     page = parse_markdown(page_path)
-    errors = "\n".join(e for c in page_commands(page) for e in command_errors(c))
+    errors = "\n".join(e for c in page_commands(page)
+                       for e in command_errors(c, script_help))
     assert "strl-pose predict has no flag --no-such-flag" in errors
     assert "unknown subcommand 'strl-pose frobnicate'" in errors
     assert "examples/train.py has no flag --stepz" in errors

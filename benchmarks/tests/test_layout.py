@@ -6,9 +6,6 @@ a benchmark: a benchmark is tested here."""
 from __future__ import annotations
 
 import ast
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -76,18 +73,31 @@ RUNNABLE = [p for p in SCRIPTS if p.name not in HELPERS]
 
 
 @pytest.fixture(scope="module")
-def help_runs():
-    """Every script's ``--help``, two processes at a time (one per core of a small machine)."""
-    from concurrent.futures import ThreadPoolExecutor
+def help_runs(script_help):
+    """Every script's ``--help``, in one process (the root conftest's ``script_help``)."""
+    return script_help(RUNNABLE)
 
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
 
-    def run(script):
-        return subprocess.run([sys.executable, str(script), "--help"], cwd=REPO, env=env,
-                              capture_output=True, text=True, timeout=300)
-
-    with ThreadPoolExecutor(max_workers=2) as pool:
-        return dict(zip(RUNNABLE, pool.map(run, RUNNABLE), strict=True))
+def test_help_runner_gives_each_script_its_own_import_path(tmp_path, script_help):
+    """The one-process ``--help`` runner (root conftest) sees what separate processes see: a
+    helper found beside one script is not found by a script elsewhere that imports it, and a
+    script's failure does not stop the next."""
+    for folder in ("a", "b"):
+        (tmp_path / folder).mkdir()
+    (tmp_path / "a" / "planted_helper.py").write_text("NAME = 'x'\n")
+    script = ("import argparse\nimport planted_helper\n"
+              "argparse.ArgumentParser(description=planted_helper.NAME).parse_args()\n")
+    (tmp_path / "a" / "beside.py").write_text(script)
+    (tmp_path / "b" / "elsewhere.py").write_text(script)
+    (tmp_path / "b" / "plain.py").write_text("import argparse\n"
+                                            "argparse.ArgumentParser().parse_args()\n")
+    runs = script_help([tmp_path / "a" / "beside.py", tmp_path / "b" / "elsewhere.py",
+                        tmp_path / "b" / "plain.py"])
+    beside, elsewhere, plain = (runs[tmp_path / p] for p in
+                                ("a/beside.py", "b/elsewhere.py", "b/plain.py"))
+    assert beside[0] == 0 and "usage: beside.py" in beside[1]
+    assert elsewhere[0] == 1 and "No module named 'planted_helper'" in elsewhere[2]
+    assert plain[0] == 0 and "usage: plain.py" in plain[1]
 
 
 @pytest.mark.slow
@@ -95,6 +105,6 @@ def help_runs():
 def test_every_script_answers_help_from_where_it_is(script, help_runs):
     """A moved script still finds the shared helpers and the scripts it reads (and this
     checkout's package)."""
-    res = help_runs[script]
-    assert res.returncode == 0, res.stderr[-2000:]
-    assert "usage:" in res.stdout
+    code, stdout, stderr = help_runs[script]
+    assert code == 0, stderr[-2000:]
+    assert "usage:" in stdout

@@ -180,8 +180,28 @@ def _rotations(dirs, max_angle_error_deg: float) -> list[np.ndarray]:
 
 def _sampson(R: np.ndarray, T: np.ndarray, x0: torch.Tensor, x1: torch.Tensor) -> np.ndarray:
     """Sampson distances ``[P, N]`` of the matches (normalised ``[N, 2]``) under ``R`` and the
-    translations ``T`` ``[P, 3]``: the package's one Sampson under a pose
-    (:func:`~strl_pyg.geometry.pose_sampson`), batched over the hypotheses."""
+    translations ``T`` ``[P, 3]``, in closed form (the fast path; :func:`_sampson_reference`,
+    the package's one Sampson under a pose, is its reference).
+
+    With ``r = R h0`` and ``E = [t]_x R``, every term is linear in ``t``: ``h1 . E h0 = t . (r x
+    h1)``, ``(E h0)_{x,y} = t . (0, r_z, -r_y), t . (-r_z, 0, r_x)`` and ``(E^T h1)_j = t .
+    (R_j x h1)`` (``R_j`` the ``j``-th column): five ``[P, 3] @ [3, N]`` products instead of
+    ``P`` essential matrices applied to every match."""
+    R, T = np.asarray(R, float), np.asarray(T, float)
+    h0, h1 = _homogeneous(x0.numpy()), _homogeneous(x1.numpy())
+    r = h0 @ R.T
+    zero = np.zeros(len(r))
+    num = T @ np.cross(r, h1).T
+    den = ((T @ np.stack([zero, r[:, 2], -r[:, 1]])) ** 2
+           + (T @ np.stack([-r[:, 2], zero, r[:, 0]])) ** 2
+           + (T @ np.cross(R[:, 0], h1).T) ** 2 + (T @ np.cross(R[:, 1], h1).T) ** 2)
+    return np.abs(num) / np.sqrt(den + 1e-300)
+
+
+def _sampson_reference(R: np.ndarray, T: np.ndarray, x0: torch.Tensor,
+                       x1: torch.Tensor) -> np.ndarray:
+    """:func:`_sampson` through :func:`~strl_pyg.geometry.pose_sampson`, batched over the
+    hypotheses."""
     P = len(T)
     r = pose_sampson(torch.from_numpy(R).expand(P, 3, 3), torch.from_numpy(T),
                      x0.expand(P, -1, -1), x1.expand(P, -1, -1))

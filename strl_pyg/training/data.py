@@ -72,7 +72,7 @@ def build_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
     # before any matching: a run must not train for hours and then have nothing to validate
     check_sources(cfg, train, val)
     for ds in (train, val):
-        ds.build_cache(num_workers=max(1, cfg.num_workers), progress=progress)
+        ds.build_cache(num_workers=cfg.num_workers, progress=progress)
     check_sources(cfg, train, val, matched=True)
     return train, val
 
@@ -192,7 +192,7 @@ def _posed_datasets(cfg: TrainConfig, progress: bool = True) -> tuple[Any, Any]:
             raise ValueError(f"Expected {role} pairs from the scenes (got none: "
                              f"{ds.no_pairs_reason()})")
     for ds in (train, val):
-        ds.build_cache(num_workers=max(1, cfg.num_workers), progress=progress)
+        ds.build_cache(num_workers=cfg.num_workers, progress=progress)
     for role, ds in (("training", train), ("validation", val)):
         if len(ds) == 0:
             least = f" with >= {ds.min_points} point matches" if ds.min_points else ""

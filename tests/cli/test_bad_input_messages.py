@@ -119,7 +119,8 @@ def test_a_closed_stdout_ends_quietly(tmp_path, generated_pair):
     for extra in (["--json"], []):
         proc = subprocess.Popen(
             [sys.executable, "-m", "strl_pyg.cli.commands", "predict", str(tmp_path / "a.png"),
-             str(tmp_path / "b.png"), "--K", k, "--bootstrap", "0", *extra],
+             str(tmp_path / "b.png"), "--K", k, "--bootstrap", "0", "--methods", "poselib",
+             *extra],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO)
         proc.stdout.close()  # the reader is gone before anything is written
         code = proc.wait(timeout=300)

@@ -152,6 +152,59 @@ def test_joint_refinement_returns_to_the_true_pose_from_a_perturbed_one():
     np.testing.assert_allclose(t0, t, atol=1e-12)
 
 
+def test_closed_form_sampson_of_translation_hypotheses_equals_pose_sampson():
+    from strl_pyg.estimation.vanishing import _sampson, _sampson_reference
+
+    g = np.random.default_rng(4)
+    R = cv2.Rodrigues(np.array([0.1, -0.3, 0.2]))[0]
+    T = g.normal(size=(40, 3))
+    T /= np.linalg.norm(T, axis=1, keepdims=True)
+    x0, x1 = (torch.from_numpy(g.normal(size=(70, 2)) * 0.5) for _ in range(2))
+    fast, ref = _sampson(R, T, x0, x1), _sampson_reference(R, T, x0, x1)
+    assert fast.shape == (40, 70) and ref.max() > 0.5
+    np.testing.assert_allclose(fast, ref, rtol=1e-10, atol=1e-13)
+
+
+def test_central_difference_jacobian_equals_jacfwd_on_a_known_function():
+    from strl_pyg.estimation.line_refine import _jacobian
+
+    A = torch.tensor([[1.0, -2.0, 0.5], [0.3, 0.0, 4.0]], dtype=torch.float64)
+
+    def batched(p):  # [B, 3] -> [B, 4]: sin(A p) and p_0 p_2 e^{p_1}, p_1^3
+        return torch.cat([torch.sin(p @ A.T), (p[:, 0] * p[:, 2] * p[:, 1].exp())[:, None],
+                          p[:, 1:2] ** 3], dim=1)
+
+    p = torch.tensor([0.2, -0.7, 1.3], dtype=torch.float64)
+    exact = torch.func.jacfwd(lambda q: batched(q[None])[0])(p)
+    central = _jacobian(batched, None, p, "central")
+    assert central.shape == (4, 3)
+    torch.testing.assert_close(central, exact, rtol=1e-8, atol=1e-9)
+    torch.testing.assert_close(_jacobian(None, lambda q: batched(q[None])[0], p, "autodiff"),
+                               exact, rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_joint_refinement_with_central_differences_equals_the_jacfwd_reference(seed):
+    """The default Jacobian (central differences in one batched call) against the exact one
+    (``torch.func.jacfwd``): the same refined pose and cost from a start ~2 deg off, on noisy
+    points and lines (measured: 1e-11 apart)."""
+    m, R, t = manhattan_pair(seed, n_points=12, noise=0.3)
+    dirs = vanishing_directions(m)
+    R_start = cv2.Rodrigues(np.array([0.02, -0.025, 0.015]))[0] @ R
+    t_start = t + np.array([0.08, -0.05, 0.03])
+    every = np.ones(m.num_points, bool)
+    fast = refine_with_lines(m, R_start, t_start, dirs, every, return_cost=True)
+    ref = refine_with_lines(m, R_start, t_start, dirs, every, return_cost=True,
+                            jacobian="autodiff")
+    assert float(rotation_angle_deg(torch.from_numpy(fast[0].T @ R_start))) > 0.1  # it moved
+    np.testing.assert_allclose(fast[0], ref[0], atol=1e-8)
+    np.testing.assert_allclose(fast[1], ref[1], atol=1e-8)
+    assert fast[2] == pytest.approx(ref[2], rel=1e-9)
+    with pytest.raises(ValueError, match=r"Expected jacobian in \('central', 'autodiff'\) "
+                                         r"\(got 'numeric'\)"):
+        refine_with_lines(m, R, t, dirs, every, jacobian="numeric")
+
+
 def test_joint_refinement_refuses_bad_starts_and_masks_with_one_line():
     m, R, t = manhattan_pair(2, n_points=6)
     dirs, every = vanishing_directions(m), np.ones(m.num_points, bool)
