@@ -19,6 +19,18 @@ def pytest_addoption(parser):
                      help="also run the slow tier (tests marked 'slow')")
 
 
+def pytest_configure(config):
+    """Under pytest-xdist (``-n 2``, the README's test command) each worker runs torch (and
+    the subprocesses its tests start) on one thread: the tests' tensors are small, two
+    threads per worker were no faster than one, and two workers of two threads on a 2-core
+    machine wait on each other."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        os.environ["OMP_NUM_THREADS"] = "1"
+        import torch
+
+        torch.set_num_threads(1)
+
+
 def _full_test(config) -> bool:
     return bool(config.getoption("--runslow")) or os.environ.get("STRL_FULL_TEST") == "1"
 
