@@ -392,8 +392,8 @@ def test_default_train_config_model_accepts_its_default_data():
 
 @pytest.mark.slow
 def test_training_command_runs_on_the_default_settings(tmp_path):
-    """``examples/train.py`` with every setting at its default but the counts: 3 steps, 64
-    training pairs (the input statistics are fitted on the first 128, so on all 64) and 16
+    """``examples/train.py`` with every setting at its default but the counts: 3 steps, 32
+    training pairs (the input statistics are fitted on the first 128, so on all 32) and 8
     validation pairs. At the default counts the pairs' generation alone took ~3 min (128 for
     the statistics, 128 for validation: ~0.4 s each, the rendering and the textures); the
     code run is the same."""
@@ -402,15 +402,15 @@ def test_training_command_runs_on_the_default_settings(tmp_path):
     from pathlib import Path
 
     script = Path(__file__).resolve().parents[2] / "examples" / "train.py"
-    proc = subprocess.run([sys.executable, str(script), "--steps", "3", "--train-pairs", "64",
-                           "--val-pairs", "16", "--out", "run"],
+    proc = subprocess.run([sys.executable, str(script), "--steps", "3", "--train-pairs", "32",
+                           "--val-pairs", "8", "--out", "run"],
                           cwd=tmp_path, capture_output=True, text=True, timeout=850)
     assert proc.returncode == 0, proc.stderr[-3000:]
     result = json.loads(proc.stdout.strip().splitlines()[-1])
     assert result["step"] == 3 and np.isfinite(result["rot_err_deg"])
     assert (tmp_path / "run" / "last.pt").is_file() and (tmp_path / "run" / "model.pt").is_file()
     config = json.loads((tmp_path / "run" / "config.json").read_text())
-    assert config["train_pairs"] == 64 and config["val_pairs"] == 16
+    assert config["train_pairs"] == 32 and config["val_pairs"] == 8
 
 
 @pytest.mark.slow  # two predicts on a real KITTI pair: the fast tier's case is
