@@ -25,6 +25,7 @@ from __future__ import annotations
 import json
 import os
 import time
+import warnings
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from contextlib import nullcontext
@@ -43,9 +44,10 @@ from strl_pyg.frontend.config import FrontendConfig
 from strl_pyg.frontend.features import LINES, POINTS, PointFeatures
 from strl_pyg.frontend.pipeline import thorough_points
 from strl_pyg.frontend.store import FeatureStore
+from strl_pyg.inference.status import Status
 
 __all__ = ["SceneOptions", "SceneSummary", "run_scene", "check_settings", "pair_task_of",
-           "PoolRunner"]
+           "pair_intrinsics", "intrinsics_warning", "PoolRunner"]
 
 
 
@@ -214,6 +216,30 @@ def _first_needs(store: FeatureStore, images: list[CollectionImage], cfg: Fronte
     return needs
 
 
+def pair_intrinsics(p: Pair, images: list[CollectionImage]) -> tuple[Any, Any]:
+    """The pair's ``(K0, K1)``: its own where the pairs file gives them, else its images'
+    cameras'; ``(None, None)`` where either is unknown (the pair runs without intrinsics)."""
+    a, b = images[p.i], images[p.j]
+    K0 = p.K0 if p.K0 is not None else (None if a.camera is None else a.camera.K)
+    K1 = p.K1 if p.K1 is not None else (None if b.camera is None else b.camera.K)
+    return (None, None) if K0 is None or K1 is None else (K0, K1)
+
+
+def intrinsics_warning(images: list[CollectionImage], pairs: list[Pair],
+                       options: SceneOptions) -> str | None:
+    """The one-line warning :func:`run_scene` gives where pairs have no intrinsics and the
+    database would get none of their geometries: a pose without intrinsics is
+    ``unreliable`` (rule ``no_intrinsics``), which ``options.verified`` does not hold by
+    default, so COLMAP's mappers would find no verified pair among them; ``None`` otherwise."""
+    blind = sum(pair_intrinsics(p, images)[0] is None for p in pairs)
+    if not blind or not options.database or Status.UNRELIABLE.value in options.verified:
+        return None
+    return (f"{blind} of {len(pairs)} pairs have no intrinsics (an image without a camera and "
+            f"no K in the pairs file): their poses are 'unreliable' (no_intrinsics), so none "
+            f"enters the database as a verified geometry at verified={','.join(options.verified)}"
+            f"; give a K or cameras (--K, --cameras), or verify 'unreliable' too")
+
+
 def pair_task_of(p: Pair, images: list[CollectionImage], store: FeatureStore,
                  cfg: FrontendConfig) -> dict[str, Any]:
     """The task of one pair for :func:`~strl_pyg.collection.work.pair_task`: both images,
@@ -221,10 +247,7 @@ def pair_task_of(p: Pair, images: list[CollectionImage], store: FeatureStore,
     no camera) and their stored features."""
     configs = [cfg, thorough_points(cfg)] if cfg.thorough_below > 0 else [cfg]
     a, b = images[p.i], images[p.j]
-    K0 = p.K0 if p.K0 is not None else (None if a.camera is None else a.camera.K)
-    K1 = p.K1 if p.K1 is not None else (None if b.camera is None else b.camera.K)
-    if K0 is None or K1 is None:
-        K0 = K1 = None  # one camera unknown: the pair runs without intrinsics
+    K0, K1 = pair_intrinsics(p, images)
     return {"i": p.i, "j": p.j, "image0": a, "image1": b,
             "K0": None if K0 is None else np.asarray(K0, dtype=float),
             "K1": None if K1 is None else np.asarray(K1, dtype=float),
@@ -293,6 +316,9 @@ def run_scene(images: list[CollectionImage], pairs: list[Pair], out_dir: str | o
         out.mkdir(parents=True, exist_ok=True)
         check_settings(out, options)
         runner = PoolRunner(options)
+    message = intrinsics_warning(images, pairs, options) if runner.writer else None
+    if message:
+        warnings.warn(message, UserWarning, stacklevel=2)
     try:
         done, computed, store = _run_phases(runner, images, pairs, out, options)
         if not runner.writer:

@@ -333,8 +333,36 @@ def test_only_the_pairs_images_are_detected_and_written(generated, tmp_path):
 
     folder = generated[0]
     images = read_collection(folder / "images")  # no cameras
-    s = run_scene(images, [Pair(0, 1)], tmp_path / "o", FAST)
+    with pytest.warns(UserWarning, match=r"^1 of 1 pairs have no intrinsics .* 'unreliable' "
+                                         r"\(no_intrinsics\), so none enters the database as "
+                                         r"a verified geometry at verified=ok; give a K"):
+        s = run_scene(images, [Pair(0, 1)], tmp_path / "o", FAST)
     assert s.features_computed[LINES] == 2
     with pycolmap.Database.open(s.outputs["database"]) as db:
         assert sorted(im.name for im in db.read_all_images()) == ["s0_0.png", "s0_1.png"]
         assert db.read_all_cameras()[0].model.name == "SIMPLE_RADIAL"
+
+
+def test_pairs_without_intrinsics_are_warned_of_only_where_the_database_loses_them(generated):
+    """Before: a collection without cameras ran to the end and wrote a database without one
+    verified geometry (every pose 'unreliable': no_intrinsics), and nothing said so."""
+    import dataclasses
+    import warnings
+
+    from strl_pyg.collection import Pair
+    from strl_pyg.collection.scene import intrinsics_warning
+
+    folder, images, pairs, out, _, _ = generated
+    blind = [dataclasses.replace(im, camera=None) for im in images]
+    assert intrinsics_warning(images, pairs, FAST) is None  # every camera known
+    assert intrinsics_warning(blind, pairs, FAST).startswith(f"{len(pairs)} of {len(pairs)} ")
+    one = [blind[0], *images[1:]]  # one image without a camera: its pairs only
+    assert intrinsics_warning(one, pairs, FAST).startswith(f"{len(images) - 1} of ")
+    K = np.asarray(images[0].camera.K).tolist()
+    assert intrinsics_warning(blind, [Pair(0, 1, K, K)], FAST) is None  # the pairs file's K
+    for options in (dataclasses.replace(FAST, verified=("ok", "unreliable")),
+                    dataclasses.replace(FAST, database=False)):
+        assert intrinsics_warning(blind, pairs, options) is None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        run_scene(images, pairs, out, FAST)  # the fixture's folder, resumed: nothing to warn
