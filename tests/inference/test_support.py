@@ -165,3 +165,30 @@ def test_check_support_leaves_a_regression_record_as_it_is_by_default(held_out_p
                          checked=True).status == "failed"
     assert check_support(MethodResult("poselib", "ok", wrong), m).status == "failed"
 
+
+
+def test_a_pose_the_support_check_refuses_gets_no_bootstrap(model, monkeypatch, generated_pair):
+    """Before: PoseLib's bootstrap (8 more RANSAC solves, at their most iterations on random
+    matches) ran for a pose the support check then refused: 626 ms of 142 on 300 random
+    matches. Guided and fused still compute it where they need it (the same resamples)."""
+    pytest.importorskip("poselib")
+    from strl_pyg.inference.methods import classical
+
+    calls = []
+    real = classical.bootstrap_resamples
+
+    def counted(*args, **kw):
+        calls.append(args[2])
+        return real(*args, **kw)
+
+    monkeypatch.setattr(classical, "bootstrap_resamples", counted)
+    est = PoseEstimator(model, methods=["poselib"]).estimate(_noise())
+    rec = est.methods["poselib"]
+    assert rec.status == "failed" and rec.unsupported and calls == []
+    assert rec.info["bootstrap"].startswith("skipped: the matches do not support")
+    assert rec.info["covariance"] == "first-order"
+    # a supported pose keeps its bootstrap
+    pair = generated_pair(2_000_004, SceneConfig(kind="indoor", noise_px=0.5))
+    ok = PoseEstimator(model, methods=["poselib"]).estimate(pair.matches).methods["poselib"]
+    assert ok.status == "ok" and calls == ["poselib"]
+    assert ok.info["covariance"] == "first-order + bootstrap (8)" and "bootstrap" not in ok.info

@@ -52,7 +52,9 @@ class MethodContext:
     loaded_model: torch.nn.Module | None = field(default=None, repr=False)
     #: each classical solver's one solve of the pair (:func:`_solve`), by solver name
     solves: dict[str, Any] = field(default_factory=dict, repr=False)
-    #: each classical solver's bootstrap resamples, by solver name (guided and fused reuse them)
+    #: each classical solver's bootstrap resamples, by solver name: a ``LazyBootstrap``
+    #: (``strl_pyg.inference.methods.classical``), computed when first called (guided and
+    #: fused reuse them)
     bootstraps: dict[str, Any] = field(default_factory=dict, repr=False)
     #: the network on every match and its time in ms (:func:`_full_forward`)
     full_forward: tuple[Any, float] | None = field(default=None, repr=False)

@@ -64,7 +64,8 @@ class Fused(PoseMethod):
         # the fused pose stays near the classical one and moves with it when the matches change:
         # the classical bootstrap term (instability of the solve, which the information form
         # cannot see) is added, as for the classical record itself (its warning, if any, is there)
-        boot = ctx.bootstraps.get(cls.method)
+        lazy = ctx.bootstraps.get(cls.method)
+        boot = None if lazy is None else lazy()
         rec = _add_bootstrap(rec, boot, 0 if boot is None else ctx.config.bootstrap,
                              "information form", f"{cls.method} ")
         return rec

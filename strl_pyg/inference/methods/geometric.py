@@ -106,7 +106,7 @@ class Guided(PoseMethod):
             subset = res.info.get("point_index")
             if (subset is None and res.info["candidate"] == "all" and not res.info["refined"]
                     and base in ctx.bootstraps):
-                boot, resampled = ctx.bootstraps[base], base
+                boot, resampled = ctx.bootstraps[base](), base
             else:
                 sub = matches if subset is None else matches.select(point_index=subset)
                 boot = bootstrap_resamples(sub, res.pose, base, n_boot,
