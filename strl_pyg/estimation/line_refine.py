@@ -149,7 +149,7 @@ def refine_with_lines(matches: PairMatches, R: np.ndarray, t: np.ndarray, direct
             same ``directions`` and ``point_mask``).
         jacobian: ``"central"`` (default): central differences, all ``2 P`` evaluations in
             one batched call of the residuals; ``"autodiff"``: ``torch.func.jacfwd``, the
-            exact reference (the same refinement to ~1e-9, ~20x slower: its per-operation
+            exact reference (the same refinement to ~1e-11; slower: functorch's per-operation
             overhead dominates on these small problems).
 
     Returns:
